@@ -9,6 +9,12 @@
 //! See `ARCHITECTURE.md` for the map of modules.
 
 pub mod expr;
+pub mod formulation;
 pub mod integrate;
+pub mod linalg;
+pub mod model;
+pub mod problems;
+pub mod programme;
 pub mod scalar;
+pub mod solve;
 pub mod tree;

@@ -1,0 +1,501 @@
+//! Accelerations and constraint reactions from A a - F = B^T lambda, B a = gamma.
+//!
+//! Given the mass matrix A (nv x nv, SPD), the total natural force F = G + Q (2.2), the stacked
+//! constraint Jacobian B (s x nv) and gamma, every formulation returns the acceleration a = dv/dt
+//! and multipliers lambda with A a - F = B^T lambda: the total ideal reaction, whose programme rows
+//! make up the control force u (2.12) and whose system rows are joint reactions.
+//!
+//! - [`Formulation::NullSpace`] (the paper, (2.7)-(2.10)): D = orthonormal basis of null(B) from a
+//!   column-pivoted Householder QR of B^T (rank-revealing; never the paper's hand-made ratios of
+//!   (2.19), which divide by velocities); solve the square system [D A; B] a = [D F; gamma] by LU.
+//!   No inverse of A.
+//! - [`Formulation::Kkt`] (Lagrange multipliers): [A, -B^T; B, 0] [a; lambda] = [F; gamma].
+//! - [`Formulation::RangeSpace`] (the earlier method the paper criticizes, refs [4, 5]): explicit
+//!   A^-1; lambda = (B A^-1 B^T)^-1 (gamma - B A^-1 F), a = A^-1 (F + B^T lambda).
+//! - [`Formulation::UdwadiaKalaba`] (Udwadia & Kalaba, Proc. R. Soc. A 439 (1992) 407-410):
+//!   a = a0 + W (B W)^+ (gamma - B a0), a0 = A^-1 F, W W^T = A^-1; here W = L^-T from the Cholesky
+//!   factor A = L L^T and the pseudo-inverse from a QR of (B W)^T.
+//!
+//! Rows of B are normalized to unit length before factorizing (this changes neither null(B) nor
+//! the solution), so rank decisions compare like with like. A row whose gradient vanishes or a set of
+//! dependent rows is reported as [`FormulationError::RankDeficient`]; it is never papered over.
+
+use crate::linalg::{self, Singular};
+use crate::scalar::{re, Scalar};
+use nalgebra::DMatrix;
+
+/// Which equations give the accelerations.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Formulation {
+    /// The paper's null-space form (2.8)-(2.10) with D from a rank-revealing QR.
+    NullSpace,
+    /// Lagrange multipliers: the (n + s) KKT system.
+    Kkt,
+    /// Range space with an explicit inverse of A.
+    RangeSpace,
+    /// Udwadia-Kalaba with the Moore-Penrose pseudo-inverse.
+    UdwadiaKalaba,
+}
+
+impl Formulation {
+    /// All formulations, for comparisons.
+    pub const ALL: [Formulation; 4] = [
+        Formulation::NullSpace,
+        Formulation::Kkt,
+        Formulation::RangeSpace,
+        Formulation::UdwadiaKalaba,
+    ];
+}
+
+/// Why the accelerations could not be computed.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FormulationError {
+    /// B has numerical rank `rank` < s. `rows` lists the rows judged dependent or vanishing;
+    /// `rcond` is the smallest |r_jj| of the normalized QR (or the vanishing row's norm).
+    RankDeficient {
+        rank: usize,
+        rows: Vec<usize>,
+        rcond: f64,
+    },
+    /// The square system (or A itself) is numerically singular.
+    SingularSystem { rcond: f64 },
+}
+
+/// Diagnostics of one solve.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Diagnostics {
+    /// Smallest |r_jj| of the QR of the row-normalized B^T (1 for orthogonal rows; 1 if s = 0).
+    pub b_rcond: f64,
+    /// Pivot ratio of the LU of the square system (a reciprocal condition estimate).
+    pub system_rcond: f64,
+    /// |D u|_inf / max(|u|_inf, tiny): how far u is from the row space of B (null-space method; the
+    /// other methods report it too, computed from the same QR).
+    pub du: f64,
+    /// Factorizations performed.
+    pub factorizations: usize,
+}
+
+/// Tolerances of the rank decisions.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RankTolerances {
+    /// Dependent rows: smallest |r_jj| of the QR of the row-normalized B^T below this. Default 1e-10.
+    pub dependent: f64,
+    /// A row whose gradient norm |B_i| falls below this is vanishing. Default 1e-12 (absolute: the
+    /// caller scales it by the row's norm at the initial state).
+    pub vanishing: f64,
+}
+
+impl Default for RankTolerances {
+    fn default() -> Self {
+        RankTolerances {
+            dependent: 1e-10,
+            vanishing: 1e-12,
+        }
+    }
+}
+
+/// Preallocated workspace for all formulations.
+pub struct FormulationWork<S: Scalar> {
+    nv: usize,
+    s: usize,
+    bt: DMatrix<S>,
+    beta: Vec<S>,
+    perm: Vec<usize>,
+    norms: Vec<S>,
+    k: DMatrix<S>,
+    piv: Vec<usize>,
+    rhs: Vec<S>,
+    tmp: Vec<S>,
+    tmp2: Vec<S>,
+    inv: DMatrix<S>,
+    x: DMatrix<S>,
+}
+
+impl<S: Scalar> FormulationWork<S> {
+    /// Workspace for `nv` velocities and `s` constraint rows.
+    pub fn new(nv: usize, s: usize) -> Self {
+        let z = S::zero();
+        FormulationWork {
+            nv,
+            s,
+            bt: DMatrix::from_element(nv, s, z),
+            beta: vec![z; s],
+            perm: vec![0; s],
+            norms: vec![z; s],
+            k: DMatrix::from_element(nv + s, nv + s, z),
+            piv: vec![0; nv + s],
+            rhs: vec![z; nv + s],
+            tmp: vec![z; nv + s],
+            tmp2: vec![z; nv + s],
+            inv: DMatrix::from_element(nv, nv, z),
+            x: DMatrix::from_element(nv, s, z),
+        }
+    }
+
+    /// Solve for `acc` (nv) and `lambda` (s). `row_scale[i]` is the reference norm of row i for the
+    /// vanishing test (its norm at the initial state; 1 where unknown).
+    #[allow(clippy::too_many_arguments)]
+    pub fn solve(
+        &mut self,
+        formulation: Formulation,
+        a: &DMatrix<S>,
+        force: &[S],
+        b: &DMatrix<S>,
+        gamma: &[S],
+        row_scale: &[f64],
+        tol: &RankTolerances,
+        acc: &mut [S],
+        lambda: &mut [S],
+    ) -> Result<Diagnostics, FormulationError> {
+        let (nv, s) = (self.nv, self.s);
+        let mut diag = Diagnostics {
+            b_rcond: 1.0,
+            system_rcond: 1.0,
+            du: 0.0,
+            factorizations: 0,
+        };
+        // Normalize rows: B_hat = N^-1 B, gamma_hat = N^-1 gamma.
+        for i in 0..s {
+            let mut n2 = S::zero();
+            for j in 0..nv {
+                n2 += b[(i, j)] * b[(i, j)];
+            }
+            let n = n2.sqrt();
+            if re(n) <= tol.vanishing * row_scale[i].max(f64::MIN_POSITIVE) || re(n) == 0.0 {
+                return Err(FormulationError::RankDeficient {
+                    rank: s - 1,
+                    rows: vec![i],
+                    rcond: re(n) / row_scale[i].max(f64::MIN_POSITIVE),
+                });
+            }
+            self.norms[i] = n;
+            let inv = n.recip();
+            for j in 0..nv {
+                let x = b[(i, j)] * inv;
+                self.bt[(j, i)] = x;
+                self.x[(j, i)] = x;
+            }
+        }
+        // Rank-revealing QR of B_hat^T (nv x s): B_hat^T P = Q R.
+        if s > 0 {
+            let rank = linalg::qr_colpiv(
+                &mut self.bt,
+                nv,
+                s,
+                &mut self.beta,
+                &mut self.perm,
+                tol.dependent,
+            );
+            diag.factorizations += 1;
+            let mut rmin = f64::INFINITY;
+            for j in 0..s {
+                rmin = rmin.min(re(self.bt[(j, j)]).abs());
+            }
+            diag.b_rcond = rmin;
+            if rank < s || rmin < tol.dependent {
+                let rank = rank.min(s - 1);
+                return Err(FormulationError::RankDeficient {
+                    rank,
+                    rows: self.perm[rank..s].to_vec(),
+                    rcond: rmin,
+                });
+            }
+        }
+        match formulation {
+            Formulation::NullSpace => self.null_space(a, force, gamma, acc, &mut diag)?,
+            Formulation::Kkt => self.kkt(a, force, b, gamma, acc, &mut diag)?,
+            Formulation::RangeSpace => self.range_space(a, force, b, gamma, acc, &mut diag)?,
+            Formulation::UdwadiaKalaba => self.udwadia_kalaba(a, force, b, gamma, acc, &mut diag)?,
+        }
+        // Reaction u = A a - F = B^T lambda = B_hat^T N lambda. With Q^T u = w:
+        // R P^T (N lambda) = w[..s], and D u = w[s..] should vanish (2.7).
+        for i in 0..nv {
+            let mut x = -force[i];
+            for j in 0..nv {
+                x += a[(i, j)] * acc[j];
+            }
+            self.tmp[i] = x;
+        }
+        let mut umax = 0.0f64;
+        for i in 0..nv {
+            umax = umax.max(re(self.tmp[i]).abs());
+        }
+        linalg::qr_apply_qt(&self.bt, nv, s, &self.beta, &mut self.tmp[..nv]);
+        let mut du = 0.0f64;
+        for i in s..nv {
+            du = du.max(re(self.tmp[i]).abs());
+        }
+        diag.du = du / umax.max(f64::MIN_POSITIVE);
+        linalg::solve_upper(&self.bt, s, &mut self.tmp[..s]);
+        for j in 0..s {
+            let row = self.perm[j];
+            lambda[row] = self.tmp[j] / self.norms[row];
+        }
+        Ok(diag)
+    }
+
+    /// (2.8)-(2.10): [B_hat; D A] a = [gamma_hat; D F], D = rows s..nv of Q^T.
+    fn null_space(
+        &mut self,
+        a: &DMatrix<S>,
+        force: &[S],
+        gamma: &[S],
+        acc: &mut [S],
+        diag: &mut Diagnostics,
+    ) -> Result<(), FormulationError> {
+        let (nv, s) = (self.nv, self.s);
+        for i in 0..nv {
+            for j in 0..nv {
+                self.k[(i, j)] = a[(i, j)];
+            }
+            self.rhs[i] = force[i];
+        }
+        // Q^T [A | F]: rows s.. are D A and D F.
+        linalg::qr_apply_qt_mat(&self.bt, nv, s, &self.beta, &mut self.k, nv);
+        linalg::qr_apply_qt(&self.bt, nv, s, &self.beta, &mut self.rhs[..nv]);
+        // Rows 0..s: the normalized programme B_hat a = gamma_hat, in pivot order.
+        for j in 0..s {
+            let row = self.perm[j];
+            for col in 0..nv {
+                self.k[(j, col)] = self.bt_row_entry(row, col);
+            }
+            self.rhs[j] = gamma[row] / self.norms[row];
+        }
+        self.lu_solve_k(nv, acc, diag)
+    }
+
+    /// Entry (row, col) of B_hat (kept in `x` by `solve`, since the QR overwrites `bt`).
+    fn bt_row_entry(&self, row: usize, col: usize) -> S {
+        self.x[(col, row)]
+    }
+
+    fn lu_solve_k(
+        &mut self,
+        n: usize,
+        out: &mut [S],
+        diag: &mut Diagnostics,
+    ) -> Result<(), FormulationError> {
+        let rcond = linalg::lu_factor(&mut self.k, n, &mut self.piv, 0.0)
+            .map_err(|e: Singular| FormulationError::SingularSystem { rcond: e.rcond })?;
+        diag.factorizations += 1;
+        diag.system_rcond = rcond;
+        linalg::lu_solve(&self.k, n, &self.piv, &mut self.rhs[..n]);
+        out[..self.nv].copy_from_slice(&self.rhs[..self.nv]);
+        Ok(())
+    }
+
+    /// [A, -B_hat^T; B_hat, 0] [a; N lambda] = [F; gamma_hat].
+    fn kkt(
+        &mut self,
+        a: &DMatrix<S>,
+        force: &[S],
+        b: &DMatrix<S>,
+        gamma: &[S],
+        acc: &mut [S],
+        diag: &mut Diagnostics,
+    ) -> Result<(), FormulationError> {
+        let (nv, s) = (self.nv, self.s);
+        let n = nv + s;
+        for i in 0..n {
+            for j in 0..n {
+                self.k[(i, j)] = S::zero();
+            }
+        }
+        for i in 0..nv {
+            for j in 0..nv {
+                self.k[(i, j)] = a[(i, j)];
+            }
+            self.rhs[i] = force[i];
+        }
+        for r in 0..s {
+            let inv = self.norms[r].recip();
+            for j in 0..nv {
+                let bij = b[(r, j)] * inv;
+                self.k[(nv + r, j)] = bij;
+                self.k[(j, nv + r)] = -bij;
+            }
+            self.rhs[nv + r] = gamma[r] * inv;
+        }
+        let rcond = linalg::lu_factor(&mut self.k, n, &mut self.piv, 0.0)
+            .map_err(|e| FormulationError::SingularSystem { rcond: e.rcond })?;
+        diag.factorizations += 1;
+        diag.system_rcond = rcond;
+        linalg::lu_solve(&self.k, n, &self.piv, &mut self.rhs[..n]);
+        acc[..nv].copy_from_slice(&self.rhs[..nv]);
+        Ok(())
+    }
+
+    /// Explicit inverse: lambda = (B A^-1 B^T)^-1 (gamma - B A^-1 F), a = A^-1 (F + B^T lambda).
+    fn range_space(
+        &mut self,
+        a: &DMatrix<S>,
+        force: &[S],
+        b: &DMatrix<S>,
+        gamma: &[S],
+        acc: &mut [S],
+        diag: &mut Diagnostics,
+    ) -> Result<(), FormulationError> {
+        let (nv, s) = (self.nv, self.s);
+        for i in 0..nv {
+            for j in 0..nv {
+                self.k[(i, j)] = a[(i, j)];
+            }
+        }
+        let rcond = linalg::lu_factor(&mut self.k, nv, &mut self.piv, 0.0)
+            .map_err(|e| FormulationError::SingularSystem { rcond: e.rcond })?;
+        diag.factorizations += 1;
+        linalg::lu_inverse(&self.k, nv, &self.piv, &mut self.inv, &mut self.tmp[..nv]);
+        // a0 = A^-1 F
+        for i in 0..nv {
+            let mut x = S::zero();
+            for j in 0..nv {
+                x += self.inv[(i, j)] * force[j];
+            }
+            acc[i] = x;
+        }
+        if s == 0 {
+            diag.system_rcond = rcond;
+            return Ok(());
+        }
+        // X = A^-1 B_hat^T (nv x s); S = B_hat X (s x s) into k; r = gamma_hat - B_hat a0.
+        for r in 0..s {
+            let inv_n = self.norms[r].recip();
+            for i in 0..nv {
+                let mut x = S::zero();
+                for j in 0..nv {
+                    x += self.inv[(i, j)] * b[(r, j)];
+                }
+                self.x[(i, r)] = x * inv_n;
+            }
+        }
+        for r in 0..s {
+            let inv_n = self.norms[r].recip();
+            for c2 in 0..s {
+                let mut x = S::zero();
+                for j in 0..nv {
+                    x += b[(r, j)] * self.x[(j, c2)];
+                }
+                self.k[(r, c2)] = x * inv_n;
+            }
+            let mut ba0 = S::zero();
+            for j in 0..nv {
+                ba0 += b[(r, j)] * acc[j];
+            }
+            self.rhs[r] = (gamma[r] - ba0) * inv_n;
+        }
+        let rc = linalg::lu_factor(&mut self.k, s, &mut self.piv, 0.0)
+            .map_err(|e| FormulationError::SingularSystem { rcond: e.rcond })?;
+        diag.factorizations += 1;
+        diag.system_rcond = rcond.min(rc);
+        linalg::lu_solve(&self.k, s, &self.piv, &mut self.rhs[..s]);
+        for i in 0..nv {
+            let mut x = S::zero();
+            for r in 0..s {
+                x += self.x[(i, r)] * self.rhs[r];
+            }
+            acc[i] += x;
+        }
+        Ok(())
+    }
+
+    /// a = a0 + L^-T (B L^-T)^+ (gamma - B a0), A = L L^T.
+    fn udwadia_kalaba(
+        &mut self,
+        a: &DMatrix<S>,
+        force: &[S],
+        b: &DMatrix<S>,
+        gamma: &[S],
+        acc: &mut [S],
+        diag: &mut Diagnostics,
+    ) -> Result<(), FormulationError> {
+        let (nv, s) = (self.nv, self.s);
+        for i in 0..nv {
+            for j in 0..nv {
+                self.k[(i, j)] = a[(i, j)];
+            }
+        }
+        linalg::cholesky(&mut self.k, nv)
+            .map_err(|e| FormulationError::SingularSystem { rcond: e.rcond })?;
+        diag.factorizations += 1;
+        // a0 = L^-T L^-1 F
+        acc[..nv].copy_from_slice(&force[..nv]);
+        self.lower_solve(acc);
+        self.lower_t_solve(acc);
+        if s == 0 {
+            return Ok(());
+        }
+        // X = L^-1 B_hat^T (nv x s) = (B_hat W)^T, factored in place in `x`.
+        for r in 0..s {
+            let inv_n = self.norms[r].recip();
+            for j in 0..nv {
+                self.tmp2[j] = b[(r, j)] * inv_n;
+            }
+            let mut col = std::mem::take(&mut self.tmp2);
+            self.lower_solve(&mut col[..nv]);
+            for j in 0..nv {
+                self.x[(j, r)] = col[j];
+            }
+            self.tmp2 = col;
+        }
+        let mut beta = std::mem::take(&mut self.rhs);
+        let mut perm = std::mem::take(&mut self.piv);
+        let rank = linalg::qr_colpiv(&mut self.x, nv, s, &mut beta[..s], &mut perm[..s], 0.0);
+        diag.factorizations += 1;
+        let ok = rank == s;
+        // residual r = gamma_hat - B_hat a0, permuted: z = R^-T P^T r, y = Q [z; 0].
+        for j in 0..s {
+            let row = perm[j];
+            let inv_n = self.norms[row].recip();
+            let mut ba0 = S::zero();
+            for c2 in 0..nv {
+                ba0 += b[(row, c2)] * acc[c2];
+            }
+            self.tmp2[j] = (gamma[row] - ba0) * inv_n;
+        }
+        if ok {
+            linalg::solve_upper_t(&self.x, s, &mut self.tmp2[..s]);
+            for j in s..nv {
+                self.tmp2[j] = S::zero();
+            }
+            linalg::qr_apply_q(&self.x, nv, s, &beta[..s], &mut self.tmp2[..nv]);
+            // a = a0 + L^-T y
+            let mut y = std::mem::take(&mut self.tmp2);
+            self.lower_t_solve(&mut y[..nv]);
+            for j in 0..nv {
+                acc[j] += y[j];
+            }
+            self.tmp2 = y;
+        }
+        self.rhs = beta;
+        self.piv = perm;
+        if !ok {
+            return Err(FormulationError::SingularSystem { rcond: 0.0 });
+        }
+        diag.system_rcond = 1.0;
+        Ok(())
+    }
+
+    /// L y = x in place (L in the lower triangle of k).
+    fn lower_solve(&self, x: &mut [S]) {
+        for i in 0..self.nv {
+            let mut v = x[i];
+            for j in 0..i {
+                v -= self.k[(i, j)] * x[j];
+            }
+            x[i] = v / self.k[(i, i)];
+        }
+    }
+
+    /// L^T y = x in place.
+    fn lower_t_solve(&self, x: &mut [S]) {
+        for i in (0..self.nv).rev() {
+            let mut v = x[i];
+            for j in i + 1..self.nv {
+                v -= self.k[(j, i)] * x[j];
+            }
+            x[i] = v / self.k[(i, i)];
+        }
+    }
+
+}

@@ -1,0 +1,407 @@
+//! Small dense factorizations, in place and allocation-free, generic over [`Scalar`].
+//!
+//! nalgebra's decompositions consume and allocate and need `RealField`; the right-hand side of a
+//! programmed motion is evaluated millions of times, also over dual numbers (for exact Jacobians), so
+//! the two factorizations it needs are written here on preallocated storage:
+//! - LU with partial pivoting (Golub & Van Loan, *Matrix Computations*, Alg. 3.4.1);
+//! - Householder QR with column pivoting, rank-revealing (ibid., Alg. 5.4.1).
+//!
+//! Pivot choices compare real parts only, so a dual evaluation follows the same branch as the
+//! `f64` one and its derivative parts are the derivatives of that branch.
+
+use crate::scalar::{c, re, Scalar};
+use nalgebra::DMatrix;
+
+/// A pivot fell to zero (or below `tol` times the largest pivot) during a factorization.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Singular {
+    /// Column at which elimination broke down.
+    pub column: usize,
+    /// Ratio of the smallest to the largest pivot magnitude seen (a reciprocal condition estimate).
+    pub rcond: f64,
+}
+
+/// In-place LU with partial pivoting of the leading `n x n` block of `a`: P A = L U, L unit lower.
+/// Returns the reciprocal pivot-ratio estimate `min|u_ii| / max|u_ii|`, or `Singular` if a pivot is
+/// exactly zero or the ratio falls below `tol`.
+pub fn lu_factor<S: Scalar>(
+    a: &mut DMatrix<S>,
+    n: usize,
+    piv: &mut [usize],
+    tol: f64,
+) -> Result<f64, Singular> {
+    let mut umax = 0.0f64;
+    let mut umin = f64::INFINITY;
+    for k in 0..n {
+        let mut p = k;
+        let mut best = re(a[(k, k)]).abs();
+        for i in k + 1..n {
+            let m = re(a[(i, k)]).abs();
+            if m > best {
+                best = m;
+                p = i;
+            }
+        }
+        piv[k] = p;
+        if best == 0.0 || !best.is_finite() {
+            return Err(Singular {
+                column: k,
+                rcond: 0.0,
+            });
+        }
+        umax = umax.max(best);
+        umin = umin.min(best);
+        if p != k {
+            a.swap_rows(k, p);
+        }
+        let inv = a[(k, k)].recip();
+        for i in k + 1..n {
+            let l = a[(i, k)] * inv;
+            a[(i, k)] = l;
+            for j in k + 1..n {
+                let akj = a[(k, j)];
+                a[(i, j)] -= l * akj;
+            }
+        }
+    }
+    let rcond = if n == 0 { 1.0 } else { umin / umax };
+    if rcond < tol {
+        return Err(Singular {
+            column: n.saturating_sub(1),
+            rcond,
+        });
+    }
+    Ok(rcond)
+}
+
+/// Solve A x = b in place with the factors from [`lu_factor`].
+pub fn lu_solve<S: Scalar>(a: &DMatrix<S>, n: usize, piv: &[usize], b: &mut [S]) {
+    for k in 0..n {
+        b.swap(k, piv[k]);
+    }
+    for i in 0..n {
+        let mut s = b[i];
+        for j in 0..i {
+            s -= a[(i, j)] * b[j];
+        }
+        b[i] = s;
+    }
+    for i in (0..n).rev() {
+        let mut s = b[i];
+        for j in i + 1..n {
+            s -= a[(i, j)] * b[j];
+        }
+        b[i] = s / a[(i, i)];
+    }
+}
+
+/// Householder QR with column pivoting of the leading `m x k` block of `a` (m >= k):
+/// A P = Q R. On return the upper triangle holds R, the part below the diagonal the Householder
+/// vectors (with implicit leading 1), `beta[j]` their scalings (H_j = I - beta_j w_j w_j^T), and
+/// `perm[j]` the original column now in position j. Returns the numerical rank: the number of
+/// leading |r_jj| above `tol * |r_00|`. Column norms are recomputed at each step (k is small: the
+/// number of programme rows), so there is no downdating error.
+pub fn qr_colpiv<S: Scalar>(
+    a: &mut DMatrix<S>,
+    m: usize,
+    k: usize,
+    beta: &mut [S],
+    perm: &mut [usize],
+    tol: f64,
+) -> usize {
+    for (j, p) in perm.iter_mut().enumerate().take(k) {
+        *p = j;
+    }
+    let mut rank = k;
+    let mut r00 = 0.0f64;
+    for j in 0..k {
+        // Pivot: the remaining column of largest norm (real parts).
+        let mut best = -1.0;
+        let mut p = j;
+        for col in j..k {
+            let mut s = 0.0;
+            for i in j..m {
+                let x = re(a[(i, col)]);
+                s += x * x;
+            }
+            if s > best {
+                best = s;
+                p = col;
+            }
+        }
+        if p != j {
+            a.swap_columns(j, p);
+            perm.swap(j, p);
+        }
+        // Householder vector for column j, rows j..m.
+        let mut sigma = S::zero();
+        for i in j + 1..m {
+            sigma += a[(i, j)] * a[(i, j)];
+        }
+        let x0 = a[(j, j)];
+        let norm_re = (re(x0) * re(x0) + re(sigma)).sqrt();
+        if j == 0 {
+            r00 = norm_re;
+        }
+        if rank == k && (norm_re == 0.0 || norm_re <= tol * r00) {
+            rank = j;
+        }
+        if norm_re == 0.0 {
+            beta[j] = S::zero();
+            continue;
+        }
+        let norm = (x0 * x0 + sigma).sqrt();
+        // v0 = x0 - alpha, alpha = -sign(x0) * norm: no cancellation.
+        let alpha = if re(x0) >= 0.0 { -norm } else { norm };
+        let v0 = x0 - alpha;
+        // Scale w = v / v0 so that w_0 = 1; beta = -v0 / alpha.
+        let inv_v0 = v0.recip();
+        for i in j + 1..m {
+            a[(i, j)] *= inv_v0;
+        }
+        beta[j] = -v0 / alpha;
+        a[(j, j)] = alpha;
+        // Apply H_j to the remaining columns.
+        for col in j + 1..k {
+            let mut s = a[(j, col)];
+            for i in j + 1..m {
+                s += a[(i, j)] * a[(i, col)];
+            }
+            s *= beta[j];
+            a[(j, col)] -= s;
+            for i in j + 1..m {
+                let w = a[(i, j)];
+                a[(i, col)] -= s * w;
+            }
+        }
+    }
+    rank
+}
+
+/// y <- Q^T y for the leading `m` entries of a vector, with the reflectors of [`qr_colpiv`].
+pub fn qr_apply_qt<S: Scalar>(qr: &DMatrix<S>, m: usize, k: usize, beta: &[S], y: &mut [S]) {
+    for j in 0..k {
+        if beta[j] == S::zero() {
+            continue;
+        }
+        let mut s = y[j];
+        for i in j + 1..m {
+            s += qr[(i, j)] * y[i];
+        }
+        s *= beta[j];
+        y[j] -= s;
+        for i in j + 1..m {
+            y[i] -= s * qr[(i, j)];
+        }
+    }
+}
+
+/// y <- Q y (the inverse of [`qr_apply_qt`]).
+pub fn qr_apply_q<S: Scalar>(qr: &DMatrix<S>, m: usize, k: usize, beta: &[S], y: &mut [S]) {
+    for j in (0..k).rev() {
+        if beta[j] == S::zero() {
+            continue;
+        }
+        let mut s = y[j];
+        for i in j + 1..m {
+            s += qr[(i, j)] * y[i];
+        }
+        s *= beta[j];
+        y[j] -= s;
+        for i in j + 1..m {
+            y[i] -= s * qr[(i, j)];
+        }
+    }
+}
+
+/// Columns `col0..col0+ncols` of M <- Q^T M, for an `m`-row matrix M (reflectors of [`qr_colpiv`]).
+pub fn qr_apply_qt_mat<S: Scalar>(
+    qr: &DMatrix<S>,
+    m: usize,
+    k: usize,
+    beta: &[S],
+    mat: &mut DMatrix<S>,
+    ncols: usize,
+) {
+    for j in 0..k {
+        if beta[j] == S::zero() {
+            continue;
+        }
+        for col in 0..ncols {
+            let mut s = mat[(j, col)];
+            for i in j + 1..m {
+                s += qr[(i, j)] * mat[(i, col)];
+            }
+            s *= beta[j];
+            mat[(j, col)] -= s;
+            for i in j + 1..m {
+                let w = qr[(i, j)];
+                mat[(i, col)] -= s * w;
+            }
+        }
+    }
+}
+
+/// Solve R x = b (R the leading `k x k` upper triangle of `qr`) in place.
+pub fn solve_upper<S: Scalar>(qr: &DMatrix<S>, k: usize, b: &mut [S]) {
+    for i in (0..k).rev() {
+        let mut s = b[i];
+        for j in i + 1..k {
+            s -= qr[(i, j)] * b[j];
+        }
+        b[i] = s / qr[(i, i)];
+    }
+}
+
+/// Solve R^T x = b (R the leading `k x k` upper triangle of `qr`) in place.
+pub fn solve_upper_t<S: Scalar>(qr: &DMatrix<S>, k: usize, b: &mut [S]) {
+    for i in 0..k {
+        let mut s = b[i];
+        for j in 0..i {
+            s -= qr[(j, i)] * b[j];
+        }
+        b[i] = s / qr[(i, i)];
+    }
+}
+
+/// In-place Cholesky A = L L^T of the leading `n x n` block (lower triangle overwritten by L).
+pub fn cholesky<S: Scalar>(a: &mut DMatrix<S>, n: usize) -> Result<(), Singular> {
+    for j in 0..n {
+        let mut d = a[(j, j)];
+        for k in 0..j {
+            d -= a[(j, k)] * a[(j, k)];
+        }
+        if re(d) <= 0.0 || !re(d).is_finite() {
+            return Err(Singular {
+                column: j,
+                rcond: 0.0,
+            });
+        }
+        let l = d.sqrt();
+        a[(j, j)] = l;
+        let inv = l.recip();
+        for i in j + 1..n {
+            let mut s = a[(i, j)];
+            for k in 0..j {
+                s -= a[(i, k)] * a[(j, k)];
+            }
+            a[(i, j)] = s * inv;
+        }
+    }
+    Ok(())
+}
+
+/// Explicit inverse of an LU-factored matrix into `inv` (column by column); `col` is scratch of length n.
+pub fn lu_inverse<S: Scalar>(
+    lu: &DMatrix<S>,
+    n: usize,
+    piv: &[usize],
+    inv: &mut DMatrix<S>,
+    col: &mut [S],
+) {
+    for j in 0..n {
+        for (i, x) in col.iter_mut().enumerate().take(n) {
+            *x = if i == j { c(1.0) } else { S::zero() };
+        }
+        lu_solve(lu, n, piv, &mut col[..n]);
+        for i in 0..n {
+            inv[(i, j)] = col[i];
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn test_matrix(m: usize, k: usize, seed: u64) -> DMatrix<f64> {
+        let mut s = seed;
+        DMatrix::from_fn(m, k, |_, _| {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((s >> 11) as f64 / (1u64 << 53) as f64) - 0.5
+        })
+    }
+
+    #[test]
+    fn lu_solves_against_nalgebra() {
+        let n = 7;
+        let a0 = test_matrix(n, n, 3);
+        let b0: Vec<f64> = (0..n).map(|i| i as f64 - 2.0).collect();
+        let mut a = a0.clone();
+        let mut piv = vec![0; n];
+        lu_factor(&mut a, n, &mut piv, 0.0).unwrap();
+        let mut x = b0.clone();
+        lu_solve(&a, n, &piv, &mut x);
+        let r = &a0 * nalgebra::DVector::from_vec(x) - nalgebra::DVector::from_vec(b0);
+        assert!(r.amax() < 50.0 * f64::EPSILON, "residual {}", r.amax());
+    }
+
+    #[test]
+    fn lu_reports_singular() {
+        let mut a = DMatrix::from_row_slice(2, 2, &[1.0, 2.0, 2.0, 4.0]);
+        let mut piv = vec![0; 2];
+        assert!(lu_factor(&mut a, 2, &mut piv, 1e-12).is_err());
+    }
+
+    #[test]
+    fn qr_reconstructs_and_gives_null_space() {
+        let (m, k) = (6, 3);
+        let a0 = test_matrix(m, k, 11);
+        let mut a = a0.clone();
+        let mut beta = vec![0.0; k];
+        let mut perm = vec![0; k];
+        let rank = qr_colpiv(&mut a, m, k, &mut beta, &mut perm, 1e-12);
+        assert_eq!(rank, k);
+        // Q^T A P = R: apply Q^T to the permuted columns of A0.
+        let mut ap = DMatrix::zeros(m, k);
+        for j in 0..k {
+            ap.set_column(j, &a0.column(perm[j]));
+        }
+        qr_apply_qt_mat(&a, m, k, &beta, &mut ap, k);
+        for i in 0..m {
+            for j in 0..k {
+                let expect = if i <= j { a[(i, j)] } else { 0.0 };
+                assert!((ap[(i, j)] - expect).abs() < 20.0 * f64::EPSILON);
+            }
+        }
+        // The last m - k columns of Q are orthogonal to range(A0).
+        for l in k..m {
+            let mut e = vec![0.0; m];
+            e[l] = 1.0;
+            qr_apply_q(&a, m, k, &beta, &mut e);
+            let d = a0.transpose() * nalgebra::DVector::from_vec(e);
+            assert!(d.amax() < 20.0 * f64::EPSILON);
+        }
+    }
+
+    #[test]
+    fn qr_reveals_rank() {
+        let (m, k) = (5, 3);
+        let mut a0 = test_matrix(m, k, 5);
+        let c0 = a0.column(0).clone_owned();
+        let c1 = a0.column(1).clone_owned();
+        a0.set_column(2, &(c0 * 2.0 - c1));
+        let mut a = a0.clone();
+        let mut beta = vec![0.0; k];
+        let mut perm = vec![0; k];
+        assert_eq!(qr_colpiv(&mut a, m, k, &mut beta, &mut perm, 1e-10), 2);
+    }
+
+    #[test]
+    fn cholesky_and_inverse() {
+        let n = 5;
+        let b = test_matrix(n, n, 7);
+        let a0 = &b * b.transpose() + DMatrix::identity(n, n);
+        let mut l = a0.clone();
+        cholesky(&mut l, n).unwrap();
+        let lo = l.lower_triangle();
+        assert!((&lo * lo.transpose() - &a0).amax() < 50.0 * f64::EPSILON);
+        let mut lu = a0.clone();
+        let mut piv = vec![0; n];
+        lu_factor(&mut lu, n, &mut piv, 0.0).unwrap();
+        let mut inv = DMatrix::zeros(n, n);
+        let mut col = vec![0.0; n];
+        lu_inverse(&lu, n, &piv, &mut inv, &mut col);
+        assert!((&inv * &a0 - DMatrix::identity(n, n)).amax() < 1e-13);
+    }
+}

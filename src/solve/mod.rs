@@ -1,0 +1,423 @@
+//! Problem, method settings, solution and return codes; `solve(problem, settings)`.
+//!
+//! - [`Problem`]: a [`Model`], its [`Constraints`] (programme rows and system constraints), the
+//!   initial state and the time span.
+//! - [`Settings`]: formulation, integrator, tolerances, drift control, output rate.
+//! - [`Solution`]: the trajectory (t, q, v, dv/dt, u, reactions, residuals), statistics and a
+//!   [`ReturnCode`]. Whatever was computed before a failure is kept.
+
+mod evaluator;
+mod ode;
+mod project;
+
+pub use evaluator::{Baumgarte, Evaluator};
+pub use project::{ProjectionReport, Projector};
+
+use crate::formulation::{Formulation, RankTolerances};
+use crate::integrate::{DriverOptions, Integrator, IntegratorStats, Method};
+use crate::model::Model;
+use crate::programme::{Constraints, Level, Role};
+
+/// What to integrate: a system, its constraints, an initial state and a time span.
+#[derive(Clone, Debug)]
+pub struct Problem<M: Model, C: Constraints> {
+    /// The mechanical system.
+    pub model: M,
+    /// Programme rows and system constraints.
+    pub constraints: C,
+    /// Initial time.
+    pub t0: f64,
+    /// Final time.
+    pub t1: f64,
+    /// Initial configuration (nq).
+    pub q0: Vec<f64>,
+    /// Initial velocity (nv).
+    pub v0: Vec<f64>,
+}
+
+/// How the programme's violation is kept in check (Section 2: the programme is part of the closed
+/// system, so its violation is a numerical error that can be controlled).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case", tag = "kind")]
+pub enum DriftControl {
+    /// Monitor only.
+    None,
+    /// After every accepted step, project positions onto g(t, q) = 0 and velocities onto the
+    /// velocity-level rows, each by Newton iterations minimizing the correction in the
+    /// kinetic-energy metric (A). `tol`: residual to reach; `max_iter` per level.
+    Projection { tol: f64, max_iter: usize },
+    /// Baumgarte stabilization of the differentiated rows.
+    Baumgarte { alpha: f64, beta: f64 },
+}
+
+/// Output sampling.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Output {
+    /// One sample at t0 and one after every accepted step.
+    Steps,
+    /// Samples at t0, t0 + dt, ... and t1, from the dense output.
+    Every(f64),
+}
+
+/// The method: every field documents its default (`Settings::default()`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Settings {
+    /// Formulation of the accelerations. Default: the paper's null-space form.
+    pub formulation: Formulation,
+    /// Integrator. Default: DOP853.
+    pub integrator: Method,
+    /// Relative local error tolerance. Default 1e-10.
+    pub rtol: f64,
+    /// Absolute local error tolerance. Default 1e-12.
+    pub atol: f64,
+    /// Largest step. Default: unlimited.
+    pub h_max: f64,
+    /// Maximum step attempts. Default 10_000_000.
+    pub max_steps: usize,
+    /// Drift control. Default: projection to 1e-12 with up to 8 Newton iterations.
+    pub drift: DriftControl,
+    /// Rank decisions on B. Default: [`RankTolerances::default`].
+    pub rank_dependent: f64,
+    /// See [`RankTolerances::vanishing`]. Default 1e-12.
+    pub rank_vanishing: f64,
+    /// Output sampling. Default: every accepted step.
+    pub output: Output,
+    /// Stop with [`ReturnCode::DriftExceeded`] when a position- or velocity-level residual exceeds
+    /// this after a step. Default: None (monitor only).
+    pub max_drift: Option<f64>,
+    /// Initial state: residuals above this make it inconsistent. Default 1e-10.
+    pub consistency_tol: f64,
+    /// Project an inconsistent initial state onto the constraints (and report the correction)
+    /// instead of refusing it. Default false.
+    pub assemble: bool,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            formulation: Formulation::NullSpace,
+            integrator: Method::Dop853,
+            rtol: 1e-10,
+            atol: 1e-12,
+            h_max: f64::INFINITY,
+            max_steps: 10_000_000,
+            drift: DriftControl::Projection {
+                tol: 1e-12,
+                max_iter: 8,
+            },
+            rank_dependent: 1e-10,
+            rank_vanishing: 1e-12,
+            output: Output::Steps,
+            max_drift: None,
+            consistency_tol: 1e-10,
+            assemble: false,
+        }
+    }
+}
+
+impl Settings {
+    fn rank(&self) -> RankTolerances {
+        RankTolerances {
+            dependent: self.rank_dependent,
+            vanishing: self.rank_vanishing,
+        }
+    }
+}
+
+/// How a solve ended. Nightly jobs branch on this, not on messages.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[serde(rename_all = "snake_case", tag = "code")]
+pub enum ReturnCode {
+    /// Reached t1.
+    Success,
+    /// The step size fell below the minimum.
+    StepTooSmall { t: f64, h: f64 },
+    /// The constraint Jacobian B lost rank: `rows` are dependent or vanishing; `rcond` estimates the
+    /// reciprocal condition of the row-normalized B.
+    SingularProgramme {
+        t: f64,
+        rows: Vec<String>,
+        rcond: f64,
+    },
+    /// The square system of the formulation (or A) is numerically singular.
+    SingularSystem { t: f64, rcond: f64 },
+    /// A residual exceeded `Settings::max_drift`.
+    DriftExceeded { t: f64, row: String, residual: f64 },
+    /// Non-finite values in the state or the right-hand side.
+    NonFinite { t: f64 },
+    /// `max_steps` used up.
+    MaxSteps { t: f64 },
+    /// The initial state violates a row beyond `consistency_tol` (and was not, or could not be,
+    /// assembled).
+    InconsistentInitialState { row: String, residual: f64 },
+    /// Projection onto the constraints did not converge after a step.
+    ProjectionFailed { t: f64, row: String, residual: f64 },
+}
+
+impl ReturnCode {
+    /// True for [`ReturnCode::Success`].
+    pub fn is_success(&self) -> bool {
+        matches!(self, ReturnCode::Success)
+    }
+
+    /// Short machine name (`success`, `singular_programme`, ...).
+    pub fn name(&self) -> &'static str {
+        match self {
+            ReturnCode::Success => "success",
+            ReturnCode::StepTooSmall { .. } => "step_too_small",
+            ReturnCode::SingularProgramme { .. } => "singular_programme",
+            ReturnCode::SingularSystem { .. } => "singular_system",
+            ReturnCode::DriftExceeded { .. } => "drift_exceeded",
+            ReturnCode::NonFinite { .. } => "non_finite",
+            ReturnCode::MaxSteps { .. } => "max_steps",
+            ReturnCode::InconsistentInitialState { .. } => "inconsistent_initial_state",
+            ReturnCode::ProjectionFailed { .. } => "projection_failed",
+        }
+    }
+}
+
+/// Counters of a solve (snapshot-tested).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Statistics {
+    /// Integrator counters (steps, rejected, RHS and Jacobian evaluations, LU, Newton).
+    pub integrator: IntegratorStats,
+    /// Factorizations inside right-hand-side evaluations (QR of B^T, LU of the square system).
+    pub factorizations: usize,
+    /// Post-step projections performed (steps where a correction was applied).
+    pub projections: usize,
+    /// Newton iterations of all projections.
+    pub projection_iterations: usize,
+    /// Largest position correction |dq| (in the chart, inf-norm).
+    pub max_position_correction: f64,
+    /// Largest velocity correction |dv| (inf-norm).
+    pub max_velocity_correction: f64,
+    /// Largest relative |D u| / |u| seen: how far u left the row space of B (2.7).
+    pub max_du: f64,
+    /// Smallest reciprocal condition estimate of the row-normalized B seen.
+    pub min_b_rcond: f64,
+}
+
+/// Correction applied to the initial state when it was assembled.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct InitialCorrection {
+    /// |dq| (inf-norm, chart coordinates).
+    pub position: f64,
+    /// |dv| (inf-norm).
+    pub velocity: f64,
+}
+
+/// The sampled motion, one row per sample, flattened.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Trajectory {
+    /// Names of q.
+    pub q_names: Vec<String>,
+    /// Names of v (also of dv/dt, u, reactions).
+    pub v_names: Vec<String>,
+    /// Names of the constraint rows.
+    pub row_names: Vec<String>,
+    /// Sample times.
+    pub t: Vec<f64>,
+    /// Configurations, nq per sample.
+    pub q: Vec<f64>,
+    /// Velocities, nv per sample.
+    pub v: Vec<f64>,
+    /// Accelerations dv/dt, nv per sample.
+    pub a: Vec<f64>,
+    /// Control forces u of the programme rows (2.12), nv per sample.
+    pub u: Vec<f64>,
+    /// Reactions of the system's own constraints, nv per sample.
+    pub reactions: Vec<f64>,
+    /// Multipliers lambda, s per sample.
+    pub lambda: Vec<f64>,
+    /// Residual of each row, s per sample: g (position), f (velocity), h (acceleration).
+    pub residual: Vec<f64>,
+    /// dg/dt of position rows (0 for other rows), s per sample.
+    pub residual_rate: Vec<f64>,
+}
+
+impl Trajectory {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+    /// True when there is no sample.
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+    fn nq(&self) -> usize {
+        self.q_names.len()
+    }
+    fn nv(&self) -> usize {
+        self.v_names.len()
+    }
+    fn s(&self) -> usize {
+        self.row_names.len()
+    }
+    /// q of sample k.
+    pub fn q_at(&self, k: usize) -> &[f64] {
+        &self.q[k * self.nq()..(k + 1) * self.nq()]
+    }
+    /// v of sample k.
+    pub fn v_at(&self, k: usize) -> &[f64] {
+        &self.v[k * self.nv()..(k + 1) * self.nv()]
+    }
+    /// dv/dt of sample k.
+    pub fn a_at(&self, k: usize) -> &[f64] {
+        &self.a[k * self.nv()..(k + 1) * self.nv()]
+    }
+    /// u of sample k.
+    pub fn u_at(&self, k: usize) -> &[f64] {
+        &self.u[k * self.nv()..(k + 1) * self.nv()]
+    }
+    /// System reactions of sample k.
+    pub fn reactions_at(&self, k: usize) -> &[f64] {
+        &self.reactions[k * self.nv()..(k + 1) * self.nv()]
+    }
+    /// Multipliers of sample k.
+    pub fn lambda_at(&self, k: usize) -> &[f64] {
+        &self.lambda[k * self.s()..(k + 1) * self.s()]
+    }
+    /// Residuals of sample k.
+    pub fn residual_at(&self, k: usize) -> &[f64] {
+        &self.residual[k * self.s()..(k + 1) * self.s()]
+    }
+    /// Largest |residual| of row i over the samples.
+    pub fn max_residual(&self, i: usize) -> f64 {
+        (0..self.len())
+            .map(|k| self.residual_at(k)[i].abs())
+            .fold(0.0, f64::max)
+    }
+}
+
+/// One output sample, handed to a [`SampleSink`].
+pub struct Sample<'a> {
+    pub t: f64,
+    pub q: &'a [f64],
+    pub v: &'a [f64],
+    pub a: &'a [f64],
+    pub u: &'a [f64],
+    pub reactions: &'a [f64],
+    pub lambda: &'a [f64],
+    pub residual: &'a [f64],
+    pub residual_rate: &'a [f64],
+}
+
+/// Where samples go: kept in memory ([`Trajectory`]) or streamed (CSV, MCAP) so memory does not grow
+/// with the number of steps.
+pub trait SampleSink {
+    /// Take one sample.
+    fn sample(&mut self, s: &Sample<'_>);
+}
+
+impl SampleSink for Trajectory {
+    fn sample(&mut self, s: &Sample<'_>) {
+        self.t.push(s.t);
+        self.q.extend_from_slice(s.q);
+        self.v.extend_from_slice(s.v);
+        self.a.extend_from_slice(s.a);
+        self.u.extend_from_slice(s.u);
+        self.reactions.extend_from_slice(s.reactions);
+        self.lambda.extend_from_slice(s.lambda);
+        self.residual.extend_from_slice(s.residual);
+        self.residual_rate.extend_from_slice(s.residual_rate);
+    }
+}
+
+/// The outcome of a solve.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Solution {
+    /// How it ended.
+    pub code: ReturnCode,
+    /// The samples taken until then.
+    pub trajectory: Trajectory,
+    /// Counters.
+    pub stats: Statistics,
+    /// Largest |residual| of each row over every accepted step (not only the samples).
+    pub max_residual: Vec<f64>,
+    /// Largest |dg/dt| of each position row over every accepted step (0 for other rows).
+    pub max_residual_rate: Vec<f64>,
+    /// Correction applied to the initial state, if it was assembled.
+    pub initial_correction: Option<InitialCorrection>,
+    /// Last time reached.
+    pub t_end: f64,
+}
+
+/// Solve and keep all samples in memory.
+pub fn solve<M: Model, C: Constraints>(problem: &Problem<M, C>, settings: &Settings) -> Solution {
+    let mut traj = Trajectory {
+        q_names: problem.model.q_names(),
+        v_names: problem.model.v_names(),
+        row_names: problem
+            .constraints
+            .rows()
+            .iter()
+            .map(|r| r.name.clone())
+            .collect(),
+        ..Default::default()
+    };
+    let mut out = solve_into(problem, settings, &mut traj);
+    out.trajectory = traj;
+    out
+}
+
+/// Solve, streaming samples into `sink`; the returned solution's trajectory is empty.
+pub fn solve_into<M: Model, C: Constraints>(
+    problem: &Problem<M, C>,
+    settings: &Settings,
+    sink: &mut dyn SampleSink,
+) -> Solution {
+    let s = problem.constraints.rows().len();
+    let mut sol = Solution {
+        code: ReturnCode::Success,
+        trajectory: Trajectory::default(),
+        stats: Statistics {
+            min_b_rcond: 1.0,
+            ..Default::default()
+        },
+        max_residual: vec![0.0; s],
+        max_residual_rate: vec![0.0; s],
+        initial_correction: None,
+        t_end: problem.t0,
+    };
+    let mut ode = match ode::MotionOde::new(problem, settings, sink) {
+        Ok(o) => o,
+        Err(code) => {
+            sol.code = code;
+            return sol;
+        }
+    };
+    sol.initial_correction = ode.initial_correction.clone();
+    let nv = problem.model.nv();
+    let options = DriverOptions {
+        rtol: settings.rtol,
+        atol: settings.atol,
+        h_max: settings.h_max,
+        max_steps: settings.max_steps,
+        ..Default::default()
+    };
+    let mut integrator = Integrator::new(settings.integrator, options, 2 * nv);
+    let mut y = ode.initial_y();
+    let (outcome, istats) = integrator.integrate(&mut ode, problem.t0, problem.t1, &mut y);
+    sol.code = ode.finish(outcome);
+    sol.stats = ode.stats.clone();
+    sol.stats.integrator = istats;
+    sol.max_residual = ode.max_residual.clone();
+    sol.max_residual_rate = ode.max_residual_rate.clone();
+    sol.t_end = ode.t_last;
+    sol
+}
+
+/// Is row i one whose residual the state itself must satisfy (position or velocity level)?
+pub(crate) fn is_state_row(level: Level) -> bool {
+    matches!(level, Level::Position | Level::Velocity)
+}
+
+/// Names of the rows of a role.
+pub fn rows_of_role<C: Constraints>(c: &C, role: Role) -> Vec<String> {
+    c.rows()
+        .iter()
+        .filter(|r| r.role == role)
+        .map(|r| r.name.clone())
+        .collect()
+}

@@ -1,0 +1,492 @@
+//! The programmed motion as an ODE on a chart, driven by `crate::integrate`.
+//!
+//! State y = (delta, v): q = base (+) delta (Euclidean blocks add, quaternion blocks
+//! q = base (x) Exp(delta)), so every integrator steps a flat R^(2 nv) and rotations are integrated
+//! Lie-group-correctly (RKMK: d(delta)/dt = dexp^-1(delta) omega). After each accepted step the
+//! chart is re-centred when needed, the state is projected onto the programme manifold (if
+//! enabled), samples are emitted and residuals monitored.
+
+use super::evaluator::{Baumgarte, Evaluator};
+use super::project::Projector;
+use super::{
+    is_state_row, DriftControl, InitialCorrection, Output, Problem, ReturnCode, Sample,
+    SampleSink, Settings, Statistics,
+};
+use crate::formulation::{FormulationError, RankTolerances};
+use crate::integrate::{Accept, DenseOutput, OdeProblem, Outcome};
+use crate::model::{self, Model, Segment};
+use crate::programme::{Constraints, Level, Role};
+use crate::scalar::Dual;
+use nalgebra::DMatrix;
+use num_dual::Dual64;
+
+/// Why the run stopped, as seen from inside a step.
+#[derive(Clone, Debug)]
+pub(crate) enum Stop {
+    Formulation(FormulationError),
+    NonFinite,
+    Drift { row: usize, residual: f64 },
+    Projection { row: usize, residual: f64 },
+}
+
+pub(crate) struct MotionOde<'a, M: Model, C: Constraints> {
+    problem: &'a Problem<M, C>,
+    settings: &'a Settings,
+    ev: Evaluator<'a, M, C, f64>,
+    evd: Option<Evaluator<'a, M, C, Dual64>>,
+    proj: Projector<'a, M, C>,
+    sink: &'a mut dyn SampleSink,
+    segments: Vec<Segment>,
+    levels: Vec<Level>,
+    nv: usize,
+    base: Vec<f64>,
+    q: Vec<f64>,
+    v: Vec<f64>,
+    qd: Vec<Dual64>,
+    yd: Vec<Dual64>,
+    dyd: Vec<Dual64>,
+    ybuf: Vec<f64>,
+    u: Vec<f64>,
+    reac: Vec<f64>,
+    res: Vec<f64>,
+    rate: Vec<f64>,
+    rank: RankTolerances,
+    baumgarte: Option<Baumgarte>,
+    has_quaternion: bool,
+    out_index: usize,
+    pub stats: Statistics,
+    pub max_residual: Vec<f64>,
+    pub max_residual_rate: Vec<f64>,
+    pub t_last: f64,
+    pub initial_correction: Option<InitialCorrection>,
+}
+
+impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
+    /// Check and (optionally) assemble the initial state, emit the first sample.
+    pub fn new(
+        problem: &'a Problem<M, C>,
+        settings: &'a Settings,
+        sink: &'a mut dyn SampleSink,
+    ) -> Result<Self, ReturnCode> {
+        let m = &problem.model;
+        let c = &problem.constraints;
+        let (nq, nv, s) = (m.nq(), m.nv(), c.rows().len());
+        if problem.q0.len() != nq || problem.v0.len() != nv {
+            return Err(ReturnCode::InconsistentInitialState {
+                row: format!(
+                    "dimensions: q0 has {} entries (model nq = {nq}), v0 has {} (nv = {nv})",
+                    problem.q0.len(),
+                    problem.v0.len()
+                ),
+                residual: f64::NAN,
+            });
+        }
+        if !problem.q0.iter().chain(&problem.v0).all(|x| x.is_finite()) {
+            return Err(ReturnCode::NonFinite { t: problem.t0 });
+        }
+        let segments = m.segments().to_vec();
+        let mut q = problem.q0.clone();
+        model::normalize(&segments, &mut q);
+        let mut v = problem.v0.clone();
+        let levels: Vec<Level> = c.rows().iter().map(|r| r.level).collect();
+        let names: Vec<String> = c.rows().iter().map(|r| r.name.clone()).collect();
+        let mut proj = Projector::new(m, c);
+        let t0 = problem.t0;
+
+        // Consistency of the initial state (2.5).
+        let mut res = vec![0.0; s];
+        let mut rate = vec![0.0; s];
+        let worst = |proj: &mut Projector<'a, M, C>, q: &[f64], v: &[f64], res: &mut [f64], rate: &mut [f64]| {
+            proj.residuals(t0, q, v, res, rate);
+            let mut w = (0.0f64, 0usize);
+            for i in 0..s {
+                if !is_state_row(levels[i]) {
+                    continue;
+                }
+                let r = if levels[i] == Level::Position {
+                    res[i].abs().max(rate[i].abs())
+                } else {
+                    res[i].abs()
+                };
+                if r > w.0 || r.is_nan() {
+                    w = (r, i);
+                }
+            }
+            w
+        };
+        let (r0, i0) = worst(&mut proj, &q, &v, &mut res, &mut rate);
+        let mut initial_correction = None;
+        if r0 > settings.consistency_tol || r0.is_nan() {
+            if !settings.assemble {
+                return Err(ReturnCode::InconsistentInitialState {
+                    row: names[i0].clone(),
+                    residual: r0,
+                });
+            }
+            let rep = proj.project(t0, &mut q, &mut v, settings.consistency_tol * 1e-3, 50);
+            let (r1, i1) = worst(&mut proj, &q, &v, &mut res, &mut rate);
+            if r1 > settings.consistency_tol || r1.is_nan() {
+                return Err(ReturnCode::InconsistentInitialState {
+                    row: format!("{} (assembly failed)", names[i1]),
+                    residual: r1,
+                });
+            }
+            initial_correction = Some(InitialCorrection {
+                position: rep.dq,
+                velocity: rep.dv,
+            });
+        }
+
+        let mut ev = Evaluator::new(m, c);
+        // Reference row norms for the vanishing-row test.
+        ev.prepare(t0, &q, &v);
+        let mut scale = vec![1.0; s];
+        for (i, sc) in scale.iter_mut().enumerate() {
+            *sc = ev.jet.b.row(i).iter().map(|x| x * x).sum::<f64>().sqrt();
+        }
+        ev.row_scale = scale;
+        let baumgarte = match settings.drift {
+            DriftControl::Baumgarte { alpha, beta } => Some(Baumgarte { alpha, beta }),
+            _ => None,
+        };
+        let mut me = MotionOde {
+            problem,
+            settings,
+            ev,
+            evd: None,
+            proj,
+            sink,
+            has_quaternion: segments.iter().any(|g| matches!(g, Segment::Quaternion { .. })),
+            segments,
+            levels,
+            nv,
+            base: q.clone(),
+            q,
+            v,
+            qd: vec![Dual::from_re(0.0); nq],
+            yd: vec![Dual::from_re(0.0); 2 * nv],
+            dyd: vec![Dual::from_re(0.0); 2 * nv],
+            ybuf: vec![0.0; 2 * nv],
+            u: vec![0.0; nv],
+            reac: vec![0.0; nv],
+            res,
+            rate,
+            rank: settings.rank(),
+            baumgarte,
+            out_index: 0,
+            stats: Statistics {
+                min_b_rcond: 1.0,
+                ..Default::default()
+            },
+            max_residual: vec![0.0; s],
+            max_residual_rate: vec![0.0; s],
+            t_last: t0,
+            initial_correction,
+        };
+        let (q0, v0) = (me.q.clone(), me.v.clone());
+        if let Err(stop) = me.emit(t0, &q0, &v0) {
+            return Err(me.code_of(stop, t0));
+        }
+        me.monitor(t0).map_err(|stop| me.code_of(stop, t0))?;
+        Ok(me)
+    }
+
+    /// y(t0) = (0, v0).
+    pub fn initial_y(&self) -> Vec<f64> {
+        let mut y = vec![0.0; 2 * self.nv];
+        y[self.nv..].copy_from_slice(&self.v);
+        y
+    }
+
+    fn eval_f64(&mut self, t: f64, q: &[f64], v: &[f64]) -> Result<(), Stop> {
+        if !q.iter().chain(v).all(|x| x.is_finite()) {
+            return Err(Stop::NonFinite);
+        }
+        self.ev
+            .evaluate(self.settings.formulation, &self.rank, self.baumgarte, t, q, v)
+            .map_err(Stop::Formulation)?;
+        let d = self.ev.diag;
+        self.stats.factorizations += d.factorizations;
+        self.stats.max_du = self.stats.max_du.max(d.du);
+        self.stats.min_b_rcond = self.stats.min_b_rcond.min(d.b_rcond);
+        Ok(())
+    }
+
+    /// Evaluate at (t, q, v) and hand the sample to the sink.
+    fn emit(&mut self, t: f64, q: &[f64], v: &[f64]) -> Result<(), Stop> {
+        self.eval_f64(t, q, v)?;
+        self.ev.reaction(Role::Programme, &mut self.u);
+        self.ev.reaction(Role::System, &mut self.reac);
+        let s = self.levels.len();
+        // Acceleration rows: evaluate h(t, q, v, dv/dt) directly as an independent check.
+        let mut hbuf = std::mem::take(&mut self.res);
+        {
+            let mut ws = self.problem.constraints.workspace::<f64>();
+            if self.levels.contains(&Level::Acceleration) {
+                self.problem
+                    .constraints
+                    .eval(&mut ws, t, q, v, &self.ev.acc, &mut hbuf);
+            }
+        }
+        for i in 0..s {
+            match self.levels[i] {
+                Level::Acceleration => {}
+                _ => hbuf[i] = self.ev.jet.value[i],
+            }
+            self.rate[i] = self.ev.jet.gdot[i];
+        }
+        self.sink.sample(&Sample {
+            t,
+            q,
+            v,
+            a: &self.ev.acc,
+            u: &self.u,
+            reactions: &self.reac,
+            lambda: &self.ev.lambda,
+            residual: &hbuf,
+            residual_rate: &self.rate,
+        });
+        for i in 0..s {
+            if self.levels[i] == Level::Acceleration {
+                self.max_residual[i] = self.max_residual[i].max(hbuf[i].abs());
+            }
+        }
+        self.res = hbuf;
+        self.out_index += 1;
+        Ok(())
+    }
+
+    /// Residuals of the state rows at the current (q, v); stop on drift beyond `max_drift`.
+    fn monitor(&mut self, t: f64) -> Result<(), Stop> {
+        let (q, v) = (std::mem::take(&mut self.q), std::mem::take(&mut self.v));
+        self.proj.residuals(t, &q, &v, &mut self.res, &mut self.rate);
+        self.q = q;
+        self.v = v;
+        for i in 0..self.levels.len() {
+            if !is_state_row(self.levels[i]) {
+                continue;
+            }
+            let r = self.res[i].abs();
+            let rr = self.rate[i].abs();
+            if r.is_nan() || rr.is_nan() {
+                return Err(Stop::NonFinite);
+            }
+            self.max_residual[i] = self.max_residual[i].max(r);
+            self.max_residual_rate[i] = self.max_residual_rate[i].max(rr);
+            if let Some(lim) = self.settings.max_drift {
+                if r.max(rr) > lim {
+                    return Err(Stop::Drift {
+                        row: i,
+                        residual: r.max(rr),
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn code_of(&self, stop: Stop, t: f64) -> ReturnCode {
+        let names = |rows: &[usize]| -> Vec<String> {
+            rows.iter()
+                .map(|&i| self.problem.constraints.rows()[i].name.clone())
+                .collect()
+        };
+        match stop {
+            Stop::Formulation(FormulationError::RankDeficient { rows, rcond, .. }) => {
+                ReturnCode::SingularProgramme {
+                    t,
+                    rows: names(&rows),
+                    rcond,
+                }
+            }
+            Stop::Formulation(FormulationError::SingularSystem { rcond }) => {
+                ReturnCode::SingularSystem { t, rcond }
+            }
+            Stop::NonFinite => ReturnCode::NonFinite { t },
+            Stop::Drift { row, residual } => ReturnCode::DriftExceeded {
+                t,
+                row: names(&[row])[0].clone(),
+                residual,
+            },
+            Stop::Projection { row, residual } => ReturnCode::ProjectionFailed {
+                t,
+                row: names(&[row])[0].clone(),
+                residual,
+            },
+        }
+    }
+
+    /// Map the integrator's outcome to a return code.
+    pub fn finish(&self, outcome: Outcome<Stop>) -> ReturnCode {
+        match outcome {
+            Outcome::Finished => ReturnCode::Success,
+            Outcome::StepTooSmall { t, h } => ReturnCode::StepTooSmall { t, h },
+            Outcome::MaxSteps { t } => ReturnCode::MaxSteps { t },
+            Outcome::NonFinite { t } => ReturnCode::NonFinite { t },
+            Outcome::Problem { t, error } => self.code_of(error, t),
+        }
+    }
+
+    /// q = base (+) delta into `self.q`.
+    fn chart_to_q(&mut self, y: &[f64]) {
+        model::retract(&self.segments, &self.base, &y[..self.nv], &mut self.q);
+    }
+}
+
+impl<'a, M: Model, C: Constraints> OdeProblem for MotionOde<'a, M, C> {
+    type Error = Stop;
+
+    fn dim(&self) -> usize {
+        2 * self.nv
+    }
+
+    fn rhs(&mut self, t: f64, y: &[f64], dy: &mut [f64]) -> Result<(), Stop> {
+        let nv = self.nv;
+        self.chart_to_q(y);
+        let q = std::mem::take(&mut self.q);
+        let r = self.eval_f64(t, &q, &y[nv..]);
+        self.q = q;
+        r?;
+        model::chart_rate(&self.segments, &y[..nv], &y[nv..], &mut dy[..nv]);
+        dy[nv..].copy_from_slice(&self.ev.acc);
+        Ok(())
+    }
+
+    fn jacobian(&mut self, t: f64, y: &[f64], jac: &mut DMatrix<f64>) -> Result<(), Stop> {
+        let nv = self.nv;
+        if self.evd.is_none() {
+            let mut e = Evaluator::new(&self.problem.model, &self.problem.constraints);
+            e.row_scale = self.ev.row_scale.clone();
+            self.evd = Some(e);
+        }
+        let evd = self.evd.as_mut().expect("created above");
+        for j in 0..2 * nv {
+            for k in 0..2 * nv {
+                self.yd[k] = Dual::new(y[k], if k == j { 1.0 } else { 0.0 });
+            }
+            model::retract(&self.segments, &self.base, &self.yd[..nv], &mut self.qd);
+            evd.evaluate(
+                self.settings.formulation,
+                &self.rank,
+                self.baumgarte,
+                Dual::from_re(t),
+                &self.qd,
+                &self.yd[nv..],
+            )
+            .map_err(Stop::Formulation)?;
+            model::chart_rate(&self.segments, &self.yd[..nv], &self.yd[nv..], &mut self.dyd[..nv]);
+            self.dyd[nv..].copy_from_slice(&evd.acc);
+            for i in 0..2 * nv {
+                jac[(i, j)] = self.dyd[i].eps;
+            }
+        }
+        Ok(())
+    }
+
+    fn error_scale(&self, y0: &[f64], y1: &[f64], atol: f64, rtol: f64, out: &mut [f64]) {
+        let nv = self.nv;
+        for seg in &self.segments {
+            match *seg {
+                Segment::Euclidean { q: iq, v: iv, len } => {
+                    for k in 0..len {
+                        let a = (self.base[iq + k] + y0[iv + k]).abs();
+                        let b = (self.base[iq + k] + y1[iv + k]).abs();
+                        out[iv + k] = atol + rtol * a.max(b);
+                    }
+                }
+                Segment::Quaternion { v: iv, .. } => {
+                    for k in 0..3 {
+                        out[iv + k] = atol + rtol;
+                    }
+                }
+            }
+        }
+        for i in nv..2 * nv {
+            out[i] = atol + rtol * y0[i].abs().max(y1[i].abs());
+        }
+    }
+
+    fn accepted(
+        &mut self,
+        t0: f64,
+        t1: f64,
+        y: &mut [f64],
+        dense: &dyn DenseOutput,
+    ) -> Result<Accept, Stop> {
+        let nv = self.nv;
+        let (ts, te) = (self.problem.t0, self.problem.t1);
+        // Interior output times from the dense output (before any projection of the step end).
+        if let Output::Every(dt) = self.settings.output {
+            loop {
+                let tk = ts + self.out_index as f64 * dt;
+                if tk >= t1 - 1e-12 * t1.abs().max(1.0) || tk > te {
+                    break;
+                }
+                if tk <= t0 {
+                    self.out_index += 1;
+                    continue;
+                }
+                let mut yb = std::mem::take(&mut self.ybuf);
+                dense.eval(tk, &mut yb);
+                self.chart_to_q(&yb);
+                let q = std::mem::take(&mut self.q);
+                let r = self.emit(tk, &q, &yb[nv..]);
+                self.q = q;
+                self.ybuf = yb;
+                r?;
+            }
+        }
+        // The new state, re-centred and projected.
+        self.chart_to_q(y);
+        self.v.copy_from_slice(&y[nv..]);
+        let mut changed = false;
+        if let DriftControl::Projection { tol, max_iter } = self.settings.drift {
+            let (mut q, mut v) = (std::mem::take(&mut self.q), std::mem::take(&mut self.v));
+            let rep = self.proj.project(t1, &mut q, &mut v, tol, max_iter);
+            self.q = q;
+            self.v = v;
+            if rep.iterations > 0 {
+                changed = true;
+                self.stats.projections += 1;
+                self.stats.projection_iterations += rep.iterations;
+                self.stats.max_position_correction = self.stats.max_position_correction.max(rep.dq);
+                self.stats.max_velocity_correction = self.stats.max_velocity_correction.max(rep.dv);
+            }
+            if !rep.converged && !(rep.residual <= 1e3 * tol) {
+                self.t_last = t1;
+                return Err(Stop::Projection {
+                    row: rep.row,
+                    residual: rep.residual,
+                });
+            }
+        }
+        if changed || (self.has_quaternion && model::chart_angle(&self.segments, &y[..nv]) > 0.5)
+        {
+            model::normalize(&self.segments, &mut self.q);
+            self.base.copy_from_slice(&self.q);
+            for x in &mut y[..nv] {
+                *x = 0.0;
+            }
+            y[nv..].copy_from_slice(&self.v);
+            changed = true;
+        }
+        self.t_last = t1;
+        self.monitor(t1)?;
+        let at_output = match self.settings.output {
+            Output::Steps => true,
+            Output::Every(dt) => {
+                let tk = ts + self.out_index as f64 * dt;
+                (tk - t1).abs() <= 1e-12 * t1.abs().max(1.0) || t1 >= te
+            }
+        };
+        if at_output {
+            let (q, v) = (self.q.clone(), self.v.clone());
+            self.emit(t1, &q, &v)?;
+        }
+        Ok(if changed {
+            Accept::Changed
+        } else {
+            Accept::Unchanged
+        })
+    }
+}
