@@ -60,6 +60,8 @@ pub enum FormulationError {
     },
     /// The square system (or A itself) is numerically singular.
     SingularSystem { rcond: f64 },
+    /// B, gamma, A or F contain NaN or infinity.
+    NonFinite,
 }
 
 /// Diagnostics of one solve.
@@ -69,8 +71,8 @@ pub struct Diagnostics {
     pub b_rcond: f64,
     /// Pivot ratio of the LU of the square system (a reciprocal condition estimate).
     pub system_rcond: f64,
-    /// |D u|_inf / max(|u|_inf, tiny): how far u is from the row space of B (null-space method; the
-    /// other methods report it too, computed from the same QR).
+    /// |D u|_inf / max(|u|, |A a|, |F|)_inf: how far u is from the row space of B (2.7), relative to
+    /// the terms it is computed from (every method reports it, from the same QR).
     pub du: f64,
     /// Factorizations performed.
     pub factorizations: usize,
@@ -162,6 +164,9 @@ impl<S: Scalar> FormulationWork<S> {
                 n2 += b[(i, j)] * b[(i, j)];
             }
             let n = n2.sqrt();
+            if !re(n).is_finite() || !re(gamma[i]).is_finite() {
+                return Err(FormulationError::NonFinite);
+            }
             if re(n) <= tol.vanishing * row_scale[i].max(f64::MIN_POSITIVE) || re(n) == 0.0 {
                 return Err(FormulationError::RankDeficient {
                     rank: s - 1,
@@ -206,7 +211,9 @@ impl<S: Scalar> FormulationWork<S> {
             Formulation::NullSpace => self.null_space(a, force, gamma, acc, &mut diag)?,
             Formulation::Kkt => self.kkt(a, force, b, gamma, acc, &mut diag)?,
             Formulation::RangeSpace => self.range_space(a, force, b, gamma, acc, &mut diag)?,
-            Formulation::UdwadiaKalaba => self.udwadia_kalaba(a, force, b, gamma, acc, &mut diag)?,
+            Formulation::UdwadiaKalaba => {
+                self.udwadia_kalaba(a, force, b, gamma, acc, &mut diag)?
+            }
         }
         // Reaction u = A a - F = B^T lambda = B_hat^T N lambda. With Q^T u = w:
         // R P^T (N lambda) = w[..s], and D u = w[s..] should vanish (2.7).
@@ -217,9 +224,13 @@ impl<S: Scalar> FormulationWork<S> {
             }
             self.tmp[i] = x;
         }
+        // Scale of the terms of u = A a - F, so that du measures round-off, not cancellation.
         let mut umax = 0.0f64;
         for i in 0..nv {
-            umax = umax.max(re(self.tmp[i]).abs());
+            umax = umax
+                .max(re(self.tmp[i]).abs())
+                .max(re(force[i]).abs())
+                .max(re(self.tmp[i] + force[i]).abs());
         }
         linalg::qr_apply_qt(&self.bt, nv, s, &self.beta, &mut self.tmp[..nv]);
         let mut du = 0.0f64;
@@ -497,5 +508,4 @@ impl<S: Scalar> FormulationWork<S> {
             x[i] = v / self.k[(i, i)];
         }
     }
-
 }

@@ -112,7 +112,13 @@ pub fn cartesian(q: &[f64], v: &[f64]) -> ([f64; 3], [f64; 3]) {
 }
 
 /// Example 2.1 from a given initial state; the programmed speed is the initial speed.
-pub fn problem(m: f64, mu: f64, q0: [f64; 3], v0: [f64; 3], t1: f64) -> Problem<Particle, ConstantSpeed> {
+pub fn problem(
+    m: f64,
+    mu: f64,
+    q0: [f64; 3],
+    v0: [f64; 3],
+    t1: f64,
+) -> Problem<Particle, ConstantSpeed> {
     let c2 = speed2(&q0, &v0);
     Problem {
         model: Particle { m, mu },

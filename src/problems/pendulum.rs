@@ -44,7 +44,8 @@ impl Model for DoublePendulum {
     fn applied_forces<S: Scalar>(&self, _: &mut (), _t: S, q: &[S], _v: &[S], f: &mut [S]) {
         let s1 = q[0].sin();
         let s12 = (q[0] + q[1]).sin();
-        f[0] = -(s1 * ((self.m1 + self.m2) * self.g * self.l1) + s12 * (self.m2 * self.g * self.l2));
+        f[0] =
+            -(s1 * ((self.m1 + self.m2) * self.g * self.l1) + s12 * (self.m2 * self.g * self.l2));
         f[1] = -(s12 * (self.m2 * self.g * self.l2));
     }
 }
@@ -152,7 +153,11 @@ impl RodAndSwing {
     /// Closed form: phi, phid, phidd at t.
     pub fn phi(&self, t: f64) -> (f64, f64, f64) {
         let (a, w) = (self.phi0, self.omega);
-        (a * (w * t).sin(), a * w * (w * t).cos(), -a * w * w * (w * t).sin())
+        (
+            a * (w * t).sin(),
+            a * w * (w * t).cos(),
+            -a * w * w * (w * t).sin(),
+        )
     }
 }
 

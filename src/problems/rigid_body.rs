@@ -20,7 +20,7 @@
 
 use crate::model::{lie, Model, Segment};
 use crate::programme::{Constraints, Level, Role, RowSpec};
-use crate::scalar::Scalar;
+use crate::scalar::{DualStruct, Scalar};
 use crate::solve::Problem;
 use nalgebra::DMatrix;
 
@@ -52,7 +52,10 @@ impl Model for RigidBody {
         &SEG
     }
     fn q_names(&self) -> Vec<String> {
-        ["qw", "qx", "qy", "qz"].iter().map(|s| s.to_string()).collect()
+        ["qw", "qx", "qy", "qz"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect()
     }
     fn v_names(&self) -> Vec<String> {
         ["p", "q", "r"].iter().map(|s| s.to_string()).collect()
@@ -91,7 +94,11 @@ impl Precession {
     pub fn new(lambda: f64) -> Self {
         Precession {
             lambda,
-            rows: [RowSpec::new("precession", Level::Acceleration, Role::Programme)],
+            rows: [RowSpec::new(
+                "precession",
+                Level::Acceleration,
+                Role::Programme,
+            )],
         }
     }
 }
@@ -105,7 +112,14 @@ impl Constraints for Precession {
     fn eval<S: Scalar>(&self, _: &mut (), _t: S, _q: &[S], w: &[S], a: &[S], out: &mut [S]) {
         let (p, q, r) = (w[0], w[1], w[2]);
         let rho2 = p * p + q * q;
-        out[0] = p * a[1] - q * a[0] + r * rho2 - rho2 * rho2.sqrt() * self.lambda;
+        // rho2^(3/2) is C1 with zero gradient at rho2 = 0, but forward AD of rho2 * sqrt(rho2) (or
+        // num-dual's powf) gives 0 * inf = NaN there: take the exact value 0 at that point.
+        let rho3 = if rho2.re() == 0.0 {
+            rho2
+        } else {
+            rho2 * rho2.sqrt()
+        };
+        out[0] = p * a[1] - q * a[0] + r * rho2 - rho3 * self.lambda;
     }
 }
 
@@ -151,7 +165,12 @@ pub fn symmetric_body() -> Problem<RigidBody, Precession> {
 }
 
 /// Closed form for [`symmetric_body`]-type problems: omega(t) and u(t).
-pub fn symmetric_closed_form(body: &RigidBody, lambda: f64, w0: [f64; 3], t: f64) -> ([f64; 3], [f64; 3]) {
+pub fn symmetric_closed_form(
+    body: &RigidBody,
+    lambda: f64,
+    w0: [f64; 3],
+    t: f64,
+) -> ([f64; 3], [f64; 3]) {
     let rho = (w0[0] * w0[0] + w0[1] * w0[1]).sqrt();
     let psi0 = w0[1].atan2(w0[0]);
     let r = w0[2];

@@ -1,6 +1,8 @@
 //! One evaluation of the programmed-motion right-hand side at (t, q, v): dv/dt and multipliers.
 
-use crate::formulation::{Diagnostics, Formulation, FormulationError, FormulationWork, RankTolerances};
+use crate::formulation::{
+    Diagnostics, Formulation, FormulationError, FormulationWork, RankTolerances,
+};
 use crate::model::Model;
 use crate::programme::jet::Jet;
 use crate::programme::{Constraints, Level, Role};
@@ -64,7 +66,8 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
     /// A, F = G + Q and the constraint jet at (t, q, v), without solving.
     pub fn prepare(&mut self, t: S, q: &[S], v: &[S]) {
         self.model.mass_matrix(&mut self.mws, q, &mut self.mass);
-        self.model.velocity_terms(&mut self.mws, q, v, &mut self.force);
+        self.model
+            .velocity_terms(&mut self.mws, q, v, &mut self.force);
         self.model
             .applied_forces(&mut self.mws, t, q, v, &mut self.qf);
         for (f, &x) in self.force.iter_mut().zip(&self.qf) {

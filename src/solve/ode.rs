@@ -9,8 +9,8 @@
 use super::evaluator::{Baumgarte, Evaluator};
 use super::project::Projector;
 use super::{
-    is_state_row, DriftControl, InitialCorrection, Output, Problem, ReturnCode, Sample,
-    SampleSink, Settings, Statistics,
+    is_state_row, DriftControl, InitialCorrection, Output, Problem, ReturnCode, Sample, SampleSink,
+    Settings, Statistics,
 };
 use crate::formulation::{FormulationError, RankTolerances};
 use crate::integrate::{Accept, DenseOutput, OdeProblem, Outcome};
@@ -96,7 +96,11 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
         // Consistency of the initial state (2.5).
         let mut res = vec![0.0; s];
         let mut rate = vec![0.0; s];
-        let worst = |proj: &mut Projector<'a, M, C>, q: &[f64], v: &[f64], res: &mut [f64], rate: &mut [f64]| {
+        let worst = |proj: &mut Projector<'a, M, C>,
+                     q: &[f64],
+                     v: &[f64],
+                     res: &mut [f64],
+                     rate: &mut [f64]| {
             proj.residuals(t0, q, v, res, rate);
             let mut w = (0.0f64, 0usize);
             for i in 0..s {
@@ -156,7 +160,9 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
             evd: None,
             proj,
             sink,
-            has_quaternion: segments.iter().any(|g| matches!(g, Segment::Quaternion { .. })),
+            has_quaternion: segments
+                .iter()
+                .any(|g| matches!(g, Segment::Quaternion { .. })),
             segments,
             levels,
             nv,
@@ -203,7 +209,14 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
             return Err(Stop::NonFinite);
         }
         self.ev
-            .evaluate(self.settings.formulation, &self.rank, self.baumgarte, t, q, v)
+            .evaluate(
+                self.settings.formulation,
+                &self.rank,
+                self.baumgarte,
+                t,
+                q,
+                v,
+            )
             .map_err(Stop::Formulation)?;
         let d = self.ev.diag;
         self.stats.factorizations += d.factorizations;
@@ -259,7 +272,8 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
     /// Residuals of the state rows at the current (q, v); stop on drift beyond `max_drift`.
     fn monitor(&mut self, t: f64) -> Result<(), Stop> {
         let (q, v) = (std::mem::take(&mut self.q), std::mem::take(&mut self.v));
-        self.proj.residuals(t, &q, &v, &mut self.res, &mut self.rate);
+        self.proj
+            .residuals(t, &q, &v, &mut self.res, &mut self.rate);
         self.q = q;
         self.v = v;
         for i in 0..self.levels.len() {
@@ -302,6 +316,7 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
             Stop::Formulation(FormulationError::SingularSystem { rcond }) => {
                 ReturnCode::SingularSystem { t, rcond }
             }
+            Stop::Formulation(FormulationError::NonFinite) => ReturnCode::NonFinite { t },
             Stop::NonFinite => ReturnCode::NonFinite { t },
             Stop::Drift { row, residual } => ReturnCode::DriftExceeded {
                 t,
@@ -374,7 +389,12 @@ impl<'a, M: Model, C: Constraints> OdeProblem for MotionOde<'a, M, C> {
                 &self.yd[nv..],
             )
             .map_err(Stop::Formulation)?;
-            model::chart_rate(&self.segments, &self.yd[..nv], &self.yd[nv..], &mut self.dyd[..nv]);
+            model::chart_rate(
+                &self.segments,
+                &self.yd[..nv],
+                &self.yd[nv..],
+                &mut self.dyd[..nv],
+            );
             self.dyd[nv..].copy_from_slice(&evd.acc);
             for i in 0..2 * nv {
                 jac[(i, j)] = self.dyd[i].eps;
@@ -460,8 +480,7 @@ impl<'a, M: Model, C: Constraints> OdeProblem for MotionOde<'a, M, C> {
                 });
             }
         }
-        if changed || (self.has_quaternion && model::chart_angle(&self.segments, &y[..nv]) > 0.5)
-        {
+        if changed || (self.has_quaternion && model::chart_angle(&self.segments, &y[..nv]) > 0.5) {
             model::normalize(&self.segments, &mut self.q);
             self.base.copy_from_slice(&self.q);
             for x in &mut y[..nv] {

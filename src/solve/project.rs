@@ -124,9 +124,8 @@ impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
         }
         // Velocities: dg/dt of position rows and f of velocity rows.
         self.sel.clear();
-        self.sel.extend(
-            (0..self.levels.len()).filter(|&i| self.levels[i] != Level::Acceleration),
-        );
+        self.sel
+            .extend((0..self.levels.len()).filter(|&i| self.levels[i] != Level::Acceleration));
         if !self.sel.is_empty() {
             let mut done = false;
             let mut it = 0;
@@ -160,9 +159,8 @@ impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
         // Final residuals of all state rows.
         self.ev.prepare(t, q, v);
         self.sel.clear();
-        self.sel.extend(
-            (0..self.levels.len()).filter(|&i| self.levels[i] != Level::Acceleration),
-        );
+        self.sel
+            .extend((0..self.levels.len()).filter(|&i| self.levels[i] != Level::Acceleration));
         let a = self.worst(|ev, i| ev.jet.value[i]);
         let b = self.worst(|ev, i| rate_or_value(ev, i));
         let (r, row) = if a.0 >= b.0 { a } else { b };

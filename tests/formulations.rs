@@ -1,0 +1,299 @@
+//! Instantaneous checks of the right-hand side: the four formulations against each other, the
+//! ideality of u (2.7), exact constraint derivatives against closed forms, rank detection.
+//!
+//! Tolerance class: algebraic identities, in multiples of machine epsilon times the problem scale.
+
+use progmo::formulation::{Formulation, FormulationError, RankTolerances};
+use progmo::model::Model;
+use progmo::problems::{particle, pendulum, rigid_body};
+use progmo::programme::{Constraints, Role};
+use progmo::solve::{Evaluator, Problem};
+
+const EPS: f64 = f64::EPSILON;
+
+/// Deterministic pseudo-random numbers in [-1, 1).
+struct Lcg(u64);
+impl Lcg {
+    fn next(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        2.0 * ((self.0 >> 11) as f64 / (1u64 << 53) as f64) - 1.0
+    }
+}
+
+fn accelerations<M: Model, C: Constraints>(
+    p: &Problem<M, C>,
+    f: Formulation,
+    t: f64,
+    q: &[f64],
+    v: &[f64],
+) -> (Vec<f64>, Vec<f64>, f64) {
+    let mut ev = Evaluator::<M, C, f64>::new(&p.model, &p.constraints);
+    ev.evaluate(f, &RankTolerances::default(), None, t, q, v)
+        .expect("regular state");
+    (ev.acc.clone(), ev.lambda.clone(), ev.diag.du)
+}
+
+fn max_abs(x: &[f64]) -> f64 {
+    x.iter().fold(0.0, |m, y| m.max(y.abs()))
+}
+
+/// All formulations give the same dv/dt and lambda on well-conditioned states.
+fn check_agreement<M: Model, C: Constraints>(
+    p: &Problem<M, C>,
+    states: &[(f64, Vec<f64>, Vec<f64>)],
+) {
+    for (t, q, v) in states {
+        let (a0, l0, du) = accelerations(p, Formulation::NullSpace, *t, q, v);
+        let scale_a = max_abs(&a0).max(1.0);
+        let scale_l = max_abs(&l0).max(1.0);
+        // (2.7): D u = 0, relative to |u|.
+        assert!(du < 100.0 * EPS, "D u = {du:e}");
+        for f in Formulation::ALL {
+            let (a, l, _) = accelerations(p, f, *t, q, v);
+            for k in 0..a.len() {
+                assert!(
+                    (a[k] - a0[k]).abs() < 1e3 * EPS * scale_a,
+                    "{f:?} acc[{k}] {} vs {}",
+                    a[k],
+                    a0[k]
+                );
+            }
+            for k in 0..l.len() {
+                assert!(
+                    (l[k] - l0[k]).abs() < 1e3 * EPS * scale_l,
+                    "{f:?} lambda[{k}] {} vs {}",
+                    l[k],
+                    l0[k]
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn formulations_agree_on_example_2_1() {
+    let p = particle::example_2_1();
+    let mut rng = Lcg(1);
+    let states: Vec<_> = (0..20)
+        .map(|_| {
+            let q = vec![0.5 * rng.next(), 3.0 * rng.next(), 1.5 + rng.next()];
+            let v = vec![rng.next(), rng.next(), rng.next()];
+            (rng.next(), q, v)
+        })
+        .collect();
+    check_agreement(&p, &states);
+}
+
+#[test]
+fn formulations_agree_on_example_3_1_heavy_top() {
+    let p = rigid_body::heavy_top();
+    let mut rng = Lcg(2);
+    let states: Vec<_> = (0..20)
+        .map(|_| {
+            let mut q: Vec<f64> = (0..4).map(|_| rng.next()).collect();
+            let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
+            q.iter_mut().for_each(|x| *x /= n);
+            let v = vec![rng.next(), rng.next(), 5.0 * rng.next()];
+            (0.0, q, v)
+        })
+        .collect();
+    check_agreement(&p, &states);
+}
+
+#[test]
+fn formulations_agree_with_system_constraints_and_complete_programme() {
+    let p = pendulum::rod_and_swing();
+    let mut rng = Lcg(3);
+    let states: Vec<_> = (0..20)
+        .map(|_| {
+            let th = rng.next();
+            let q = vec![1.2 * th.sin(), -1.2 * th.cos()];
+            let v = vec![rng.next(), rng.next()];
+            (rng.next(), q, v)
+        })
+        .collect();
+    check_agreement(&p, &states);
+    let d = pendulum::double_pendulum();
+    let states: Vec<_> = (0..20)
+        .map(|_| {
+            (
+                2.0 * rng.next(),
+                vec![rng.next(), rng.next()],
+                vec![rng.next(), rng.next()],
+            )
+        })
+        .collect();
+    check_agreement(&d, &states);
+}
+
+/// The control force of the constant-speed programme is tangential (NOTES.md, Example 2.1):
+/// u = 2 lambda A v / m, i.e. in Cartesian terms f = 2 lambda xdot.
+#[test]
+fn example_2_1_control_force_is_along_the_velocity() {
+    let p = particle::example_2_1();
+    let (q, v) = (vec![0.2, 0.4, 1.3], vec![0.3, -0.7, 0.0]); // rd = 0: the paper's D is singular
+    let mut ev = Evaluator::<_, _, f64>::new(&p.model, &p.constraints);
+    ev.evaluate(
+        Formulation::NullSpace,
+        &RankTolerances::default(),
+        None,
+        0.0,
+        &q,
+        &v,
+    )
+    .unwrap();
+    let mut u = vec![0.0; 3];
+    ev.reaction(Role::Programme, &mut u);
+    let m = p.model.m;
+    let (th, r) = (q[0], q[2]);
+    let av = [
+        m * r * r * v[0],
+        m * r * r * th.cos().powi(2) * v[1],
+        m * v[2],
+    ];
+    let k = 2.0 * ev.lambda[0] / m;
+    for j in 0..3 {
+        assert!((u[j] - k * av[j]).abs() < 100.0 * EPS * max_abs(&u).max(1.0));
+    }
+    // B = dg/dv = 2 (r^2 thd, r^2 cos^2 th phd, rd) exactly (AD, no finite differences).
+    let b = [
+        2.0 * r * r * v[0],
+        2.0 * r * r * th.cos().powi(2) * v[1],
+        2.0 * v[2],
+    ];
+    for j in 0..3 {
+        assert!((ev.jet.b[(0, j)] - b[j]).abs() < 10.0 * EPS);
+    }
+}
+
+/// Holonomic row q2 - A sin(w t): B = (0, 1), gamma = -A w^2 sin(w t) exactly.
+#[test]
+fn holonomic_row_second_derivative_is_exact() {
+    let p = pendulum::double_pendulum();
+    let (amp, w) = (p.constraints.amplitude, p.constraints.omega);
+    let mut ev = Evaluator::<_, _, f64>::new(&p.model, &p.constraints);
+    let t = 0.7;
+    ev.prepare(t, &[0.1, 0.2], &[0.3, 0.4]);
+    assert_eq!(ev.jet.b[(0, 0)], 0.0);
+    assert_eq!(ev.jet.b[(0, 1)], 1.0);
+    assert!((ev.jet.gamma[0] + amp * w * w * (w * t).sin()).abs() < 10.0 * EPS);
+    assert!((ev.jet.gdot[0] - (0.4 - amp * w * (w * t).cos())).abs() < 10.0 * EPS);
+}
+
+/// The complete programme of the Cartesian pendulum at its closed-form state: dv/dt, the control
+/// force of the programme row and the rod reaction all match the closed form.
+#[test]
+fn complete_programme_matches_closed_form() {
+    let p = pendulum::rod_and_swing();
+    let c = &p.constraints;
+    let (m, g, l) = (p.model.m, p.model.g, c.length);
+    for &t in &[0.0, 0.3, 1.1, 2.5] {
+        let (ph, phd, phdd) = c.phi(t);
+        let q = [l * ph.sin(), -l * ph.cos()];
+        let v = [l * ph.cos() * phd, l * ph.sin() * phd];
+        let a = [
+            l * (ph.cos() * phdd - ph.sin() * phd * phd),
+            l * (ph.sin() * phdd + ph.cos() * phd * phd),
+        ];
+        // m a = (0, -m g) + lr (2x, 2y) + mu (1, 0)
+        let lr = m * (a[1] + g) / (2.0 * q[1]);
+        let mu = m * a[0] - 2.0 * q[0] * lr;
+        for f in Formulation::ALL {
+            let mut ev = Evaluator::<_, _, f64>::new(&p.model, &p.constraints);
+            ev.evaluate(f, &RankTolerances::default(), None, t, &q, &v)
+                .unwrap();
+            let mut u = vec![0.0; 2];
+            let mut rod = vec![0.0; 2];
+            ev.reaction(Role::Programme, &mut u);
+            ev.reaction(Role::System, &mut rod);
+            let tol = 1e3 * EPS * (m * g);
+            assert!(
+                (ev.acc[0] - a[0]).abs() < tol && (ev.acc[1] - a[1]).abs() < tol,
+                "{f:?}"
+            );
+            assert!(
+                (u[0] - mu).abs() < tol && u[1].abs() < tol,
+                "{f:?} u {u:?} vs {mu}"
+            );
+            assert!((rod[0] - 2.0 * lr * q[0]).abs() < tol, "{f:?}");
+            assert!((rod[1] - 2.0 * lr * q[1]).abs() < tol, "{f:?}");
+        }
+    }
+}
+
+/// Example 3.1 closed form for an axisymmetric body: u = (A lambda rho - C r)(-q, p, 0).
+#[test]
+fn example_3_1_control_torque_matches_closed_form() {
+    let p = rigid_body::symmetric_body();
+    let (w, u_ref) =
+        rigid_body::symmetric_closed_form(&p.model, p.constraints.lambda, [0.6, 0.8, 1.5], 0.0);
+    let mut ev = Evaluator::<_, _, f64>::new(&p.model, &p.constraints);
+    ev.evaluate(
+        Formulation::NullSpace,
+        &RankTolerances::default(),
+        None,
+        0.0,
+        &p.q0,
+        &w,
+    )
+    .unwrap();
+    let mut u = vec![0.0; 3];
+    ev.reaction(Role::Programme, &mut u);
+    for j in 0..3 {
+        assert!((u[j] - u_ref[j]).abs() < 100.0 * EPS, "{u:?} vs {u_ref:?}");
+    }
+}
+
+/// p = q = 0: the programme's gradient vanishes; every formulation reports it, none returns numbers.
+#[test]
+fn vanishing_programme_gradient_is_reported() {
+    let p = rigid_body::degenerate_start();
+    for f in Formulation::ALL {
+        let mut ev = Evaluator::<_, _, f64>::new(&p.model, &p.constraints);
+        let r = ev.evaluate(f, &RankTolerances::default(), None, 0.0, &p.q0, &p.v0);
+        match r {
+            Err(FormulationError::RankDeficient { rows, .. }) => assert_eq!(rows, vec![0]),
+            other => panic!("{f:?}: expected rank deficiency, got {other:?}"),
+        }
+    }
+}
+
+/// Two copies of the same row: dependent rows are reported by name order (the later pivot).
+#[test]
+fn dependent_rows_are_reported() {
+    use progmo::programme::{Level, RowSpec};
+    use progmo::scalar::Scalar;
+    struct Twice([RowSpec; 2]);
+    impl Constraints for Twice {
+        type Workspace<S: Scalar> = ();
+        fn workspace<S: Scalar>(&self) {}
+        fn rows(&self) -> &[RowSpec] {
+            &self.0
+        }
+        fn eval<S: Scalar>(&self, _: &mut (), _t: S, q: &[S], _v: &[S], _a: &[S], out: &mut [S]) {
+            out[0] = q[1] - 0.1;
+            out[1] = q[1] * 2.0 - 0.2;
+        }
+    }
+    let d = pendulum::double_pendulum();
+    let cons = Twice([
+        RowSpec::new("a", Level::Position, Role::Programme),
+        RowSpec::new("b", Level::Position, Role::Programme),
+    ]);
+    let mut ev = Evaluator::<_, _, f64>::new(&d.model, &cons);
+    let r = ev.evaluate(
+        Formulation::NullSpace,
+        &RankTolerances::default(),
+        None,
+        0.0,
+        &[0.1, 0.1],
+        &[0.0, 0.0],
+    );
+    assert!(
+        matches!(r, Err(FormulationError::RankDeficient { rank: 1, .. })),
+        "{r:?}"
+    );
+}
