@@ -20,7 +20,7 @@
 
 use crate::model::{lie, Model, Segment};
 use crate::programme::{Constraints, Level, Role, RowSpec};
-use crate::scalar::{DualStruct, Scalar};
+use crate::scalar::Scalar;
 use crate::solve::Problem;
 use nalgebra::DMatrix;
 

@@ -1,0 +1,63 @@
+//! Criterion benchmarks of the solver core on the shared test problems: one right-hand side
+//! (accelerations and multipliers) per formulation, and whole solves.
+//!
+//! Run: `cargo bench --bench core`.
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
+use progmo::formulation::{Formulation, RankTolerances};
+use progmo::model::Model;
+use progmo::problems::{particle, pendulum, rigid_body};
+use progmo::programme::Constraints;
+use progmo::solve::{solve, Evaluator, Problem, Settings};
+use std::hint::black_box;
+
+fn rhs_group<M: Model, C: Constraints>(c: &mut Criterion, name: &str, p: &Problem<M, C>) {
+    let mut g = c.benchmark_group(format!("rhs/{name}"));
+    for f in Formulation::ALL {
+        let mut ev = Evaluator::<M, C, f64>::new(&p.model, &p.constraints);
+        let tol = RankTolerances::default();
+        g.bench_function(BenchmarkId::from_parameter(format!("{f:?}")), |b| {
+            b.iter(|| {
+                ev.evaluate(
+                    f,
+                    &tol,
+                    None,
+                    black_box(0.1),
+                    black_box(&p.q0),
+                    black_box(&p.v0),
+                )
+                .unwrap();
+                black_box(ev.acc[0])
+            })
+        });
+    }
+    g.finish();
+}
+
+fn rhs(c: &mut Criterion) {
+    rhs_group(c, "example_2_1", &particle::example_2_1());
+    rhs_group(c, "heavy_top", &rigid_body::heavy_top());
+    rhs_group(c, "double_pendulum", &pendulum::double_pendulum());
+}
+
+fn whole_solves(c: &mut Criterion) {
+    let mut g = c.benchmark_group("solve");
+    g.sample_size(10);
+    let s = Settings::default();
+    let p = particle::example_2_1();
+    g.bench_function("example_2_1/dop853/projection", |b| {
+        b.iter(|| black_box(solve(&p, &s)))
+    });
+    let p = rigid_body::heavy_top();
+    g.bench_function("heavy_top/dop853/projection", |b| {
+        b.iter(|| black_box(solve(&p, &s)))
+    });
+    let p = pendulum::double_pendulum();
+    g.bench_function("double_pendulum/dop853/projection", |b| {
+        b.iter(|| black_box(solve(&p, &s)))
+    });
+    g.finish();
+}
+
+criterion_group!(benches, rhs, whole_solves);
+criterion_main!(benches);
