@@ -152,7 +152,7 @@ fn fold(n: Node, src: &str) -> Result<F, ExprError> {
     };
     Ok(match n.kind {
         Kind::Num(v) => F::C(v),
-        Kind::Pi => F::C(std::f64::consts::PI),
+        Kind::Named(_, v) => F::C(v),
         Kind::Sym(..) => F::N(n),
         Kind::Neg(a) => match fold(*a, src)? {
             F::C(v) => F::C(-v),
@@ -210,7 +210,7 @@ impl Gen {
     fn emit(&mut self, n: &Node) {
         match &n.kind {
             Kind::Num(v) => self.push(Op::Const(*v)),
-            Kind::Pi => self.push(Op::Const(std::f64::consts::PI)),
+            Kind::Named(_, v) => self.push(Op::Const(*v)),
             Kind::Sym(s, _) => self.push(Op::Load(*s as u32)),
             Kind::Neg(a) => {
                 self.emit(a);
@@ -312,7 +312,7 @@ fn collect_slots(n: &Node, out: &mut Vec<usize>, order: &mut u8) {
             out.push(*s);
             *order = (*order).max(time_order(name));
         }
-        Kind::Num(_) | Kind::Pi => {}
+        Kind::Num(_) | Kind::Named(..) => {}
         Kind::Neg(a) => collect_slots(a, out, order),
         Kind::Bin(_, a, b) => {
             collect_slots(a, out, order);

@@ -34,8 +34,8 @@
 //! # Functions and constants
 //!
 //! `sin cos tan asin acos atan exp log sqrt abs sinh cosh tanh` take one argument, `atan2(y, x)`
-//! two; `log` is the natural logarithm. `pi` is the only constant and is reserved (a symbol named
-//! `pi` cannot be referenced). Names carry no meaning here: `r'` and `r''` are ordinary names
+//! two; `log` is the natural logarithm. `pi` is built in and reserved; further named constants
+//! come from [`SymbolTable::define`] and are folded at compile time. Names carry no meaning here: `r'` and `r''` are ordinary names
 //! whose apostrophes [`Expr::time_order`] counts, so the caller can tell position-, velocity- and
 //! acceleration-level rows apart.
 //!
@@ -43,7 +43,7 @@
 //!
 //! Exponents that are integer constants compile to `powi` (`x^2` to a multiplication), other
 //! constants to `powf`, symbolic exponents to `powd` (`exp(y ln x)`, so derivatives need `x > 0`).
-//! `abs` has derivative `sign(x)` (−1 at 0). `atan2` keeps finite derivatives on the whole plane
+//! `abs` has derivative `sign(x)` (+1 at 0). `atan2` keeps finite derivatives on the whole plane
 //! except the origin, also where num-dual's own `atan2` divides by `x = 0`.
 //!
 //! # Why an own parser
@@ -68,10 +68,16 @@ pub use parser::Func;
 use std::collections::HashMap;
 
 /// Ordered names → slot indices. The caller fills a slot array `&[S]` in this order.
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
+///
+/// Optionally also named constants ([`SymbolTable::define`]), folded into the bytecode at
+/// compile time (scene parameters such as masses and lengths). A slot wins over a constant of
+/// the same name; `pi` is reserved.
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct SymbolTable {
     names: Vec<String>,
     index: HashMap<String, usize>,
+    const_names: Vec<String>,
+    consts: HashMap<String, f64>,
 }
 
 impl SymbolTable {
@@ -105,6 +111,25 @@ impl SymbolTable {
         &self.names
     }
 
+    /// Define (or redefine) a named constant.
+    pub fn define(&mut self, name: impl Into<String>, value: f64) {
+        let name = name.into();
+        if self.consts.insert(name.clone(), value).is_none() {
+            self.const_names.push(name);
+        }
+    }
+
+    /// The value of a named constant.
+    pub fn constant(&self, name: &str) -> Option<f64> {
+        self.consts.get(name).copied()
+    }
+
+    /// Names of the defined constants, in definition order.
+    pub fn constant_names(&self) -> &[String] {
+        &self.const_names
+    }
+
+    /// Number of slots.
     pub fn len(&self) -> usize {
         self.names.len()
     }

@@ -78,6 +78,19 @@ impl Func {
     }
 }
 
+/// Common spellings from other languages.
+fn alias(name: &str) -> Option<&'static str> {
+    Some(match name {
+        "ln" => "log",
+        "arcsin" => "asin",
+        "arccos" => "acos",
+        "arctan" => "atan",
+        "arctan2" => "atan2",
+        "fabs" => "abs",
+        _ => return None,
+    })
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum BinOp {
     Add,
@@ -102,7 +115,8 @@ impl BinOp {
 #[derive(Debug, Clone)]
 pub(crate) enum Kind {
     Num(f64),
-    Pi,
+    /// `pi` or a constant defined in the symbol table: folded, printed by name.
+    Named(String, f64),
     /// Slot (usize::MAX when only collecting names) and name as written.
     Sym(usize, String),
     Neg(Box<Node>),
@@ -186,7 +200,7 @@ impl<'a> Parser<'a> {
 
     fn make(&self, kind: Kind, start: usize, end: usize, tok: &Token) -> Result<Node, ExprError> {
         let height = 1 + match &kind {
-            Kind::Num(_) | Kind::Pi | Kind::Sym(..) => 0,
+            Kind::Num(_) | Kind::Named(..) | Kind::Sym(..) => 0,
             Kind::Neg(a) => a.height,
             Kind::Bin(_, a, b) => a.height.max(b.height),
             Kind::Call(_, args) => args.iter().map(|a| a.height).max().unwrap_or(0),
@@ -319,7 +333,8 @@ impl<'a> Parser<'a> {
 
     fn name(&mut self, t: &Token, name: &str, end: usize) -> Result<Node, ExprError> {
         if name == "pi" {
-            return self.make(Kind::Pi, t.col, end, t);
+            let pi = Kind::Named(name.to_string(), std::f64::consts::PI);
+            return self.make(pi, t.col, end, t);
         }
         if Func::from_name(name).is_some() {
             return Err(self.err_at(
@@ -339,7 +354,15 @@ impl<'a> Parser<'a> {
             Some(table) => match table.get(name) {
                 Some(s) => s,
                 None => {
-                    let cands = table.names().iter().map(|s| s.as_str()).chain(["pi"]);
+                    if let Some(v) = table.constant(name) {
+                        return self.make(Kind::Named(name.to_string(), v), t.col, end, t);
+                    }
+                    let cands = table
+                        .names()
+                        .iter()
+                        .chain(table.constant_names())
+                        .map(|s| s.as_str())
+                        .chain(["pi"]);
                     return Err(self.err_at(
                         K::UnknownSymbol {
                             name: name.to_string(),
@@ -355,7 +378,10 @@ impl<'a> Parser<'a> {
 
     fn call(&mut self, t: &Token, name: &str) -> Result<Node, ExprError> {
         let Some(f) = Func::from_name(name) else {
-            let known = self.symbols.is_some_and(|s| s.get(name).is_some()) || name == "pi";
+            let known = name == "pi"
+                || self
+                    .symbols
+                    .is_some_and(|s| s.get(name).is_some() || s.constant(name).is_some());
             let kind = if known {
                 K::NotAFunction {
                     name: name.to_string(),
@@ -363,7 +389,9 @@ impl<'a> Parser<'a> {
             } else {
                 K::UnknownFunction {
                     name: name.to_string(),
-                    suggestion: closest(name, Func::ALL.iter().map(|f| f.name())),
+                    suggestion: alias(name)
+                        .map(str::to_string)
+                        .or_else(|| closest(name, Func::ALL.iter().map(|f| f.name()))),
                 }
             };
             return Err(self.err_at(kind, t));
@@ -424,7 +452,7 @@ impl<'a> Parser<'a> {
 fn prec(n: &Node) -> u8 {
     match &n.kind {
         Kind::Num(v) if *v < 0.0 => 3,
-        Kind::Num(_) | Kind::Pi | Kind::Sym(..) | Kind::Call(..) => 5,
+        Kind::Num(_) | Kind::Named(..) | Kind::Sym(..) | Kind::Call(..) => 5,
         Kind::Neg(_) => 3,
         Kind::Bin(BinOp::Add | BinOp::Sub, ..) => 1,
         Kind::Bin(BinOp::Mul | BinOp::Div, ..) => 2,
@@ -452,7 +480,7 @@ impl fmt::Display for Node {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match &self.kind {
             Kind::Num(v) => f.write_str(&fmt_num(*v)),
-            Kind::Pi => f.write_str("pi"),
+            Kind::Named(name, _) => f.write_str(name),
             Kind::Sym(_, name) => f.write_str(name),
             Kind::Neg(a) => {
                 f.write_str("-")?;

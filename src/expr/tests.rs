@@ -182,6 +182,38 @@ fn symbol_table() {
 }
 
 #[test]
+fn named_constants_are_folded() {
+    let mut t: SymbolTable = ["x", "shadow"].into_iter().collect();
+    t.define("m", 2.0);
+    t.define("l", 0.5);
+    t.define("n", 3.0);
+    t.define("shadow", 7.0);
+    t.define("m", 4.0); // redefinition
+    assert_eq!(t.constant("m"), Some(4.0));
+    assert_eq!(t.constant_names(), &["m", "l", "n", "shadow"]);
+    assert_eq!(t.len(), 2);
+    let e = Expr::compile("m*l^2*g0", &{
+        let mut t = t.clone();
+        t.define("g0", 9.81);
+        t
+    })
+    .unwrap();
+    assert_eq!(e.constant(), Some(4.0 * 0.25 * 9.81));
+    assert_eq!(e.to_string(), "m*l^2*g0");
+    let e = Expr::compile("x^n", &t).unwrap();
+    assert_eq!(e.code(), &[Op::Load(0), Op::Powi(3)]);
+    assert!(!e.uses(1));
+    let d = e.value(&[Dual64::new(-2.0, 1.0), Dual64::new(0.0, 0.0)]);
+    assert_eq!((d.re, d.eps), (-8.0, 12.0));
+    // A slot wins over a constant of the same name.
+    assert_eq!(Expr::compile("shadow", &t).unwrap().code(), &[Op::Load(1)]);
+    let e = Expr::compile("2*mm", &t).unwrap_err();
+    assert_eq!(e.message(), "unknown symbol `mm` (did you mean `m`?)");
+    let e = Expr::compile("l(2)", &t).unwrap_err();
+    assert_eq!(e.message(), "`l` is a symbol, not a function");
+}
+
+#[test]
 fn bytecode_is_folded_and_specialized() {
     let t = table();
     let code = |s: &str| Expr::compile(s, &t).unwrap().code().to_vec();
