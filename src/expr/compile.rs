@@ -188,6 +188,39 @@ fn unfold(f: F) -> Node {
     }
 }
 
+#[derive(Clone, Copy)]
+enum Leaf {
+    C(f64),
+    L(u32),
+}
+
+fn leaf(n: &Node) -> Option<Leaf> {
+    match n.kind {
+        Kind::Num(v) => Some(Leaf::C(v)),
+        Kind::Sym(s, _) => Some(Leaf::L(s as u32)),
+        _ => None,
+    }
+}
+
+/// `top op leaf`, or `leaf op top` when `swapped`, as one instruction (`op` is not `^`).
+fn fused(op: BinOp, leaf: Leaf, swapped: bool) -> Op {
+    use Leaf::{C, L};
+    match (op, leaf, swapped) {
+        (BinOp::Add, C(c), _) => Op::AddC(c),
+        (BinOp::Add, L(s), _) => Op::AddL(s),
+        (BinOp::Mul, C(c), _) => Op::MulC(c),
+        (BinOp::Mul, L(s), _) => Op::MulL(s),
+        (BinOp::Sub, C(c), false) => Op::SubC(c),
+        (BinOp::Sub, C(c), true) => Op::RSubC(c),
+        (BinOp::Sub, L(s), false) => Op::SubL(s),
+        (BinOp::Sub, L(s), true) => Op::RSubL(s),
+        (BinOp::Div | BinOp::Pow, C(c), false) => Op::DivC(c),
+        (BinOp::Div | BinOp::Pow, C(c), true) => Op::RDivC(c),
+        (BinOp::Div | BinOp::Pow, L(s), false) => Op::DivL(s),
+        (BinOp::Div | BinOp::Pow, L(s), true) => Op::RDivL(s),
+    }
+}
+
 struct Gen {
     code: Vec<Op>,
     depth: usize,
@@ -233,51 +266,28 @@ impl Gen {
                 }
             }
             Kind::Bin(op, a, b) => {
-                let leaf = |n: &Node| match n.kind {
-                    Kind::Num(v) => Some((Some(v), 0)),
-                    Kind::Sym(s, _) => Some((None, s as u32)),
-                    _ => None,
+                // A constant operand, else a slot operand, is fused into the instruction.
+                let (a, b, leaf, swapped) = match (leaf(a), leaf(b)) {
+                    (_, Some(r @ Leaf::C(_))) => (a, b, Some(r), false),
+                    (Some(l @ Leaf::C(_)), _) => (b, a, Some(l), true),
+                    (_, Some(r)) => (a, b, Some(r), false),
+                    (Some(l), None) => (b, a, Some(l), true),
+                    (None, None) => (a, b, None, false),
                 };
-                let (la, lb) = (leaf(a), leaf(b));
-                // Prefer a constant operand, then a slot operand, on the right.
-                let right = matches!(lb, Some((Some(_), _)))
-                    || (lb.is_some() && !matches!(la, Some((Some(_), _))));
-                if let (true, Some((c, s))) = (right, lb) {
-                    self.emit(a);
-                    let o = match (op, c) {
-                        (BinOp::Add, Some(c)) => Op::AddC(c),
-                        (BinOp::Sub, Some(c)) => Op::SubC(c),
-                        (BinOp::Mul, Some(c)) => Op::MulC(c),
-                        (BinOp::Add, None) => Op::AddL(s),
-                        (BinOp::Sub, None) => Op::SubL(s),
-                        (BinOp::Mul, None) => Op::MulL(s),
-                        (_, None) => Op::DivL(s),
-                        (_, Some(c)) => Op::DivC(c),
-                    };
-                    self.reduce(o, 1);
-                } else if let Some((c, s)) = la {
-                    self.emit(b);
-                    let o = match (op, c) {
-                        (BinOp::Add, Some(c)) => Op::AddC(c),
-                        (BinOp::Sub, Some(c)) => Op::RSubC(c),
-                        (BinOp::Mul, Some(c)) => Op::MulC(c),
-                        (BinOp::Add, None) => Op::AddL(s),
-                        (BinOp::Sub, None) => Op::RSubL(s),
-                        (BinOp::Mul, None) => Op::MulL(s),
-                        (_, None) => Op::RDivL(s),
-                        (_, Some(c)) => Op::RDivC(c),
-                    };
-                    self.reduce(o, 1);
-                } else {
-                    self.emit(a);
-                    self.emit(b);
-                    let o = match op {
-                        BinOp::Add => Op::Add,
-                        BinOp::Sub => Op::Sub,
-                        BinOp::Mul => Op::Mul,
-                        _ => Op::Div,
-                    };
-                    self.reduce(o, 2);
+                self.emit(a);
+                match leaf {
+                    Some(l) => self.reduce(fused(*op, l, swapped), 1),
+                    None => {
+                        self.emit(b);
+                        let o = match op {
+                            BinOp::Add => Op::Add,
+                            BinOp::Sub => Op::Sub,
+                            BinOp::Mul => Op::Mul,
+                            BinOp::Div => Op::Div,
+                            BinOp::Pow => Op::Pow,
+                        };
+                        self.reduce(o, 2);
+                    }
                 }
             }
             Kind::Call(f, args) => {

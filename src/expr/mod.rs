@@ -35,16 +35,43 @@
 //!
 //! `sin cos tan asin acos atan exp log sqrt abs sinh cosh tanh` take one argument, `atan2(y, x)`
 //! two; `log` is the natural logarithm. `pi` is built in and reserved; further named constants
-//! come from [`SymbolTable::define`] and are folded at compile time. Names carry no meaning here: `r'` and `r''` are ordinary names
-//! whose apostrophes [`Expr::time_order`] counts, so the caller can tell position-, velocity- and
-//! acceleration-level rows apart.
+//! come from [`SymbolTable::define`] and are folded at compile time. Names carry no meaning
+//! here: `r'` and `r''` are ordinary names whose apostrophes [`Expr::time_order`] counts, so the
+//! caller can tell position-, velocity- and acceleration-level rows apart.
 //!
 //! # Derivatives
 //!
-//! Exponents that are integer constants compile to `powi` (`x^2` to a multiplication), other
-//! constants to `powf`, symbolic exponents to `powd` (`exp(y ln x)`, so derivatives need `x > 0`).
-//! `abs` has derivative `sign(x)` (+1 at 0). `atan2` keeps finite derivatives on the whole plane
-//! except the origin, also where num-dual's own `atan2` divides by `x = 0`.
+//! Integer constant exponents compile to `powi` (`x^2` to a multiplication), other constants to
+//! `powf`, symbolic exponents to num-dual's `powd` = `exp(y ln x)` (derivatives need `x > 0`;
+//! a negative base with an integer-valued exponent is evaluated as `±(-x)^y`). `abs` has
+//! derivative `sign(x)` (+1 at 0). `atan2` has finite derivatives everywhere but the origin,
+//! also on the `y` axis where num-dual's own `atan2` divides by zero. The value part of a dual
+//! result equals the f64 result up to rounding (num-dual divides as `a * (1/b)`).
+//!
+//! # Example
+//!
+//! ```
+//! use progmo::expr::{Expr, SymbolTable};
+//! use num_dual::Dual64;
+//!
+//! let mut symbols = SymbolTable::new();
+//! let q = symbols.insert("q");
+//! let v = symbols.insert("q'");
+//! symbols.define("l", 0.5);
+//! let g = Expr::compile("l*sin(q) + q'^2", &symbols).unwrap();
+//! assert!(g.uses(v) && g.time_order() == 1);
+//!
+//! let mut stack = Vec::with_capacity(g.max_stack());
+//! let value = g.eval(&[0.3, 2.0], &mut stack);
+//! // d/dq through a dual number in slot q.
+//! let d = g.eval(&[Dual64::new(0.3, 1.0), Dual64::new(2.0, 0.0)], &mut Vec::new());
+//! assert_eq!(d.eps, 0.5 * 0.3f64.cos());
+//! # let _ = (q, value);
+//!
+//! let err = Expr::compile("sin(qq)", &symbols).unwrap_err();
+//! assert_eq!(err.render("scene.toml", 12, 20),
+//!     "scene.toml:12:24: error: unknown symbol `qq` (did you mean `q`?)\n    sin(qq)\n        ^^");
+//! ```
 //!
 //! # Why an own parser
 //!

@@ -57,6 +57,12 @@ fn values_match_closed_forms() {
         ("(x - 1)/(y + 2)", |x, y, _| (x - 1.0) / (y + 2.0)),
         ("3 - x", |x, _, _| 3.0 - x),
         ("3/x", |x, _, _| 3.0 / x),
+        ("y - x*t", |x, y, t| y - x * t),
+        ("y/(x + t)", |x, y, t| y / (x + t)),
+        ("t/x - 2", |x, _, t| t / x - 2.0),
+        ("x*t/4 + (x + 1)*(y - 1)", |x, y, t| {
+            x * t / 4.0 + (x + 1.0) * (y - 1.0)
+        }),
         ("x^2 + y^3 - t^-2", |x, y, t| x * x + y.powi(3) - t.powi(-2)),
         ("x^0.5 + abs(y)^1.5", |x, y, _| x.sqrt() + y.abs().powf(1.5)),
         ("x^y", |x, y, _| x.powf(y)),
@@ -233,6 +239,21 @@ fn bytecode_is_folded_and_specialized() {
     assert_eq!(code("(2*3)*x"), vec![Op::Load(0), Op::MulC(6.0)]);
     assert_eq!(code("1 - x"), vec![Op::Load(0), Op::RSubC(1.0)]);
     assert_eq!(code("x*y + t"), vec![Op::Load(0), Op::MulL(1), Op::AddL(2)]);
+    assert_eq!(code("2/x"), vec![Op::Load(0), Op::RDivC(2.0)]);
+    assert_eq!(code("x/4"), vec![Op::Load(0), Op::DivC(4.0)]);
+    assert_eq!(code("y - 1"), vec![Op::Load(1), Op::SubC(1.0)]);
+    assert_eq!(
+        code("y - x*t"),
+        vec![Op::Load(0), Op::MulL(2), Op::RSubL(1)]
+    );
+    assert_eq!(
+        code("y/(x+t)"),
+        vec![Op::Load(0), Op::AddL(2), Op::RDivL(1)]
+    );
+    assert_eq!(
+        code("sin(x) - cos(y)"),
+        vec![Op::Load(0), Op::Sin, Op::Load(1), Op::Cos, Op::Sub]
+    );
     let e = Expr::compile("sin(x)*cos(y) + (x+y)*(t-x)", &t).unwrap();
     assert_eq!(e.max_stack(), 3);
 }
