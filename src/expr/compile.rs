@@ -152,7 +152,7 @@ fn fold(n: Node, src: &str) -> Result<F, ExprError> {
     };
     Ok(match n.kind {
         Kind::Num(v) => F::C(v),
-        Kind::Named(_, v) => F::C(v),
+        Kind::Named(_, v) => return check(v),
         Kind::Sym(..) => F::N(n),
         Kind::Neg(a) => match fold(*a, src)? {
             F::C(v) => F::C(-v),

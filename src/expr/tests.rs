@@ -213,6 +213,10 @@ fn named_constants_are_folded() {
     assert_eq!((d.re, d.eps), (-8.0, 12.0));
     // A slot wins over a constant of the same name.
     assert_eq!(Expr::compile("shadow", &t).unwrap().code(), &[Op::Load(1)]);
+    t.define("bad", f64::NAN);
+    let e = Expr::compile("x + bad", &t).unwrap_err();
+    assert_eq!((e.column, e.token.as_str()), (5, "bad"));
+    assert_eq!(e.message(), "constant subexpression evaluates to NaN");
     let e = Expr::compile("2*mm", &t).unwrap_err();
     assert_eq!(e.message(), "unknown symbol `mm` (did you mean `m`?)");
     let e = Expr::compile("l(2)", &t).unwrap_err();
@@ -496,9 +500,17 @@ impl Rng {
 /// Compile; when it succeeds, evaluate over f64 and duals and check the stack bound and the
 /// Display round trip.
 fn exercise(src: &str, t: &SymbolTable) -> bool {
-    let Ok(e) = Expr::compile(src, t) else {
-        let _ = referenced_names(src);
-        return false;
+    let e = match Expr::compile(src, t) {
+        Ok(e) => e,
+        Err(err) => {
+            assert!(
+                err.column >= 1 && err.column <= src.chars().count() + 1,
+                "{src}: {err}"
+            );
+            let _ = (err.caret(), err.render("f.toml", 3, 7), err.to_string());
+            let _ = referenced_names(src);
+            return false;
+        }
     };
     let slots: Vec<f64> = (0..t.len()).map(|i| 0.3 + 0.7 * i as f64).collect();
     let mut stack = Vec::with_capacity(e.max_stack());
@@ -526,6 +538,46 @@ fn exercise(src: &str, t: &SymbolTable) -> bool {
 impl Expr {
     fn caret_free(&self) -> usize {
         self.len()
+    }
+}
+
+/// A random well-formed expression over the test table.
+fn gen_expr(rng: &mut Rng, depth: u32) -> String {
+    let atoms = [
+        "x",
+        "y",
+        "t",
+        "theta",
+        "r'",
+        "r''",
+        "tip.x",
+        "tip.vel.y",
+        "2",
+        "0.5",
+        "1e-3",
+        "pi",
+        "3",
+    ];
+    if depth == 0 || rng.next() % 3 == 0 {
+        return rng.pick(&atoms).to_string();
+    }
+    let a = gen_expr(rng, depth - 1);
+    let b = gen_expr(rng, depth - 1);
+    match rng.next() % 8 {
+        0 => format!("{a} + {b}"),
+        1 => format!("{a} - {b}"),
+        2 => format!("({a})*{b}"),
+        3 => format!("{a}/({b})"),
+        4 => format!(
+            "({a})^{}",
+            rng.pick(&["2", "3", "-1", "0.5", "1.5", "y", "(x)"])
+        ),
+        5 => format!("-{a}"),
+        6 => format!("atan2({a}, {b})"),
+        _ => format!(
+            "{}({a})",
+            rng.pick(&["sin", "cos", "tan", "exp", "log", "sqrt", "abs", "sinh", "tanh", "atan"])
+        ),
     }
 }
 
@@ -589,6 +641,28 @@ fn random_input_never_panics() {
             }
         }
         ok += usize::from(exercise(&s, &t));
+    }
+    // Random well-formed expressions, and each with one character deleted or inserted.
+    for _ in 0..3_000 {
+        let src = gen_expr(&mut rng, 4);
+        assert!(
+            exercise(&src, &t)
+                || Expr::compile(&src, &t)
+                    .is_err_and(|e| matches!(e.kind, ExprErrorKind::NonFinite { .. })),
+            "{src}"
+        );
+        let cs: Vec<char> = src.chars().collect();
+        let i = (rng.next() % (cs.len() as u64 + 1)) as usize;
+        let del: String = cs
+            .iter()
+            .enumerate()
+            .filter(|&(j, _)| j != i)
+            .map(|(_, c)| c)
+            .collect();
+        let mut ins = cs.clone();
+        ins.insert(i, *rng.pick(&chars));
+        ok += usize::from(exercise(&del, &t));
+        ok += usize::from(exercise(&ins.into_iter().collect::<String>(), &t));
     }
     // Every prefix and suffix of valid expressions.
     let valid = [
