@@ -1,0 +1,552 @@
+//! Constant folding, bytecode generation and the evaluator.
+
+use super::error::{ExprError, ExprErrorKind as K};
+use super::parser::{parse, BinOp, Func, Kind, Node};
+use super::{time_order, SymbolTable};
+use crate::scalar::Scalar;
+use std::fmt;
+
+/// One instruction of the stack machine. `C` suffix: constant right operand, `L`: slot right
+/// operand, `R` prefix: operands swapped (`RSubC(c)`: c - top).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Op {
+    Const(f64),
+    Load(u32),
+    Add,
+    Sub,
+    Mul,
+    Div,
+    /// Symbolic exponent: `powd`.
+    Pow,
+    AddC(f64),
+    SubC(f64),
+    RSubC(f64),
+    MulC(f64),
+    DivC(f64),
+    RDivC(f64),
+    AddL(u32),
+    SubL(u32),
+    RSubL(u32),
+    MulL(u32),
+    DivL(u32),
+    RDivL(u32),
+    Neg,
+    Square,
+    Powi(i32),
+    Powf(f64),
+    Sin,
+    Cos,
+    Tan,
+    Asin,
+    Acos,
+    Atan,
+    Atan2,
+    Exp,
+    Ln,
+    Sqrt,
+    Abs,
+    Sinh,
+    Cosh,
+    Tanh,
+}
+
+/// A compiled expression: immutable, `Send + Sync`, cheap to evaluate over any [`Scalar`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Expr {
+    code: Vec<Op>,
+    max_stack: usize,
+    /// Sorted, distinct slots read.
+    slots: Vec<usize>,
+    time_order: u8,
+    source: String,
+    /// Normalized infix text (before folding, so `pi` stays `pi`).
+    text: String,
+}
+
+/// Result of folding a subtree: a constant or a tree with at least one symbol.
+enum F {
+    C(f64),
+    N(Node),
+}
+
+fn apply1(f: Func, x: f64) -> f64 {
+    match f {
+        Func::Sin => x.sin(),
+        Func::Cos => x.cos(),
+        Func::Tan => x.tan(),
+        Func::Asin => x.asin(),
+        Func::Acos => x.acos(),
+        Func::Atan => x.atan(),
+        Func::Exp => x.exp(),
+        Func::Log => x.ln(),
+        Func::Sqrt => x.sqrt(),
+        Func::Abs => x.abs(),
+        Func::Sinh => x.sinh(),
+        Func::Cosh => x.cosh(),
+        Func::Tanh => x.tanh(),
+        Func::Atan2 => f64::NAN,
+    }
+}
+
+/// Evaluate `a op b` exactly as the f64 evaluator does.
+fn apply2(op: BinOp, a: f64, b: f64) -> f64 {
+    match op {
+        BinOp::Add => a + b,
+        BinOp::Sub => a - b,
+        BinOp::Mul => a * b,
+        BinOp::Div => a / b,
+        BinOp::Pow => match pow_kind(b) {
+            PowKind::One => a,
+            PowKind::Square => a * a,
+            PowKind::Sqrt => a.sqrt(),
+            PowKind::Int(n) => a.powi(n),
+            PowKind::Real => a.powf(b),
+        },
+    }
+}
+
+enum PowKind {
+    One,
+    Square,
+    Sqrt,
+    Int(i32),
+    Real,
+}
+
+fn pow_kind(b: f64) -> PowKind {
+    if b == 1.0 {
+        PowKind::One
+    } else if b == 2.0 {
+        PowKind::Square
+    } else if b == 0.5 {
+        PowKind::Sqrt
+    } else if b.fract() == 0.0 && b.abs() <= 1024.0 {
+        PowKind::Int(b as i32)
+    } else {
+        PowKind::Real
+    }
+}
+
+fn fold(n: Node, src: &str) -> Result<F, ExprError> {
+    let (start, end) = (n.start, n.end);
+    let check = |v: f64| -> Result<F, ExprError> {
+        if v.is_finite() {
+            Ok(F::C(v))
+        } else {
+            let text: String = src
+                .chars()
+                .skip(start.saturating_sub(1))
+                .take(end.saturating_sub(start))
+                .collect();
+            Err(ExprError::new(K::NonFinite { value: v }, start, &text, src))
+        }
+    };
+    let height = n.height;
+    let rebuild = move |kind| {
+        F::N(Node {
+            kind,
+            start,
+            end,
+            height,
+        })
+    };
+    Ok(match n.kind {
+        Kind::Num(v) => F::C(v),
+        Kind::Named(_, v) => return check(v),
+        Kind::Sym(..) => F::N(n),
+        Kind::Neg(a) => match fold(*a, src)? {
+            F::C(v) => F::C(-v),
+            F::N(a) => rebuild(Kind::Neg(Box::new(a))),
+        },
+        Kind::Bin(op, a, b) => match (fold(*a, src)?, fold(*b, src)?) {
+            (F::C(x), F::C(y)) => return check(apply2(op, x, y)),
+            (a, b) => rebuild(Kind::Bin(op, Box::new(unfold(a)), Box::new(unfold(b)))),
+        },
+        Kind::Call(f, args) => {
+            let args = args
+                .into_iter()
+                .map(|a| fold(a, src))
+                .collect::<Result<Vec<_>, _>>()?;
+            match (f, args.as_slice()) {
+                (Func::Atan2, [F::C(y), F::C(x)]) => return check(y.atan2(*x)),
+                (_, [F::C(x)]) => return check(apply1(f, *x)),
+                _ => rebuild(Kind::Call(f, args.into_iter().map(unfold).collect())),
+            }
+        }
+    })
+}
+
+fn unfold(f: F) -> Node {
+    match f {
+        F::C(v) => Node {
+            kind: Kind::Num(v),
+            start: 0,
+            end: 0,
+            height: 1,
+        },
+        F::N(n) => n,
+    }
+}
+
+#[derive(Clone, Copy)]
+enum Leaf {
+    C(f64),
+    L(u32),
+}
+
+fn leaf(n: &Node) -> Option<Leaf> {
+    match n.kind {
+        Kind::Num(v) => Some(Leaf::C(v)),
+        Kind::Sym(s, _) => Some(Leaf::L(s as u32)),
+        _ => None,
+    }
+}
+
+/// `top op leaf`, or `leaf op top` when `swapped`, as one instruction (`op` is not `^`).
+fn fused(op: BinOp, leaf: Leaf, swapped: bool) -> Op {
+    use Leaf::{C, L};
+    match (op, leaf, swapped) {
+        (BinOp::Add, C(c), _) => Op::AddC(c),
+        (BinOp::Add, L(s), _) => Op::AddL(s),
+        (BinOp::Mul, C(c), _) => Op::MulC(c),
+        (BinOp::Mul, L(s), _) => Op::MulL(s),
+        (BinOp::Sub, C(c), false) => Op::SubC(c),
+        (BinOp::Sub, C(c), true) => Op::RSubC(c),
+        (BinOp::Sub, L(s), false) => Op::SubL(s),
+        (BinOp::Sub, L(s), true) => Op::RSubL(s),
+        (BinOp::Div | BinOp::Pow, C(c), false) => Op::DivC(c),
+        (BinOp::Div | BinOp::Pow, C(c), true) => Op::RDivC(c),
+        (BinOp::Div | BinOp::Pow, L(s), false) => Op::DivL(s),
+        (BinOp::Div | BinOp::Pow, L(s), true) => Op::RDivL(s),
+    }
+}
+
+struct Gen {
+    code: Vec<Op>,
+    depth: usize,
+    max: usize,
+}
+
+impl Gen {
+    fn push(&mut self, op: Op) {
+        self.code.push(op);
+        self.depth += 1;
+        self.max = self.max.max(self.depth);
+    }
+
+    /// Emit an op that pops `pops` values and pushes one.
+    fn reduce(&mut self, op: Op, pops: usize) {
+        self.code.push(op);
+        self.depth -= pops - 1;
+    }
+
+    fn emit(&mut self, n: &Node) {
+        match &n.kind {
+            Kind::Num(v) => self.push(Op::Const(*v)),
+            Kind::Named(_, v) => self.push(Op::Const(*v)),
+            Kind::Sym(s, _) => self.push(Op::Load(*s as u32)),
+            Kind::Neg(a) => {
+                self.emit(a);
+                self.reduce(Op::Neg, 1);
+            }
+            Kind::Bin(BinOp::Pow, a, b) => {
+                self.emit(a);
+                match &b.kind {
+                    Kind::Num(e) => match pow_kind(*e) {
+                        PowKind::One => {}
+                        PowKind::Square => self.reduce(Op::Square, 1),
+                        PowKind::Sqrt => self.reduce(Op::Sqrt, 1),
+                        PowKind::Int(i) => self.reduce(Op::Powi(i), 1),
+                        PowKind::Real => self.reduce(Op::Powf(*e), 1),
+                    },
+                    _ => {
+                        self.emit(b);
+                        self.reduce(Op::Pow, 2);
+                    }
+                }
+            }
+            Kind::Bin(op, a, b) => {
+                // A constant operand, else a slot operand, is fused into the instruction.
+                let (a, b, leaf, swapped) = match (leaf(a), leaf(b)) {
+                    (_, Some(r @ Leaf::C(_))) => (a, b, Some(r), false),
+                    (Some(l @ Leaf::C(_)), _) => (b, a, Some(l), true),
+                    (_, Some(r)) => (a, b, Some(r), false),
+                    (Some(l), None) => (b, a, Some(l), true),
+                    (None, None) => (a, b, None, false),
+                };
+                self.emit(a);
+                match leaf {
+                    Some(l) => self.reduce(fused(*op, l, swapped), 1),
+                    None => {
+                        self.emit(b);
+                        let o = match op {
+                            BinOp::Add => Op::Add,
+                            BinOp::Sub => Op::Sub,
+                            BinOp::Mul => Op::Mul,
+                            BinOp::Div => Op::Div,
+                            BinOp::Pow => Op::Pow,
+                        };
+                        self.reduce(o, 2);
+                    }
+                }
+            }
+            Kind::Call(f, args) => {
+                for a in args {
+                    self.emit(a);
+                }
+                let o = match f {
+                    Func::Sin => Op::Sin,
+                    Func::Cos => Op::Cos,
+                    Func::Tan => Op::Tan,
+                    Func::Asin => Op::Asin,
+                    Func::Acos => Op::Acos,
+                    Func::Atan => Op::Atan,
+                    Func::Atan2 => Op::Atan2,
+                    Func::Exp => Op::Exp,
+                    Func::Log => Op::Ln,
+                    Func::Sqrt => Op::Sqrt,
+                    Func::Abs => Op::Abs,
+                    Func::Sinh => Op::Sinh,
+                    Func::Cosh => Op::Cosh,
+                    Func::Tanh => Op::Tanh,
+                };
+                self.reduce(o, args.len());
+            }
+        }
+    }
+}
+
+fn collect_slots(n: &Node, out: &mut Vec<usize>, order: &mut u8) {
+    match &n.kind {
+        Kind::Sym(s, name) => {
+            out.push(*s);
+            *order = (*order).max(time_order(name));
+        }
+        Kind::Num(_) | Kind::Named(..) => {}
+        Kind::Neg(a) => collect_slots(a, out, order),
+        Kind::Bin(_, a, b) => {
+            collect_slots(a, out, order);
+            collect_slots(b, out, order);
+        }
+        Kind::Call(_, args) => args.iter().for_each(|a| collect_slots(a, out, order)),
+    }
+}
+
+/// `atan2` whose derivative part stays finite on the y axis (`x = 0`), where num-dual's
+/// `atan(y/x)` form divides by zero. The value part is `f64::atan2` exactly.
+#[inline]
+fn atan2<S: Scalar>(y: S, x: S) -> S {
+    if S::NDERIV == 0 {
+        return y.atan2(x);
+    }
+    let (yr, xr) = (y.re(), x.re());
+    let d = if xr.abs() >= yr.abs() {
+        (y / x).atan()
+    } else {
+        -(x / y).atan()
+    };
+    // Replace the value part (off by multiples of pi/2) and keep all derivative parts.
+    d - S::from(d.re()) + S::from(yr.atan2(xr))
+}
+
+/// `x^y` for a symbolic exponent. Over f64 the same `powi`/`powf` choice as for a constant
+/// exponent; over duals `powd` = `exp(y ln x)`, with a negative base and an integer-valued
+/// exponent handled as `±(-x)^y` (num-dual cannot tell whether `y` carries derivatives).
+#[inline]
+fn pow<S: Scalar>(x: S, y: S) -> S {
+    let yr = y.re();
+    if S::NDERIV == 0 {
+        match pow_kind(yr) {
+            PowKind::One => x,
+            PowKind::Square => x * x,
+            PowKind::Sqrt => x.sqrt(),
+            PowKind::Int(n) => x.powi(n),
+            PowKind::Real => x.powf(yr),
+        }
+    } else if x.re() < 0.0 && yr.fract() == 0.0 {
+        let p = (-x).powd(y);
+        if yr % 2.0 == 0.0 {
+            p
+        } else {
+            -p
+        }
+    } else {
+        x.powd(y)
+    }
+}
+
+#[inline]
+fn abs<S: Scalar>(x: S) -> S {
+    if x.re() < 0.0 {
+        -x
+    } else {
+        x
+    }
+}
+
+impl Expr {
+    /// Parse `source`, resolve names against `symbols`, fold constants and compile to bytecode.
+    pub fn compile(source: &str, symbols: &SymbolTable) -> Result<Expr, ExprError> {
+        let (tree, _) = parse(source, Some(symbols))?;
+        let text = tree.to_string();
+        let mut slots = Vec::new();
+        let mut order = 0;
+        collect_slots(&tree, &mut slots, &mut order);
+        slots.sort_unstable();
+        slots.dedup();
+        let folded = unfold(fold(tree, source)?);
+        let mut g = Gen {
+            code: Vec::new(),
+            depth: 0,
+            max: 0,
+        };
+        g.emit(&folded);
+        debug_assert_eq!(g.depth, 1);
+        Ok(Expr {
+            code: g.code,
+            max_stack: g.max,
+            slots,
+            time_order: order,
+            source: source.to_string(),
+            text,
+        })
+    }
+
+    /// Stack capacity `eval` needs to run without allocating.
+    pub fn max_stack(&self) -> usize {
+        self.max_stack
+    }
+
+    /// A stack with enough capacity for [`Expr::eval`].
+    pub fn new_stack<S: Scalar>(&self) -> Vec<S> {
+        Vec::with_capacity(self.max_stack)
+    }
+
+    /// The distinct slots this expression reads, ascending.
+    pub fn slots(&self) -> &[usize] {
+        &self.slots
+    }
+
+    /// Whether the expression reads `slot`.
+    pub fn uses(&self, slot: usize) -> bool {
+        self.slots.binary_search(&slot).is_ok()
+    }
+
+    /// Minimum length of the slot array passed to `eval`.
+    pub fn min_slots(&self) -> usize {
+        self.slots.last().map_or(0, |s| s + 1)
+    }
+
+    /// Highest number of apostrophes on a symbol read: 0 position, 1 velocity (`r'`),
+    /// 2 acceleration (`r''`) level.
+    pub fn time_order(&self) -> u8 {
+        self.time_order
+    }
+
+    /// `Some(value)` when the expression reads no symbols.
+    pub fn constant(&self) -> Option<f64> {
+        match self.code.as_slice() {
+            [Op::Const(v)] => Some(*v),
+            _ => None,
+        }
+    }
+
+    /// The source the expression was compiled from.
+    pub fn source(&self) -> &str {
+        &self.source
+    }
+
+    /// Number of bytecode instructions.
+    pub fn len(&self) -> usize {
+        self.code.len()
+    }
+
+    /// Always false: an expression has at least one instruction.
+    pub fn is_empty(&self) -> bool {
+        self.code.is_empty()
+    }
+
+    /// Evaluate with `slots` filled in symbol-table order. `stack` is scratch space; no
+    /// allocation happens when its capacity is at least [`Expr::max_stack`].
+    ///
+    /// Panics if `slots.len() < self.min_slots()`.
+    pub fn eval<S: Scalar>(&self, slots: &[S], stack: &mut Vec<S>) -> S {
+        stack.clear();
+        // Top of stack lives in `acc`; `stack` holds the values below it (plus one dummy).
+        let mut acc = S::from(0.0);
+        macro_rules! pop {
+            () => {
+                match stack.pop() {
+                    Some(v) => v,
+                    None => unreachable!("bytecode stack underflow"),
+                }
+            };
+        }
+        for op in &self.code {
+            match *op {
+                Op::Const(c) => {
+                    stack.push(acc);
+                    acc = S::from(c);
+                }
+                Op::Load(s) => {
+                    stack.push(acc);
+                    acc = slots[s as usize];
+                }
+                Op::Add => acc = pop!() + acc,
+                Op::Sub => acc = pop!() - acc,
+                Op::Mul => acc = pop!() * acc,
+                Op::Div => acc = pop!() / acc,
+                Op::Pow => acc = pow(pop!(), acc),
+                Op::AddC(c) => acc += c,
+                Op::SubC(c) => acc -= c,
+                Op::RSubC(c) => acc = S::from(c) - acc,
+                Op::MulC(c) => acc *= c,
+                Op::DivC(c) => acc /= c,
+                Op::RDivC(c) => acc = S::from(c) / acc,
+                Op::AddL(s) => acc += slots[s as usize],
+                Op::SubL(s) => acc -= slots[s as usize],
+                Op::RSubL(s) => acc = slots[s as usize] - acc,
+                Op::MulL(s) => acc *= slots[s as usize],
+                Op::DivL(s) => acc /= slots[s as usize],
+                Op::RDivL(s) => acc = slots[s as usize] / acc,
+                Op::Neg => acc = -acc,
+                Op::Square => acc = acc * acc,
+                Op::Powi(n) => acc = acc.powi(n),
+                Op::Powf(p) => acc = acc.powf(p),
+                Op::Sin => acc = acc.sin(),
+                Op::Cos => acc = acc.cos(),
+                Op::Tan => acc = acc.tan(),
+                Op::Asin => acc = acc.asin(),
+                Op::Acos => acc = acc.acos(),
+                Op::Atan => acc = acc.atan(),
+                Op::Atan2 => acc = atan2(pop!(), acc),
+                Op::Exp => acc = acc.exp(),
+                Op::Ln => acc = acc.ln(),
+                Op::Sqrt => acc = acc.sqrt(),
+                Op::Abs => acc = abs(acc),
+                Op::Sinh => acc = acc.sinh(),
+                Op::Cosh => acc = acc.cosh(),
+                Op::Tanh => acc = acc.tanh(),
+            }
+        }
+        acc
+    }
+
+    /// Convenience evaluation that allocates its own stack (not for hot loops).
+    pub fn value<S: Scalar>(&self, slots: &[S]) -> S {
+        let mut stack = self.new_stack();
+        self.eval(slots, &mut stack)
+    }
+
+    #[cfg(test)]
+    pub(crate) fn code(&self) -> &[Op] {
+        &self.code
+    }
+}
+
+/// Normalized infix text with minimal parentheses; compiling it again gives the same expression.
+impl fmt::Display for Expr {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.text)
+    }
+}

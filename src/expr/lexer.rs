@@ -1,0 +1,200 @@
+//! Tokenizer. Positions are 1-based char columns.
+
+use super::error::{ExprError, ExprErrorKind as K};
+
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum Tok {
+    Num(f64),
+    Name(String),
+    Plus,
+    Minus,
+    Star,
+    Slash,
+    Caret,
+    LParen,
+    RParen,
+    Comma,
+    Eof,
+}
+
+#[derive(Debug, Clone)]
+pub(crate) struct Token {
+    pub tok: Tok,
+    /// 1-based char column of the first char.
+    pub col: usize,
+    /// Source text of the token ("" for end of input).
+    pub text: String,
+}
+
+fn is_start(c: char) -> bool {
+    c.is_ascii_alphabetic() || c == '_'
+}
+
+fn is_cont(c: char) -> bool {
+    c.is_ascii_alphanumeric() || c == '_'
+}
+
+pub(crate) fn lex(src: &str) -> Result<Vec<Token>, ExprError> {
+    let cs: Vec<char> = src.chars().collect();
+    let err = |kind, col: usize, text: &[char]| -> ExprError {
+        ExprError::new(kind, col + 1, &text.iter().collect::<String>(), src)
+    };
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < cs.len() {
+        let c = cs[i];
+        let start = i;
+        let simple = match c {
+            '+' => Some(Tok::Plus),
+            '-' => Some(Tok::Minus),
+            '*' => Some(Tok::Star),
+            '/' => Some(Tok::Slash),
+            '^' => Some(Tok::Caret),
+            '(' => Some(Tok::LParen),
+            ')' => Some(Tok::RParen),
+            ',' => Some(Tok::Comma),
+            _ => None,
+        };
+        if let Some(tok) = simple {
+            if c == '*' && cs.get(i + 1) == Some(&'*') {
+                return Err(err(K::DoubleStar, i, &cs[i..i + 2]));
+            }
+            out.push(Token {
+                tok,
+                col: i + 1,
+                text: c.to_string(),
+            });
+            i += 1;
+        } else if c.is_whitespace() {
+            i += 1;
+        } else if c.is_ascii_digit()
+            || (c == '.' && cs.get(i + 1).is_some_and(|d| d.is_ascii_digit()))
+        {
+            // digits [. digits] [(e|E) [+-] digits]
+            while i < cs.len() && cs[i].is_ascii_digit() {
+                i += 1;
+            }
+            if i < cs.len() && cs[i] == '.' {
+                i += 1;
+                while i < cs.len() && cs[i].is_ascii_digit() {
+                    i += 1;
+                }
+            }
+            let mut bad_exponent = false;
+            if i < cs.len() && (cs[i] == 'e' || cs[i] == 'E') {
+                let mut j = i + 1;
+                if j < cs.len() && (cs[j] == '+' || cs[j] == '-') {
+                    j += 1;
+                }
+                let digits = j;
+                while j < cs.len() && cs[j].is_ascii_digit() {
+                    j += 1;
+                }
+                if j > digits {
+                    i = j;
+                } else {
+                    bad_exponent = true;
+                    i = digits;
+                }
+            }
+            if bad_exponent {
+                return Err(err(
+                    K::BadNumber {
+                        text: cs[start..i].iter().collect(),
+                        reason: "the exponent needs digits",
+                    },
+                    start,
+                    &cs[start..i],
+                ));
+            }
+            if i < cs.len() && (cs[i] == '.' || cs[i].is_ascii_digit()) {
+                let mut j = i;
+                while j < cs.len() && (cs[j] == '.' || is_cont(cs[j])) {
+                    j += 1;
+                }
+                return Err(err(
+                    K::BadNumber {
+                        text: cs[start..j].iter().collect(),
+                        reason: "too many `.`",
+                    },
+                    start,
+                    &cs[start..j],
+                ));
+            }
+            let text: String = cs[start..i].iter().collect();
+            if i < cs.len() && is_start(cs[i]) {
+                let mut j = i;
+                while j < cs.len() && is_cont(cs[j]) {
+                    j += 1;
+                }
+                let name: String = cs[i..j].iter().collect();
+                return Err(err(K::ImplicitMul { number: text, name }, i, &cs[i..j]));
+            }
+            // The scanned text always has Rust float syntax.
+            let v: f64 = text.parse().unwrap_or(f64::NAN);
+            if !v.is_finite() {
+                return Err(err(
+                    K::BadNumber {
+                        text: text.clone(),
+                        reason: "out of range",
+                    },
+                    start,
+                    &cs[start..i],
+                ));
+            }
+            out.push(Token {
+                tok: Tok::Num(v),
+                col: start + 1,
+                text,
+            });
+        } else if is_start(c) {
+            // part ("." part)* "'"{0,2}
+            loop {
+                while i < cs.len() && is_cont(cs[i]) {
+                    i += 1;
+                }
+                if i < cs.len() && cs[i] == '.' {
+                    if cs.get(i + 1).is_some_and(|&d| is_start(d)) {
+                        i += 1;
+                        continue;
+                    }
+                    return Err(err(
+                        K::BadName {
+                            text: cs[start..=i].iter().collect(),
+                            reason: "expected a name part after `.`",
+                        },
+                        start,
+                        &cs[start..=i],
+                    ));
+                }
+                break;
+            }
+            let primes = cs[i..].iter().take_while(|&&p| p == '\'').count();
+            i += primes;
+            if primes > 2 {
+                return Err(err(
+                    K::BadName {
+                        text: cs[start..i].iter().collect(),
+                        reason: "at most two `'` (velocity `'`, acceleration `''`)",
+                    },
+                    start,
+                    &cs[start..i],
+                ));
+            }
+            let text: String = cs[start..i].iter().collect();
+            out.push(Token {
+                tok: Tok::Name(text.clone()),
+                col: start + 1,
+                text,
+            });
+        } else {
+            return Err(err(K::UnexpectedChar(c), i, &cs[i..=i]));
+        }
+    }
+    out.push(Token {
+        tok: Tok::Eof,
+        col: cs.len() + 1,
+        text: String::new(),
+    });
+    Ok(out)
+}
