@@ -375,6 +375,18 @@ fn pow<S: Scalar>(x: S, y: S) -> S {
     }
 }
 
+/// `x^p` for a constant real p. num-dual's `powf` forms x^(p-3) x^3 and so yields NaN at x = 0,
+/// even in the value; there, for p > 1, the value and first derivatives are exactly 0 (the second
+/// derivatives too when p >= 2; for 1 < p < 2 they are infinite and are returned as 0).
+#[inline]
+fn powf<S: Scalar>(x: S, p: f64) -> S {
+    if S::NDERIV > 0 && x.re() == 0.0 && p > 1.0 {
+        x * 0.0
+    } else {
+        x.powf(p)
+    }
+}
+
 #[inline]
 fn abs<S: Scalar>(x: S) -> S {
     if x.re() < 0.0 {
@@ -512,7 +524,7 @@ impl Expr {
                 Op::Neg => acc = -acc,
                 Op::Square => acc = acc * acc,
                 Op::Powi(n) => acc = acc.powi(n),
-                Op::Powf(p) => acc = acc.powf(p),
+                Op::Powf(p) => acc = powf(acc, p),
                 Op::Sin => acc = acc.sin(),
                 Op::Cos => acc = acc.cos(),
                 Op::Tan => acc = acc.tan(),

@@ -979,3 +979,18 @@ fn chain_rule_through_a_compound_expression() {
     close(d.v1, l * q.cos() + 2.0 * v, "first");
     close(d.v2, -l * q.sin() + 4.0, "second");
 }
+
+/// num-dual's powf is NaN at a zero base; the evaluator gives the exact 0 value and first
+/// derivatives there (Example 3.1's (p^2 + q^2)^(3/2) at p = q = 0).
+#[test]
+fn real_power_at_zero_base_has_finite_derivatives() {
+    use num_dual::Dual64;
+    let mut t = SymbolTable::new();
+    t.insert("p");
+    t.insert("q");
+    let e = Expr::compile("(p^2 + q^2)^1.5", &t).unwrap();
+    let d = e.eval(&[Dual64::new(0.0, 1.0), Dual64::new(0.0, 0.0)], &mut Vec::new());
+    assert_eq!((d.re, d.eps), (0.0, 0.0));
+    let d = e.eval(&[Dual64::new(0.3, 1.0), Dual64::new(0.4, 0.0)], &mut Vec::new());
+    assert!((d.eps - 1.5 * 0.25f64.sqrt() * 0.6).abs() < 1e-15);
+}
