@@ -70,7 +70,8 @@ pub struct DriverOptions {
     /// length `h` except the last, shortened to land on `t1` (exactly `ceil((t1-t0)/h - 1e-9)` steps,
     /// as for [`Method::Rk4`]); the error estimate is not used and no step is rejected. Meant for
     /// convergence studies. A Radau step whose Newton iteration diverges even with a fresh
-    /// Jacobian ends the run with [`Outcome::StepTooSmall`]. Ignored by `Rk4`. Default None.
+    /// Jacobian ends the run with [`Outcome::StepTooSmall`]. Ignored by `Rk4` and when not > 0.
+    /// Default None.
     pub fixed_step: Option<f64>,
 }
 
@@ -208,7 +209,8 @@ impl Integrator {
     /// on exit, whatever the outcome.
     ///
     /// `t1 == t0` returns [`Outcome::Finished`] at once; backward integration (`t1 < t0`) is not
-    /// supported and returns [`Outcome::StepTooSmall`] with `h = t1 - t0` without touching `y`.
+    /// supported and returns [`Outcome::StepTooSmall`] with `h = t1 - t0` without touching `y`, as
+    /// does `Rk4 { h }` with `h` not positive and finite.
     ///
     /// # Panics
     /// If `y.len() != problem.dim()`.
