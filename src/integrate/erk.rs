@@ -2,6 +2,13 @@
 //! Dormand-Prince 5(4) (Dormand & Prince 1980, dense output of Shampine 1986, HNW I, II.5 and II.6)
 //! and DOP853 (Dormand-Prince 8(5,3) with the 7th-order dense output of HNW I, II.10).
 
+// Coefficients keep their published digits; index loops mirror the formulas.
+#![allow(
+    clippy::excessive_precision,
+    clippy::needless_range_loop,
+    clippy::too_many_arguments
+)]
+
 use super::{
     fixed_step_count, h_min, initial_step, rms, Accept, DenseOutput, DriverOptions,
     IntegratorStats, OdeProblem, Outcome,

@@ -1,6 +1,9 @@
 //! In-place dense LU with partial pivoting on preallocated storage (no allocation per call), for
 //! the real and complex iteration matrices of Radau IIA.
 
+// Index loops mirror the formulas.
+#![allow(clippy::needless_range_loop, clippy::too_many_arguments)]
+
 use nalgebra::{ComplexField, DMatrix};
 
 /// Factor `a` = P L U in place (Doolittle, row partial pivoting); `piv[k]` is the row swapped
@@ -22,7 +25,7 @@ where
             }
         }
         piv[k] = p;
-        if !(best > 0.0) || !best.is_finite() {
+        if best == 0.0 || !best.is_finite() {
             return false;
         }
         if p != k {

@@ -227,7 +227,7 @@ impl Integrator {
         if t1 == t0 {
             return (Outcome::Finished, stats);
         }
-        if !(t1 > t0) {
+        if t1 < t0 || t1.is_nan() || t0.is_nan() {
             return (Outcome::StepTooSmall { t: t0, h: t1 - t0 }, stats);
         }
         if n != self.dim {

@@ -12,6 +12,9 @@
 //!   transformation rtol' = 0.1 rtol^(2/3), atol' = rtol' atol / rtol (the estimate is O(h^4));
 //! - dense output: the collocation polynomial (cubic through y0 and the three stage values).
 
+// Index loops mirror the formulas.
+#![allow(clippy::needless_range_loop, clippy::too_many_arguments)]
+
 use nalgebra::{Complex, DMatrix, Matrix3};
 
 use super::linalg::{lu_factor, lu_solve};
