@@ -11,6 +11,11 @@
 //! - Gustafsson's predictive step-size controller (IV.8, (8.25)) and RADAU5's tolerance
 //!   transformation rtol' = 0.1 rtol^(2/3), atol' = rtol' atol / rtol (the estimate is O(h^4));
 //! - dense output: the collocation polynomial (cubic through y0 and the three stage values).
+//!
+//! Accounting: `lu_decompositions` counts factorisations of the pair (E1, E2), as RADAU5's NDEC;
+//! `rejected` includes Newton failures and singular iteration matrices. f(t, y) is evaluated
+//! after every accepted step (it enters the next error estimate), after the `accepted` hook, so a
+//! projection costs no extra evaluation; the Jacobian and LU factors survive a projection.
 
 // Index loops mirror the formulas.
 #![allow(clippy::needless_range_loop, clippy::too_many_arguments)]
@@ -355,7 +360,9 @@ impl RadauWork {
         } else {
             (0.0, opts.atol)
         };
-        let fnewt = (10.0 * f64::EPSILON / rtol).max(0.03f64.min(rtol.sqrt()));
+        // Newton stopping tolerance (RADAU5's default), kept finite for rtol -> 0.
+        let rtol_f = rtol.max(10.0 * f64::EPSILON);
+        let fnewt = (10.0 * f64::EPSILON / rtol_f).max(0.03f64.min(rtol_f.sqrt()));
         let fixed = opts.fixed_step.filter(|h| *h > 0.0);
         let adaptive = fixed.is_none();
         let nfixed = fixed.map(|h| fixed_step_count(t0, t1, h));
@@ -520,7 +527,6 @@ impl RadauWork {
                 }
             };
             let mut hnew = hs;
-            let mut quot = 1.0;
             if adaptive {
                 let err = match self.estimate(problem, t, y, hs, atol, rtol, first || reject, stats)
                 {
@@ -538,7 +544,7 @@ impl RadauWork {
                 }
                 // Step-size proposal, safety factor decreasing with the Newton iterations.
                 let fac = SAFE.min(SAFE * (1 + 2 * NIT) as f64 / (newt + 2 * NIT) as f64);
-                quot = (err.powf(0.25) / fac).clamp(FACR, FACL);
+                let mut quot = (err.powf(0.25) / fac).clamp(FACR, FACL);
                 hnew = hs / quot;
                 if err >= 1.0 {
                     stats.rejected += 1;
@@ -558,7 +564,6 @@ impl RadauWork {
                 hacc = hs;
                 erracc = err.max(1e-2);
             }
-            let _ = quot;
             // Accepted: new y and collocation polynomial.
             first = false;
             for i in 0..n {
