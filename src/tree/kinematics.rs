@@ -11,7 +11,7 @@ use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 /// Per-link workspace (all quantities in link coordinates unless stated otherwise).
 #[derive(Clone, Debug)]
 pub(crate) struct LinkData<S: Scalar> {
-    /// `^i X_λ(i)` = joint transform composed with the fixed placement (Featherstone eq. 4.?: X_J X_T).
+    /// `^i X_λ(i)` = joint transform composed with the fixed placement (`X_J X_T`, Featherstone Table 5.1).
     pub x: Xform<S>,
     /// Rotation link -> world.
     pub rot: Matrix3<S>,
@@ -21,7 +21,7 @@ pub(crate) struct LinkData<S: Scalar> {
     pub s: [Motion<S>; 6],
     pub v: Motion<S>,
     pub a: Motion<S>,
-    /// Joint velocity `S qdot` and velocity-product term `c_J` (Featherstone eq. 3.40).
+    /// Joint velocity `S qdot` and velocity-product term `c_J` (Featherstone ch. 3, apparent derivative of S).
     pub vj: Motion<S>,
     pub cj: Motion<S>,
     pub f: Force<S>,
@@ -149,7 +149,7 @@ pub fn forward_kinematics<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &
 }
 
 /// Velocity pass (after [`forward_kinematics`]): `v_i = X_i v_λ + S_i qdot_i` (Featherstone
-/// eq. 3.33 / Table 5.1) and `c_J` = apparent derivative of S times qdot (nonzero only for the free
+/// Table 5.1) and `c_J` = apparent derivative of S times qdot (nonzero only for the free
 /// joint, whose S depends on q: `c_J = (0, -ω x (R^T v_world))`).
 pub fn forward_velocity<S: Scalar>(model: &Model, data: &mut TreeData<S>, v: &[S]) {
     check_len("v", v.len(), model.nv());
@@ -177,7 +177,7 @@ pub fn forward_velocity<S: Scalar>(model: &Model, data: &mut TreeData<S>, v: &[S
 }
 
 /// Acceleration pass (after [`forward_velocity`]): `a_i = X_i a_λ + S_i qddot_i + c_J + v_i x v_J`
-/// (Featherstone Table 5.1), with base acceleration `a_0 = (0, -gravity)` (gravity trick, §5.3).
+/// (Featherstone Table 5.1), with base acceleration `a_0 = (0, -gravity)` (the gravity trick of Table 5.1).
 pub fn forward_acceleration<S: Scalar>(
     model: &Model,
     data: &mut TreeData<S>,
@@ -344,7 +344,7 @@ pub fn body_angular_velocity<S: Scalar>(
 
 /// World-frame classical acceleration of a body point and angular acceleration of the body, given
 /// `(q, v, dv/dt)`: `a_P = R (a_O + α x p + ω x (v_O + ω x p))` from the spatial acceleration
-/// `(α, a_O)` (Featherstone eq. 2.?, classical vs spatial acceleration).
+/// `(α, a_O)` (classical vs spatial acceleration, Featherstone ch. 2).
 pub fn point_acceleration<S: Scalar>(
     model: &Model,
     data: &mut TreeData<S>,

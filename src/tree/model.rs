@@ -348,13 +348,15 @@ impl Model {
             } else {
                 match bodies.iter().position(|b| b.name == s.parent) {
                     Some(p) => Some(p),
-                    None => return Err(berr(
-                        name,
-                        format!(
+                    None => {
+                        return Err(berr(
+                            name,
+                            format!(
                             "unknown parent '{}' (parents must be defined before their children)",
                             s.parent
                         ),
-                    )),
+                        ))
+                    }
                 }
             };
             // placement

@@ -3,7 +3,7 @@
 //! Notation follows Featherstone, *Rigid Body Dynamics Algorithms* (2008), ch. 2:
 //! a motion vector is `(angular, linear)` = (ω, v_O) with v_O the velocity of the body point at the
 //! frame origin O; a force vector is `(moment about O, force)`. A transform `^B X_A` is stored as
-//! `(E, r)` (Featherstone eq. 2.24 / Table 2.5): `E` rotates A coordinates into B coordinates and
+//! `(E, r)` (Featherstone Table 2.5): `E` rotates A coordinates into B coordinates and
 //! `r` is the position of B's origin in A coordinates.
 
 use crate::scalar::{c, Scalar};
@@ -126,14 +126,14 @@ pub fn quat_from_rot<S: Scalar>(r: &Matrix3<S>) -> [S; 4] {
     q
 }
 
-/// Spatial motion vector (ω, v_O) (Featherstone §2.2).
+/// Spatial motion vector (ω, v_O) (Featherstone ch. 2).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Motion<S: Scalar> {
     pub ang: Vector3<S>,
     pub lin: Vector3<S>,
 }
 
-/// Spatial force vector (n_O, f) (Featherstone §2.3).
+/// Spatial force vector (n_O, f) (Featherstone ch. 2).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Force<S: Scalar> {
     pub ang: Vector3<S>,
@@ -162,14 +162,14 @@ impl<S: Scalar> Motion<S> {
             lin: self.lin * s,
         }
     }
-    /// Motion cross product `self x m` (Featherstone eq. 2.31).
+    /// Motion cross product `self x m` (Featherstone ch. 2, `crm`).
     pub fn cross_motion(&self, m: &Motion<S>) -> Motion<S> {
         Motion {
             ang: cross(&self.ang, &m.ang),
             lin: cross(&self.ang, &m.lin) + cross(&self.lin, &m.ang),
         }
     }
-    /// Force cross product `self x* f` (Featherstone eq. 2.32).
+    /// Force cross product `self x* f` (Featherstone ch. 2, `crf`).
     pub fn cross_force(&self, f: &Force<S>) -> Force<S> {
         Force {
             ang: cross(&self.ang, &f.ang) + cross(&self.lin, &f.lin),
@@ -259,7 +259,7 @@ impl<S: Scalar> Xform<S> {
 }
 
 /// Rigid-body spatial inertia about a frame origin: mass `m`, first moment `h = m c`, rotational
-/// inertia `ibar` about the origin (Featherstone eq. 2.63).
+/// inertia `ibar` about the origin (Featherstone ch. 2).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Inertia<S: Scalar> {
     pub m: S,
@@ -275,7 +275,7 @@ impl<S: Scalar> Inertia<S> {
             ibar: Matrix3::zeros(),
         }
     }
-    /// From mass, centre of mass and inertia about the centre of mass (eq. 2.63):
+    /// From mass, centre of mass and inertia about the centre of mass (Featherstone ch. 2):
     /// `ibar = I_c + m [c]x [c]x^T`.
     pub fn from_com(m: S, com: Vector3<S>, ic: Matrix3<S>) -> Self {
         let cx = skew(&com);
@@ -307,7 +307,7 @@ impl<S: Scalar> Inertia<S> {
         }
     }
     /// Express an inertia given in B coordinates in A coordinates: `X^T I X` with `X = ^B X_A`
-    /// (Featherstone eq. 2.66, written with the parallel-axis theorem, no division by `m`).
+    /// (Featherstone Table 2.5, written with the parallel-axis theorem, no division by `m`).
     pub fn transform_to_parent(&self, x: &Xform<S>) -> Inertia<S> {
         let et = x.e.transpose();
         let hp = et * self.h;

@@ -174,7 +174,7 @@ fn names_and_sizes() {
     assert!((q0[0] - 0.1).abs() < EPS && (q0[3] - 0.9 / (0.95f64).sqrt()).abs() < 4.0 * EPS);
 }
 
-/// Columns of M equal rnea(q, 0, e_i) - rnea(q, 0, 0) (Featherstone §6.1); also
+/// Columns of M equal rnea(q, 0, e_i) - rnea(q, 0, 0) (Featherstone ch. 6); also
 /// rnea(q, v, a) = M a + rnea(q, v, 0).
 #[test]
 fn crba_matches_rnea() {
@@ -449,14 +449,19 @@ fn free_body_falls() {
         velocity_terms(&model, &mut d, &q, &v, &mut gg);
         applied_forces(&model, &mut d, 0.0, &q, &v, &mut qq);
         let acc = mm.clone().cholesky().unwrap().solve(&(&gg + &qq));
-        let (acom, alpha_w) = point_acceleration(&model, &mut d, &q, &v, acc.as_slice(), 0, &com);
+        // v[0..3] is the world velocity of the body origin, so acc[0..3] is its acceleration:
+        // a_com = a_O + R (ω' x c + ω x (ω x c)).
+        let w = Vector3::new(v[3], v[4], v[5]);
+        let wdot = Vector3::new(acc[3], acc[4], acc[5]);
+        let (r, _) = body_pose(&model, &mut d, &q, 0);
+        let acom =
+            Vector3::new(acc[0], acc[1], acc[2]) + r * (wdot.cross(&com) + w.cross(&w.cross(&com)));
         assert!(
             (acom - Vector3::from(g)).amax() <= 64.0 * EPS * 10.0,
             "{acom}"
         );
-        let w = Vector3::new(v[3], v[4], v[5]);
-        let wdot = Vector3::new(acc[3], acc[4], acc[5]);
-        let (r, _) = body_pose(&model, &mut d, &q, 0);
+        let (acom2, alpha_w) = point_acceleration(&model, &mut d, &q, &v, acc.as_slice(), 0, &com);
+        assert!((acom2 - acom).amax() <= 64.0 * EPS * 10.0);
         assert!((r * wdot - alpha_w).amax() <= 16.0 * EPS);
         let euler = ic * wdot + w.cross(&(ic * w));
         assert!(euler.amax() <= 64.0 * EPS, "{euler}");
@@ -707,4 +712,70 @@ fn spec_serde_roundtrip() {
     let j: JointSpec =
         serde_json::from_str(r#"{"name": "q", "type": "slide", "axis": [1, 0, 0]}"#).unwrap();
     assert_eq!(j, JointSpec::slide("q", [1.0, 0.0, 0.0]));
+}
+
+/// Springs and dampers of hinge/slide joints: Q = -k (q - q_ref) - d v; ball/free dampers -d v.
+#[test]
+fn springs_and_dampers() {
+    let bodies = vec![
+        BodySpec::massless("m", WORLD)
+            .joint(
+                JointSpec::hinge("h", [0.0, 0.0, 1.0])
+                    .with_spring(3.0, 0.25)
+                    .with_damping(0.5),
+            )
+            .joint(JointSpec::slide("s", [1.0, 0.0, 0.0]).with_spring(2.0, -0.5)),
+        BodySpec::new(
+            "b",
+            "m",
+            1.0,
+            [0.0; 3],
+            [[0.1, 0.0, 0.0], [0.0, 0.1, 0.0], [0.0, 0.0, 0.1]],
+        )
+        .joint(JointSpec::ball("ball").with_damping(0.7)),
+    ];
+    let model = Model::new(&bodies, Fields::default()).unwrap();
+    let mut d = TreeData::<f64>::new(&model);
+    let q = [0.75, 0.5, 1.0, 0.0, 0.0, 0.0];
+    let v = [2.0, -1.0, 0.25, 0.5, -1.0];
+    let mut qq = DVector::zeros(0);
+    applied_forces(&model, &mut d, 0.0, &q, &v, &mut qq);
+    let ex = [
+        -3.0 * 0.5 - 0.5 * 2.0,
+        -2.0 * 1.0,
+        -0.7 * 0.25,
+        -0.7 * 0.5,
+        0.7,
+    ];
+    for (i, e) in ex.iter().enumerate() {
+        assert!((qq[i] - e).abs() <= 4.0 * EPS, "{i}: {} vs {e}", qq[i]);
+    }
+    assert!((potential_energy(&model, &mut d, &q) - (1.5 * 0.25 + 1.0)).abs() <= 4.0 * EPS);
+}
+
+/// Couple hook: power of `body_torque` is τ · ω_world; a non-unit quaternion gives the same
+/// mass matrix as its normalisation (implicit normalisation).
+#[test]
+fn torque_hook_and_quaternion_scaling() {
+    let model = zoo(Fields::default());
+    let mut d = TreeData::<f64>::new(&model);
+    let mut rng = Rng(11);
+    let (q, v, _) = random_state(&model, &mut rng);
+    let tq = Vector3::new(0.4, 0.1, -0.9);
+    let mut tau = DVector::zeros(model.nv());
+    for b in 0..model.bodies().len() {
+        tau.fill(0.0);
+        body_torque(&model, &mut d, &q, b, &tq, &mut tau);
+        let w = body_angular_velocity(&model, &mut d, &q, &v, b);
+        let p = tau.dot(&DVector::from_vec(v.clone()));
+        assert!((p - tq.dot(&w)).abs() <= 32.0 * EPS, "body {b}");
+    }
+    let (mut m1, mut m2) = (DMatrix::zeros(0, 0), DMatrix::zeros(0, 0));
+    mass_matrix(&model, &mut d, &q, &mut m1);
+    let mut q2 = q.clone();
+    for i in 3..11 {
+        q2[i] *= 1.7;
+    }
+    mass_matrix(&model, &mut d, &q2, &mut m2);
+    assert!(max_abs(&(&m1 - &m2)) <= 64.0 * EPS * max_abs(&m1));
 }
