@@ -15,6 +15,15 @@
 
 use nalgebra::DMatrix;
 
+mod erk;
+mod linalg;
+mod radau5;
+#[cfg(test)]
+mod tests;
+
+use erk::ErkWork;
+use radau5::RadauWork;
+
 /// Which integration method a driver uses.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -57,6 +66,13 @@ pub struct DriverOptions {
     pub h_min_factor: f64,
     /// Maximum number of step attempts (accepted + rejected). Default 10_000_000.
     pub max_steps: usize,
+    /// Force a fixed step for the adaptive methods (`Dopri5`, `Dop853`, `Radau5`): every step has
+    /// length `h` except the last, shortened to land on `t1` (exactly `ceil((t1-t0)/h - 1e-9)` steps,
+    /// as for [`Method::Rk4`]); the error estimate is not used and no step is rejected. Meant for
+    /// convergence studies. A Radau step whose Newton iteration diverges even with a fresh
+    /// Jacobian ends the run with [`Outcome::StepTooSmall`]. Ignored by `Rk4` and when not > 0.
+    /// Default None.
+    pub fixed_step: Option<f64>,
 }
 
 impl Default for DriverOptions {
@@ -68,6 +84,7 @@ impl Default for DriverOptions {
             h_max: f64::INFINITY,
             h_min_factor: 10.0,
             max_steps: 10_000_000,
+            fixed_step: None,
         }
     }
 }
@@ -157,14 +174,25 @@ pub enum Outcome<E> {
 pub struct Integrator {
     method: Method,
     options: DriverOptions,
-    // Workspace fields are added by the implementation.
+    dim: usize,
+    erk: ErkWork,
+    radau: RadauWork,
 }
 
 impl Integrator {
     /// Allocate the workspace for problems of dimension `dim`.
     pub fn new(method: Method, options: DriverOptions, dim: usize) -> Self {
-        let _ = dim;
-        Integrator { method, options }
+        let (erk, radau) = match method {
+            Method::Radau5 => (ErkWork::new(0), RadauWork::new(dim)),
+            _ => (ErkWork::new(dim), RadauWork::new(0)),
+        };
+        Integrator {
+            method,
+            options,
+            dim,
+            erk,
+            radau,
+        }
     }
 
     /// The method this integrator runs.
@@ -179,6 +207,13 @@ impl Integrator {
 
     /// Integrate from `t0` to `t1` (t1 > t0), `y` holding y(t0) on entry and the last accepted value
     /// on exit, whatever the outcome.
+    ///
+    /// `t1 == t0` returns [`Outcome::Finished`] at once; backward integration (`t1 < t0`) is not
+    /// supported and returns [`Outcome::StepTooSmall`] with `h = t1 - t0` without touching `y`, as
+    /// does `Rk4 { h }` with `h` not positive and finite.
+    ///
+    /// # Panics
+    /// If `y.len() != problem.dim()`.
     pub fn integrate<P: OdeProblem>(
         &mut self,
         problem: &mut P,
@@ -186,7 +221,120 @@ impl Integrator {
         t1: f64,
         y: &mut [f64],
     ) -> (Outcome<P::Error>, IntegratorStats) {
-        let _ = (problem, t0, t1, y);
-        unimplemented!("integrators: see the integrate issue work")
+        let n = problem.dim();
+        assert_eq!(y.len(), n, "integrate: y.len() != problem.dim()");
+        let mut stats = IntegratorStats::default();
+        if t1 == t0 {
+            return (Outcome::Finished, stats);
+        }
+        if t1 < t0 || t1.is_nan() || t0.is_nan() {
+            return (Outcome::StepTooSmall { t: t0, h: t1 - t0 }, stats);
+        }
+        if n != self.dim {
+            // One reallocation for a problem of another dimension.
+            *self = Integrator::new(self.method, self.options.clone(), n);
+        }
+        let outcome = match self.method {
+            Method::Radau5 => self
+                .radau
+                .run(&self.options, problem, t0, t1, y, &mut stats),
+            Method::Rk4 { h } => self.erk.run(
+                erk::Kind::Rk4,
+                Some(h),
+                &self.options,
+                problem,
+                t0,
+                t1,
+                y,
+                &mut stats,
+            ),
+            Method::Dopri5 => self.erk.run(
+                erk::Kind::Dopri5,
+                self.options.fixed_step,
+                &self.options,
+                problem,
+                t0,
+                t1,
+                y,
+                &mut stats,
+            ),
+            Method::Dop853 => self.erk.run(
+                erk::Kind::Dop853,
+                self.options.fixed_step,
+                &self.options,
+                problem,
+                t0,
+                t1,
+                y,
+                &mut stats,
+            ),
+        };
+        (outcome, stats)
     }
+}
+
+/// Smallest step allowed at time `t` (see [`DriverOptions::h_min_factor`]).
+pub(crate) fn h_min(opts: &DriverOptions, t: f64) -> f64 {
+    opts.h_min_factor * t.abs().max(1.0) * f64::EPSILON
+}
+
+/// Number of steps of a fixed-step run: `ceil((t1 - t0)/h - 1e-9)`, at least 1.
+pub(crate) fn fixed_step_count(t0: f64, t1: f64, h: f64) -> usize {
+    (((t1 - t0) / h - 1e-9).ceil() as usize).max(1)
+}
+
+/// RMS norm sqrt(1/m sum (v_i / sc_i)^2).
+pub(crate) fn rms(v: &[f64], sc: &[f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let s: f64 = v.iter().zip(sc).map(|(a, b)| (a / b) * (a / b)).sum();
+    (s / v.len() as f64).sqrt()
+}
+
+/// Hairer's initial step heuristic (HNW I, II.4, algorithm after (4.13)): with d0 = ||y0||,
+/// d1 = ||f0||, h0 = 0.01 d0/d1 (1e-6 if either is below 1e-5), one explicit Euler step
+/// gives d2 = ||f(t0 + h0, y0 + h0 f0) - f0|| / h0 and h1 = (0.01 / max(d1, d2))^(1/(p+1));
+/// the result is min(100 h0, h1, h_max). `f0` is given; one more f evaluation is counted.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn initial_step<P: OdeProblem>(
+    problem: &mut P,
+    t0: f64,
+    y0: &[f64],
+    f0: &[f64],
+    p: usize,
+    atol: f64,
+    rtol: f64,
+    h_max: f64,
+    span: f64,
+    sc: &mut [f64],
+    y1: &mut [f64],
+    f1: &mut [f64],
+    stats: &mut IntegratorStats,
+) -> Result<f64, P::Error> {
+    problem.error_scale(y0, y0, atol, rtol, sc);
+    let d0 = rms(y0, sc);
+    let d1 = rms(f0, sc);
+    let mut h = if d0 < 1e-5 || d1 < 1e-5 || !(d0 / d1).is_finite() {
+        1e-6
+    } else {
+        0.01 * d0 / d1
+    };
+    h = h.min(h_max).min(span);
+    for i in 0..y0.len() {
+        y1[i] = y0[i] + h * f0[i];
+    }
+    stats.rhs_evals += 1;
+    problem.rhs(t0 + h, y1, f1)?;
+    for i in 0..y0.len() {
+        y1[i] = f1[i] - f0[i];
+    }
+    let d2 = rms(y1, sc) / h;
+    let dmax = d1.max(d2);
+    let h1 = if dmax <= 1e-15 || !dmax.is_finite() {
+        (h * 1e-3).max(1e-6)
+    } else {
+        (0.01 / dmax).powf(1.0 / (p as f64 + 1.0))
+    };
+    Ok((100.0 * h).min(h1).min(h_max).min(span))
 }

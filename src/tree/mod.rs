@@ -1,1 +1,41 @@
 //! Kinematic trees: bodies and joints, CRBA and RNEA generic over the scalar type.
+//!
+//! A [`Model`] is built once from [`BodySpec`]s (validated, errors name the body/joint); a
+//! [`TreeData<S>`] workspace is allocated per model and scalar type `S` (`f64` or dual numbers), and
+//! the algorithms (Featherstone, *Rigid Body Dynamics Algorithms*, 2008) allocate nothing per call.
+//!
+//! Conventions:
+//! - Frames: every body has a frame placed in its parent's frame by `pos` and `quat` (w, x, y, z);
+//!   its joints then act in sequence (MuJoCo semantics), each joint's axis/anchor expressed in the
+//!   frame produced by the preceding joints of the same body (the body frame when unmoved by them).
+//!   The CoM and the inertia (about the CoM) are in the body frame. World is z-up only by choice of
+//!   the gravity vector.
+//! - Quaternions are (w, x, y, z), Hamilton product; `R(quat)` maps body to parent coordinates and
+//!   is normalised implicitly (any nonzero quaternion is valid).
+//! - Velocities: hinge/slide `v = dq/dt`; ball `v = ω` in the joint's child (body) frame; free
+//!   `v = (world linear velocity of the body origin, body-frame ω)` (MuJoCo). See [`qdot`].
+//! - Equation of motion (Do Sanh 1998, eq. 2.2): `A(q) dv/dt - G(q, v) = Q(t, q, v)` with
+//!   `A` = [`mass_matrix`], `G` = [`velocity_terms`] `= -C(q,v) v`, `Q` = [`applied_forces`]
+//!   (+ [`body_point_force`] for user forces). In simulator terms `bias = C v + g = -G - Q_gravity`.
+//! - Names of q/v entries: [`Model::q_names`], [`Model::v_names`].
+
+mod dynamics;
+mod kinematics;
+mod model;
+pub mod spatial;
+
+pub use dynamics::{
+    applied_forces, bias, body_point_force, body_torque, crba, gravity_forces, kinetic_energy,
+    mass_matrix, potential_energy, rnea, velocity_terms,
+};
+pub use kinematics::{
+    body_angular_velocity, body_pose, body_quaternion, forward_acceleration, forward_kinematics,
+    forward_velocity, neutral, normalize_quaternions, point_acceleration, point_jacobian,
+    point_position, point_velocity, qdot, TreeData,
+};
+pub use model::{
+    Attractor, Body, BodySpec, Fields, Joint, JointSpec, JointType, Model, ModelError, WORLD,
+};
+
+#[cfg(test)]
+mod tests;

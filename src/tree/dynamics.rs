@@ -1,0 +1,287 @@
+//! Inverse dynamics (RNEA), joint-space inertia (CRBA) and the project-facing generalized forces
+//! of `A(q) dv/dt - G(q, v) = Q(t, q, v)` (Do Sanh 1998, eq. 2.2).
+
+use super::kinematics::{
+    ensure_mat, ensure_vec, for_each_point_column, forward_acceleration, forward_kinematics,
+    forward_velocity, TreeData,
+};
+use super::model::{JointKind, Model};
+use super::spatial::{lift3, Inertia};
+use crate::scalar::{c, Scalar};
+use nalgebra::{DMatrix, DVector, Vector3};
+
+/// Recursive Newton-Euler inverse dynamics (Featherstone Table 5.1):
+/// `tau = M(q) a + C(q, v) v + g(q)` for uniform gravity `gravity` (world frame, e.g. (0,0,-9.81)),
+/// without joint springs/dampers, attractions or external forces. The result lives in `data`.
+pub fn rnea<'d, S: Scalar>(
+    model: &Model,
+    data: &'d mut TreeData<S>,
+    q: &[S],
+    v: &[S],
+    a: &[S],
+    gravity: &Vector3<S>,
+) -> &'d DVector<S> {
+    forward_kinematics(model, data, q);
+    forward_velocity(model, data, v);
+    forward_acceleration(model, data, a, gravity);
+    // body forces f_i = I_i a_i + v_i x* I_i v_i
+    for (i, link) in model.links.iter().enumerate() {
+        let ld = &mut data.links[i];
+        ld.f = match &link.inertia {
+            Some(inr) => {
+                let inr = Inertia::<S>::lift(inr);
+                inr.mul_motion(&ld.a)
+                    .add(&ld.v.cross_force(&inr.mul_motion(&ld.v)))
+            }
+            None => super::spatial::Force::zero(),
+        };
+    }
+    // backward pass: tau_i = S_i^T f_i, f_λ += X_i^T f_i
+    for i in (0..model.links.len()).rev() {
+        let link = &model.links[i];
+        let f = data.links[i].f;
+        if let Some(j) = link.joint {
+            let jt = &model.joints[j];
+            for k in 0..jt.nv {
+                data.tau[jt.iv + k] = data.links[i].s[k].dot(&f);
+            }
+        }
+        if let Some(p) = link.parent {
+            let fp = data.links[i].x.transpose_force(&f);
+            data.links[p].f = data.links[p].f.add(&fp);
+        }
+    }
+    &data.tau
+}
+
+/// Composite-rigid-body algorithm (Featherstone Table 6.2): joint-space inertia matrix `M(q)`
+/// (the paper's `A(q)`), symmetric `nv x nv`.
+pub fn crba<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &[S], m: &mut DMatrix<S>) {
+    forward_kinematics(model, data, q);
+    let nv = model.nv();
+    ensure_mat(m, nv, nv);
+    m.fill(c(0.0));
+    for (i, link) in model.links.iter().enumerate() {
+        data.links[i].ic = match &link.inertia {
+            Some(inr) => Inertia::lift(inr),
+            None => Inertia::zero(),
+        };
+    }
+    for i in (0..model.links.len()).rev() {
+        if let Some(p) = model.links[i].parent {
+            let ip = data.links[i].ic.transform_to_parent(&data.links[i].x);
+            data.links[p].ic = data.links[p].ic.add(&ip);
+        }
+    }
+    for (i, link) in model.links.iter().enumerate() {
+        let Some(ji) = link.joint else { continue };
+        let jti = &model.joints[ji];
+        for k in 0..jti.nv {
+            let col = jti.iv + k;
+            let mut f = data.links[i].ic.mul_motion(&data.links[i].s[k]);
+            for kk in 0..jti.nv {
+                m[(jti.iv + kk, col)] = data.links[i].s[kk].dot(&f);
+            }
+            let mut j = i;
+            while let Some(p) = model.links[j].parent {
+                f = data.links[j].x.transpose_force(&f);
+                j = p;
+                if let Some(jj) = model.links[j].joint {
+                    let jtj = &model.joints[jj];
+                    for kk in 0..jtj.nv {
+                        let val = data.links[j].s[kk].dot(&f);
+                        m[(jtj.iv + kk, col)] = val;
+                        m[(col, jtj.iv + kk)] = val;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// `A(q)` of the paper: the mass matrix, by [`crba`].
+pub fn mass_matrix<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &[S], a: &mut DMatrix<S>) {
+    crba(model, data, q, a);
+}
+
+/// Bias force `C(q, v) v + g(q) = rnea(q, v, 0)` with the given uniform gravity.
+pub fn bias<S: Scalar>(
+    model: &Model,
+    data: &mut TreeData<S>,
+    q: &[S],
+    v: &[S],
+    gravity: &Vector3<S>,
+    out: &mut DVector<S>,
+) {
+    let zero = std::mem::take(&mut data.zero_v);
+    rnea(model, data, q, v, &zero, gravity);
+    data.zero_v = zero;
+    ensure_vec(out, model.nv());
+    out.copy_from(&data.tau);
+}
+
+/// `G(q, v)` of the paper: `-C(q, v) v = -rnea(q, v, 0)` without gravity.
+pub fn velocity_terms<S: Scalar>(
+    model: &Model,
+    data: &mut TreeData<S>,
+    q: &[S],
+    v: &[S],
+    g: &mut DVector<S>,
+) {
+    bias(model, data, q, v, &Vector3::zeros(), g);
+    g.neg_mut();
+}
+
+/// Generalized force of uniform gravity: `-g(q) = -rnea(q, 0, 0)` (sum of CoM Jacobian^T m g).
+pub fn gravity_forces<S: Scalar>(
+    model: &Model,
+    data: &mut TreeData<S>,
+    q: &[S],
+    gravity: &Vector3<S>,
+    out: &mut DVector<S>,
+) {
+    let zero = std::mem::take(&mut data.zero_v);
+    rnea(model, data, q, &zero, &zero, gravity);
+    data.zero_v = zero;
+    ensure_vec(out, model.nv());
+    out.copy_from(&data.tau);
+    out.neg_mut();
+}
+
+/// Adds to `out` the generalized force of a world-frame force applied at a body point (body
+/// coordinates): `out += J_p(q)^T force` (point Jacobian transpose). Needs the positions of the
+/// last [`forward_kinematics`] call at the same q (every `q`-taking function here runs it);
+/// use [`body_point_force`] for a self-contained call.
+pub(crate) fn add_point_force<S: Scalar>(
+    model: &Model,
+    data: &TreeData<S>,
+    body: usize,
+    point: &Vector3<S>,
+    force: &Vector3<S>,
+    out: &mut DVector<S>,
+) {
+    let ld = &data.links[model.body_link[body]];
+    let pw = ld.pos + ld.rot * point;
+    for_each_point_column(model, data, body, &pw, |k, _w, lin| {
+        out[k] += lin.dot(force);
+    });
+}
+
+/// External force hook: adds `J_p(q)^T force` to `out` for a world-frame `force` applied at
+/// `point` (body coordinates) of `body`. `out` must have length nv (it is resized and zeroed if not).
+pub fn body_point_force<S: Scalar>(
+    model: &Model,
+    data: &mut TreeData<S>,
+    q: &[S],
+    body: usize,
+    point: &Vector3<S>,
+    force: &Vector3<S>,
+    out: &mut DVector<S>,
+) {
+    forward_kinematics(model, data, q);
+    ensure_vec(out, model.nv());
+    add_point_force(model, data, body, point, force, out);
+}
+
+/// External couple hook: adds `J_ω(q)^T torque` to `out` for a world-frame `torque` on `body`.
+pub fn body_torque<S: Scalar>(
+    model: &Model,
+    data: &mut TreeData<S>,
+    q: &[S],
+    body: usize,
+    torque: &Vector3<S>,
+    out: &mut DVector<S>,
+) {
+    forward_kinematics(model, data, q);
+    ensure_vec(out, model.nv());
+    let pw = Vector3::zeros();
+    for_each_point_column(model, data, body, &pw, |k, w, _lin| {
+        out[k] += w.dot(torque);
+    });
+}
+
+/// `Q(t, q, v)` of the paper from the model's fields and joints (time-independent; `t` is accepted
+/// for the interface): uniform gravity, Newtonian attraction of each body's CoM to fixed points
+/// (`-mu m r/|r|^3`, by the CoM Jacobian transpose), joint springs `-k (q - q_ref)` and dampers
+/// `-d v`. User forces are added by the caller with [`body_point_force`].
+pub fn applied_forces<S: Scalar>(
+    model: &Model,
+    data: &mut TreeData<S>,
+    _t: S,
+    q: &[S],
+    v: &[S],
+    out: &mut DVector<S>,
+) {
+    let g = lift3::<S>(&Vector3::from(model.fields.gravity));
+    gravity_forces(model, data, q, &g, out); // also runs forward_kinematics(q)
+    if !model.fields.attractors.is_empty() {
+        for (b, body) in model.bodies.iter().enumerate() {
+            if body.massless {
+                continue;
+            }
+            let com = lift3::<S>(&body.com);
+            let ld = &data.links[model.body_link[b]];
+            let cw = ld.pos + ld.rot * com;
+            for at in &model.fields.attractors {
+                let r = cw - lift3::<S>(&Vector3::from(at.point));
+                let r2 = r.dot(&r);
+                let r3 = r2 * r2.sqrt();
+                let f = r * (c::<S>(-at.mu * body.mass) / r3);
+                add_point_force(model, data, b, &com, &f, out);
+            }
+        }
+    }
+    for jt in &model.joints {
+        if jt.stiffness != 0.0 {
+            if let JointKind::Hinge(_) | JointKind::Slide(_) = jt.kind {
+                out[jt.iv] -= (q[jt.iq] - c::<S>(jt.spring_ref)) * c::<S>(jt.stiffness);
+            }
+        }
+        if jt.damping != 0.0 {
+            for k in 0..jt.nv {
+                out[jt.iv + k] -= v[jt.iv + k] * c::<S>(jt.damping);
+            }
+        }
+    }
+}
+
+/// Kinetic energy `T = Σ ½ v_i · I_i v_i` from the body velocities (equals `½ vᵀ A(q) v`).
+pub fn kinetic_energy<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &[S], v: &[S]) -> S {
+    forward_kinematics(model, data, q);
+    forward_velocity(model, data, v);
+    let mut t = c::<S>(0.0);
+    for (i, link) in model.links.iter().enumerate() {
+        if let Some(inr) = &link.inertia {
+            let vi = data.links[i].v;
+            t += vi.dot(&Inertia::<S>::lift(inr).mul_motion(&vi)) * c::<S>(0.5);
+        }
+    }
+    t
+}
+
+/// Potential energy of the conservative parts of `Q`: gravity `-Σ m g·c`, attraction `-Σ mu m/|r|`,
+/// springs `Σ ½ k (q - q_ref)²`, so that `Q_conservative = -∂V/∂q` on hinge/slide coordinates.
+pub fn potential_energy<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &[S]) -> S {
+    forward_kinematics(model, data, q);
+    let g = lift3::<S>(&Vector3::from(model.fields.gravity));
+    let mut e = c::<S>(0.0);
+    for (b, body) in model.bodies.iter().enumerate() {
+        if body.massless {
+            continue;
+        }
+        let ld = &data.links[model.body_link[b]];
+        let cw = ld.pos + ld.rot * lift3::<S>(&body.com);
+        e -= g.dot(&cw) * c::<S>(body.mass);
+        for at in &model.fields.attractors {
+            let r = cw - lift3::<S>(&Vector3::from(at.point));
+            e -= c::<S>(at.mu * body.mass) / r.dot(&r).sqrt();
+        }
+    }
+    for jt in &model.joints {
+        if jt.stiffness != 0.0 {
+            let d = q[jt.iq] - c::<S>(jt.spring_ref);
+            e += d * d * c::<S>(0.5 * jt.stiffness);
+        }
+    }
+    e
+}

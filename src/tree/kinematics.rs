@@ -1,0 +1,414 @@
+//! Workspace, forward kinematics (poses, velocities, accelerations), configuration-space helpers
+//! and kinematics of body points.
+
+use super::model::{JointKind, Model};
+use super::spatial::{
+    cross, lift3, quat_from_rot, rot_axis_angle, rot_quat, Force, Inertia, Motion, Xform,
+};
+use crate::scalar::{c, Scalar};
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+
+/// Per-link workspace (all quantities in link coordinates unless stated otherwise).
+#[derive(Clone, Debug)]
+pub(crate) struct LinkData<S: Scalar> {
+    /// `^i X_λ(i)` = joint transform composed with the fixed placement (`X_J X_T`, Featherstone Table 5.1).
+    pub x: Xform<S>,
+    /// Rotation link -> world.
+    pub rot: Matrix3<S>,
+    /// Link origin, world frame.
+    pub pos: Vector3<S>,
+    /// Motion subspace columns (nv of the joint).
+    pub s: [Motion<S>; 6],
+    pub v: Motion<S>,
+    pub a: Motion<S>,
+    /// Joint velocity `S qdot` and velocity-product term `c_J` (Featherstone ch. 3, apparent derivative of S).
+    pub vj: Motion<S>,
+    pub cj: Motion<S>,
+    pub f: Force<S>,
+    /// Composite inertia (CRBA) or body inertia in S.
+    pub ic: Inertia<S>,
+}
+
+impl<S: Scalar> LinkData<S> {
+    fn new() -> Self {
+        LinkData {
+            x: Xform::identity(),
+            rot: Matrix3::identity(),
+            pos: Vector3::zeros(),
+            s: [Motion::zero(); 6],
+            v: Motion::zero(),
+            a: Motion::zero(),
+            vj: Motion::zero(),
+            cj: Motion::zero(),
+            f: Force::zero(),
+            ic: Inertia::zero(),
+        }
+    }
+}
+
+/// Preallocated workspace for one [`Model`] and one scalar type; the algorithms allocate nothing
+/// per call (output vectors/matrices are resized only if their shape is wrong).
+#[derive(Clone, Debug)]
+pub struct TreeData<S: Scalar> {
+    pub(crate) links: Vec<LinkData<S>>,
+    /// Result of the last [`super::rnea`].
+    pub(crate) tau: DVector<S>,
+    pub(crate) zero_v: Vec<S>,
+}
+
+impl<S: Scalar> TreeData<S> {
+    pub fn new(model: &Model) -> Self {
+        TreeData {
+            links: vec![LinkData::new(); model.links.len()],
+            tau: DVector::zeros(model.nv()),
+            zero_v: vec![c(0.0); model.nv()],
+        }
+    }
+}
+
+pub(crate) fn ensure_vec<S: Scalar>(x: &mut DVector<S>, n: usize) {
+    if x.len() != n {
+        *x = DVector::zeros(n);
+    }
+}
+
+pub(crate) fn ensure_mat<S: Scalar>(x: &mut DMatrix<S>, r: usize, c: usize) {
+    if x.shape() != (r, c) {
+        *x = DMatrix::zeros(r, c);
+    }
+}
+
+fn check_len(what: &str, got: usize, want: usize) {
+    assert!(
+        got == want,
+        "tree: {what} has length {got}, expected {want}"
+    );
+}
+
+/// Forward position kinematics: link transforms `^i X_λ`, world poses and motion subspaces.
+/// Joint transforms (post-joint frame in pre-joint frame, `x_pre = R x_post + p`):
+/// hinge `R = Rot(u, q)`, `p = a - R a` (anchor a); slide `R = 1`, `p = u q`; ball
+/// `R = R(quat)`, `p = a - R a`; free `R = R(quat)`, `p = position`. Motion subspaces in the
+/// post-joint frame: hinge `(u, a x u)`, slide `(0, u)`, ball `(e_k, a x e_k)`, free
+/// `[(0, R^T e_k) | (e_k, 0)]` (world linear velocity, body angular velocity).
+pub fn forward_kinematics<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &[S]) {
+    check_len("q", q.len(), model.nq());
+    let zero = Vector3::<S>::zeros();
+    for (i, link) in model.links.iter().enumerate() {
+        let place = Xform::<S>::lift(&link.place);
+        let mut s = [Motion::zero(); 6];
+        let xj = match link.joint {
+            None => Xform::identity(),
+            Some(j) => {
+                let jt = &model.joints[j];
+                let a = lift3::<S>(&jt.anchor);
+                let iq = jt.iq;
+                match jt.kind {
+                    JointKind::Hinge(u) => {
+                        let r = rot_axis_angle(&u, q[iq]);
+                        let ul = lift3::<S>(&u);
+                        s[0] = Motion::new(ul, cross(&a, &ul));
+                        Xform::from_pose(r, a - r * a)
+                    }
+                    JointKind::Slide(u) => {
+                        let ul = lift3::<S>(&u);
+                        s[0] = Motion::new(zero, ul);
+                        Xform::from_pose(Matrix3::identity(), ul * q[iq])
+                    }
+                    JointKind::Ball => {
+                        let r = rot_quat(q[iq], q[iq + 1], q[iq + 2], q[iq + 3]);
+                        for (k, sk) in s.iter_mut().take(3).enumerate() {
+                            let e = Vector3::<S>::ith(k, c(1.0));
+                            *sk = Motion::new(e, cross(&a, &e));
+                        }
+                        Xform::from_pose(r, a - r * a)
+                    }
+                    JointKind::Free => {
+                        let r = rot_quat(q[iq + 3], q[iq + 4], q[iq + 5], q[iq + 6]);
+                        let rt = r.transpose();
+                        for k in 0..3 {
+                            s[k] = Motion::new(zero, rt.column(k).into_owned());
+                            s[k + 3] = Motion::new(Vector3::ith(k, c(1.0)), zero);
+                        }
+                        Xform::from_pose(r, Vector3::new(q[iq], q[iq + 1], q[iq + 2]))
+                    }
+                }
+            }
+        };
+        let x = xj.compose(&place);
+        let (rp, pp) = match link.parent {
+            Some(p) => (data.links[p].rot, data.links[p].pos),
+            None => (Matrix3::identity(), Vector3::zeros()),
+        };
+        let ld = &mut data.links[i];
+        ld.rot = rp * x.e.transpose();
+        ld.pos = pp + rp * x.r;
+        ld.x = x;
+        ld.s = s;
+    }
+}
+
+/// Velocity pass (after [`forward_kinematics`]): `v_i = X_i v_λ + S_i qdot_i` (Featherstone
+/// Table 5.1) and `c_J` = apparent derivative of S times qdot (nonzero only for the free
+/// joint, whose S depends on q: `c_J = (0, -ω x (R^T v_world))`).
+pub fn forward_velocity<S: Scalar>(model: &Model, data: &mut TreeData<S>, v: &[S]) {
+    check_len("v", v.len(), model.nv());
+    for (i, link) in model.links.iter().enumerate() {
+        let vp = match link.parent {
+            Some(p) => data.links[p].v,
+            None => Motion::zero(),
+        };
+        let ld = &mut data.links[i];
+        let mut vj = Motion::zero();
+        let mut cj = Motion::zero();
+        if let Some(j) = link.joint {
+            let jt = &model.joints[j];
+            for k in 0..jt.nv {
+                vj = vj.add(&ld.s[k].scale(v[jt.iv + k]));
+            }
+            if jt.kind == JointKind::Free {
+                cj = Motion::new(Vector3::zeros(), -cross(&vj.ang, &vj.lin));
+            }
+        }
+        ld.v = ld.x.apply_motion(&vp).add(&vj);
+        ld.vj = vj;
+        ld.cj = cj;
+    }
+}
+
+/// Acceleration pass (after [`forward_velocity`]): `a_i = X_i a_λ + S_i qddot_i + c_J + v_i x v_J`
+/// (Featherstone Table 5.1), with base acceleration `a_0 = (0, -gravity)` (the gravity trick of Table 5.1).
+pub fn forward_acceleration<S: Scalar>(
+    model: &Model,
+    data: &mut TreeData<S>,
+    a: &[S],
+    gravity: &Vector3<S>,
+) {
+    check_len("a", a.len(), model.nv());
+    let a0 = Motion::new(Vector3::zeros(), -gravity);
+    for (i, link) in model.links.iter().enumerate() {
+        let ap = match link.parent {
+            Some(p) => data.links[p].a,
+            None => a0,
+        };
+        let ld = &mut data.links[i];
+        let mut acc =
+            ld.x.apply_motion(&ap)
+                .add(&ld.cj)
+                .add(&ld.v.cross_motion(&ld.vj));
+        if let Some(j) = link.joint {
+            let jt = &model.joints[j];
+            for k in 0..jt.nv {
+                acc = acc.add(&ld.s[k].scale(a[jt.iv + k]));
+            }
+        }
+        ld.a = acc;
+    }
+}
+
+/// Time derivative of q: hinge/slide `dq/dt = v`; ball `d quat/dt = ½ quat ⊗ (0, ω_body)`; free
+/// `dp/dt = v_world`, `d quat/dt = ½ quat ⊗ (0, ω_body)`. The quaternion is used as given (not
+/// normalised).
+pub fn qdot<S: Scalar>(model: &Model, q: &[S], v: &[S], out: &mut DVector<S>) {
+    check_len("q", q.len(), model.nq());
+    check_len("v", v.len(), model.nv());
+    ensure_vec(out, model.nq());
+    let half = c::<S>(0.5);
+    let quat_rate = |qq: &[S], w: &[S], o: &mut [S]| {
+        // ½ q ⊗ (0, w)
+        o[0] = -(qq[1] * w[0] + qq[2] * w[1] + qq[3] * w[2]) * half;
+        o[1] = (qq[0] * w[0] + qq[2] * w[2] - qq[3] * w[1]) * half;
+        o[2] = (qq[0] * w[1] + qq[3] * w[0] - qq[1] * w[2]) * half;
+        o[3] = (qq[0] * w[2] + qq[1] * w[1] - qq[2] * w[0]) * half;
+    };
+    let o = out.as_mut_slice();
+    for jt in &model.joints {
+        let (iq, iv) = (jt.iq, jt.iv);
+        match jt.kind {
+            JointKind::Hinge(_) | JointKind::Slide(_) => o[iq] = v[iv],
+            JointKind::Ball => quat_rate(&q[iq..iq + 4], &v[iv..iv + 3], &mut o[iq..iq + 4]),
+            JointKind::Free => {
+                o[iq..iq + 3].copy_from_slice(&v[iv..iv + 3]);
+                quat_rate(
+                    &q[iq + 3..iq + 7],
+                    &v[iv + 3..iv + 6],
+                    &mut o[iq + 3..iq + 7],
+                );
+            }
+        }
+    }
+}
+
+/// Neutral configuration: hinge/slide 0, ball identity (1, 0, 0, 0), free = the body's placement
+/// (position, quaternion) as given in its [`super::BodySpec`] (MuJoCo's qpos0).
+pub fn neutral(model: &Model) -> DVector<f64> {
+    let mut q = DVector::zeros(model.nq());
+    for jt in &model.joints {
+        let iq = jt.iq;
+        match jt.kind {
+            JointKind::Hinge(_) | JointKind::Slide(_) => {}
+            JointKind::Ball => q[iq] = 1.0,
+            JointKind::Free => {
+                let b = &model.bodies[jt.body];
+                for k in 0..3 {
+                    q[iq + k] = b.pos[k];
+                }
+                for k in 0..4 {
+                    q[iq + 3 + k] = b.quat[k];
+                }
+            }
+        }
+    }
+    q
+}
+
+/// Normalise the quaternions of ball and free joints in place.
+pub fn normalize_quaternions<S: Scalar>(model: &Model, q: &mut [S]) {
+    for jt in &model.joints {
+        let i = match jt.kind {
+            JointKind::Ball => jt.iq,
+            JointKind::Free => jt.iq + 3,
+            _ => continue,
+        };
+        let n =
+            (q[i] * q[i] + q[i + 1] * q[i + 1] + q[i + 2] * q[i + 2] + q[i + 3] * q[i + 3]).sqrt();
+        for k in 0..4 {
+            q[i + k] /= n;
+        }
+    }
+}
+
+/// World pose of a body frame: `(R, p)` with `x_world = R x_body + p`.
+pub fn body_pose<S: Scalar>(
+    model: &Model,
+    data: &mut TreeData<S>,
+    q: &[S],
+    body: usize,
+) -> (Matrix3<S>, Vector3<S>) {
+    forward_kinematics(model, data, q);
+    let ld = &data.links[model.body_link[body]];
+    (ld.rot, ld.pos)
+}
+
+/// Orientation of a body as a unit quaternion (w, x, y, z), w >= 0 (body -> world).
+pub fn body_quaternion<S: Scalar>(
+    model: &Model,
+    data: &mut TreeData<S>,
+    q: &[S],
+    body: usize,
+) -> [S; 4] {
+    let (r, _) = body_pose(model, data, q, body);
+    quat_from_rot(&r)
+}
+
+/// World position of a point given in body coordinates.
+pub fn point_position<S: Scalar>(
+    model: &Model,
+    data: &mut TreeData<S>,
+    q: &[S],
+    body: usize,
+    point: &Vector3<S>,
+) -> Vector3<S> {
+    let (r, p) = body_pose(model, data, q, body);
+    p + r * point
+}
+
+/// World-frame velocity of a body point (coordinates in the body frame): `R (v_O + ω x p)`.
+pub fn point_velocity<S: Scalar>(
+    model: &Model,
+    data: &mut TreeData<S>,
+    q: &[S],
+    v: &[S],
+    body: usize,
+    point: &Vector3<S>,
+) -> Vector3<S> {
+    forward_kinematics(model, data, q);
+    forward_velocity(model, data, v);
+    let ld = &data.links[model.body_link[body]];
+    ld.rot * (ld.v.lin + cross(&ld.v.ang, point))
+}
+
+/// Angular velocity of a body, world frame (body frame: `R^T ω`).
+pub fn body_angular_velocity<S: Scalar>(
+    model: &Model,
+    data: &mut TreeData<S>,
+    q: &[S],
+    v: &[S],
+    body: usize,
+) -> Vector3<S> {
+    forward_kinematics(model, data, q);
+    forward_velocity(model, data, v);
+    let ld = &data.links[model.body_link[body]];
+    ld.rot * ld.v.ang
+}
+
+/// World-frame classical acceleration of a body point and angular acceleration of the body, given
+/// `(q, v, dv/dt)`: `a_P = R (a_O + α x p + ω x (v_O + ω x p))` from the spatial acceleration
+/// `(α, a_O)` (classical vs spatial acceleration, Featherstone ch. 2).
+pub fn point_acceleration<S: Scalar>(
+    model: &Model,
+    data: &mut TreeData<S>,
+    q: &[S],
+    v: &[S],
+    a: &[S],
+    body: usize,
+    point: &Vector3<S>,
+) -> (Vector3<S>, Vector3<S>) {
+    forward_kinematics(model, data, q);
+    forward_velocity(model, data, v);
+    forward_acceleration(model, data, a, &Vector3::zeros());
+    let ld = &data.links[model.body_link[body]];
+    let w = ld.v.ang;
+    let vp = ld.v.lin + cross(&w, point);
+    let ap = ld.a.lin + cross(&ld.a.ang, point) + cross(&w, &vp);
+    (ld.rot * ap, ld.rot * ld.a.ang)
+}
+
+/// Calls `f(dof, ω_col, v_col)` for every dof `k` that moves `body`, with the world-frame angular
+/// velocity column and the world-frame velocity column of the (world) point `pw`.
+pub(crate) fn for_each_point_column<S: Scalar>(
+    model: &Model,
+    data: &TreeData<S>,
+    body: usize,
+    pw: &Vector3<S>,
+    mut f: impl FnMut(usize, Vector3<S>, Vector3<S>),
+) {
+    let mut li = Some(model.body_link[body]);
+    while let Some(i) = li {
+        let link = &model.links[i];
+        if let Some(j) = link.joint {
+            let jt = &model.joints[j];
+            let ld = &data.links[i];
+            let d = pw - ld.pos;
+            for k in 0..jt.nv {
+                let w = ld.rot * ld.s[k].ang;
+                let lin = ld.rot * ld.s[k].lin + cross(&w, &d);
+                f(jt.iv + k, w, lin);
+            }
+        }
+        li = link.parent;
+    }
+}
+
+/// Jacobian of a body point, world frame, `6 x nv`: rows 0..3 map v to the body's angular velocity,
+/// rows 3..6 to the point's linear velocity.
+pub fn point_jacobian<S: Scalar>(
+    model: &Model,
+    data: &mut TreeData<S>,
+    q: &[S],
+    body: usize,
+    point: &Vector3<S>,
+    jac: &mut DMatrix<S>,
+) {
+    forward_kinematics(model, data, q);
+    ensure_mat(jac, 6, model.nv());
+    jac.fill(c(0.0));
+    let ld = &data.links[model.body_link[body]];
+    let pw = ld.pos + ld.rot * point;
+    for_each_point_column(model, data, body, &pw, |k, w, lin| {
+        for r in 0..3 {
+            jac[(r, k)] = w[r];
+            jac[(r + 3, k)] = lin[r];
+        }
+    });
+}

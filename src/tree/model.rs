@@ -1,0 +1,634 @@
+//! The immutable, validated kinematic-tree model and its construction from specifications.
+
+use super::spatial::{rot_quat, Inertia, Xform};
+use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+use std::ops::Range;
+
+/// Reserved name of the fixed world (the root of every tree).
+pub const WORLD: &str = "world";
+
+/// Joint type. Axes are given in the body frame (more precisely: in the frame produced by the
+/// preceding joints of the same body, which for an axis not moved by them is the body frame) and are
+/// normalised at construction.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum JointType {
+    /// Rotation by angle `q` about `axis` through the joint anchor. nq = nv = 1.
+    Hinge { axis: [f64; 3] },
+    /// Translation by `q` along `axis`. nq = nv = 1.
+    Slide { axis: [f64; 3] },
+    /// Spherical joint about the anchor: q = unit quaternion (w, x, y, z), v = angular velocity in
+    /// the joint's child frame (the body frame if it is the body's last joint). nq = 4, nv = 3.
+    Ball,
+    /// Floating base (only joint of a child of the world): q = (x, y, z, w, qx, qy, qz) = position of
+    /// the body origin in world frame and body orientation; v = (world-frame linear velocity of the
+    /// body origin, body-frame angular velocity) — MuJoCo's convention. nq = 7, nv = 6.
+    Free,
+}
+
+impl JointType {
+    pub fn nq(&self) -> usize {
+        match self {
+            JointType::Hinge { .. } | JointType::Slide { .. } => 1,
+            JointType::Ball => 4,
+            JointType::Free => 7,
+        }
+    }
+    pub fn nv(&self) -> usize {
+        match self {
+            JointType::Hinge { .. } | JointType::Slide { .. } => 1,
+            JointType::Ball => 3,
+            JointType::Free => 6,
+        }
+    }
+}
+
+/// Specification of one joint.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct JointSpec {
+    /// Unique name (also the name of its q/v entries, see [`Model::q_names`]).
+    pub name: String,
+    #[serde(flatten)]
+    pub kind: JointType,
+    /// Point the hinge axis passes through / ball centre, in the body frame (MuJoCo `pos`).
+    /// Ignored by slides; must be zero for free joints.
+    #[serde(default)]
+    pub anchor: [f64; 3],
+    /// Spring stiffness k: generalized force `-k (q - spring_ref)` (hinge and slide only).
+    #[serde(default)]
+    pub stiffness: f64,
+    /// Spring reference position.
+    #[serde(default)]
+    pub spring_ref: f64,
+    /// Viscous damping d: generalized force `-d v` on every dof of the joint.
+    #[serde(default)]
+    pub damping: f64,
+}
+
+impl JointSpec {
+    pub fn hinge(name: &str, axis: [f64; 3]) -> Self {
+        Self::new(name, JointType::Hinge { axis })
+    }
+    pub fn slide(name: &str, axis: [f64; 3]) -> Self {
+        Self::new(name, JointType::Slide { axis })
+    }
+    pub fn ball(name: &str) -> Self {
+        Self::new(name, JointType::Ball)
+    }
+    pub fn free(name: &str) -> Self {
+        Self::new(name, JointType::Free)
+    }
+    pub fn new(name: &str, kind: JointType) -> Self {
+        JointSpec {
+            name: name.to_string(),
+            kind,
+            anchor: [0.0; 3],
+            stiffness: 0.0,
+            spring_ref: 0.0,
+            damping: 0.0,
+        }
+    }
+    pub fn with_anchor(mut self, anchor: [f64; 3]) -> Self {
+        self.anchor = anchor;
+        self
+    }
+    pub fn with_spring(mut self, stiffness: f64, spring_ref: f64) -> Self {
+        self.stiffness = stiffness;
+        self.spring_ref = spring_ref;
+        self
+    }
+    pub fn with_damping(mut self, damping: f64) -> Self {
+        self.damping = damping;
+        self
+    }
+}
+
+/// Specification of one body.
+///
+/// Mass properties: `mass > 0` with `inertia` (about the CoM, body frame) either exactly zero (a
+/// point mass at `com`) or symmetric positive definite with principal moments satisfying the
+/// triangle inequality; or `massless = true` with `mass == 0` and zero inertia (coordinate bodies).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BodySpec {
+    pub name: String,
+    /// Name of the parent body, or [`WORLD`]. Parents must be specified before their children.
+    pub parent: String,
+    /// Position of the body frame origin in the parent frame (before the body's joints act).
+    #[serde(default)]
+    pub pos: [f64; 3],
+    /// Orientation (w, x, y, z) of the body frame in the parent frame; normalised at construction.
+    #[serde(default = "unit_quat")]
+    pub quat: [f64; 4],
+    #[serde(default)]
+    pub mass: f64,
+    /// Centre of mass in the body frame.
+    #[serde(default)]
+    pub com: [f64; 3],
+    /// Inertia tensor about the centre of mass, body frame (row-major).
+    #[serde(default)]
+    pub inertia: [[f64; 3]; 3],
+    #[serde(default)]
+    pub massless: bool,
+    /// Joints applied in sequence (parent placement, then joint 1, joint 2, ...; MuJoCo semantics).
+    #[serde(default)]
+    pub joints: Vec<JointSpec>,
+}
+
+fn unit_quat() -> [f64; 4] {
+    [1.0, 0.0, 0.0, 0.0]
+}
+
+impl BodySpec {
+    /// A rigid body with mass, CoM and inertia about the CoM.
+    pub fn new(name: &str, parent: &str, mass: f64, com: [f64; 3], inertia: [[f64; 3]; 3]) -> Self {
+        BodySpec {
+            name: name.to_string(),
+            parent: parent.to_string(),
+            pos: [0.0; 3],
+            quat: unit_quat(),
+            mass,
+            com,
+            inertia,
+            massless: false,
+            joints: Vec::new(),
+        }
+    }
+    /// A point mass at `com`.
+    pub fn point_mass(name: &str, parent: &str, mass: f64, com: [f64; 3]) -> Self {
+        Self::new(name, parent, mass, com, [[0.0; 3]; 3])
+    }
+    /// A massless body (e.g. an intermediate frame of a coordinate chain).
+    pub fn massless(name: &str, parent: &str) -> Self {
+        let mut b = Self::new(name, parent, 0.0, [0.0; 3], [[0.0; 3]; 3]);
+        b.massless = true;
+        b
+    }
+    pub fn at(mut self, pos: [f64; 3]) -> Self {
+        self.pos = pos;
+        self
+    }
+    pub fn rotated(mut self, quat: [f64; 4]) -> Self {
+        self.quat = quat;
+        self
+    }
+    pub fn joint(mut self, j: JointSpec) -> Self {
+        self.joints.push(j);
+        self
+    }
+}
+
+/// A uniform field or central attraction acting on every body's centre of mass.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Attractor {
+    /// Fixed attracting point, world frame.
+    pub point: [f64; 3],
+    /// Gravitational parameter mu: force `-mu m r / |r|^3` with `r = com - point`.
+    pub mu: f64,
+}
+
+/// Fields applied by [`super::applied_forces`].
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Fields {
+    /// Uniform gravity (world frame), e.g. `[0, 0, -9.81]`.
+    #[serde(default)]
+    pub gravity: [f64; 3],
+    /// Newtonian attractions of every body's CoM to fixed points.
+    #[serde(default)]
+    pub attractors: Vec<Attractor>,
+}
+
+/// Construction error; the message names the offending body/joint.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ModelError {
+    #[error("body '{body}': {msg}")]
+    Body { body: String, msg: String },
+    #[error("joint '{joint}' of body '{body}': {msg}")]
+    Joint {
+        body: String,
+        joint: String,
+        msg: String,
+    },
+    #[error("fields: {0}")]
+    Fields(String),
+}
+
+/// Joint type after validation (unit axes).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum JointKind {
+    Hinge(Vector3<f64>),
+    Slide(Vector3<f64>),
+    Ball,
+    Free,
+}
+
+/// A validated joint.
+#[derive(Clone, Debug)]
+pub struct Joint {
+    pub name: String,
+    pub body: usize,
+    pub(crate) kind: JointKind,
+    pub anchor: Vector3<f64>,
+    pub stiffness: f64,
+    pub spring_ref: f64,
+    pub damping: f64,
+    /// First index in q.
+    pub iq: usize,
+    /// First index in v.
+    pub iv: usize,
+    pub nq: usize,
+    pub nv: usize,
+}
+
+impl Joint {
+    /// The joint type with its normalised axis.
+    pub fn joint_type(&self) -> JointType {
+        let a = |u: &Vector3<f64>| [u[0], u[1], u[2]];
+        match &self.kind {
+            JointKind::Hinge(u) => JointType::Hinge { axis: a(u) },
+            JointKind::Slide(u) => JointType::Slide { axis: a(u) },
+            JointKind::Ball => JointType::Ball,
+            JointKind::Free => JointType::Free,
+        }
+    }
+}
+
+/// A validated body.
+#[derive(Clone, Debug)]
+pub struct Body {
+    pub name: String,
+    /// Parent body index, `None` for the world.
+    pub parent: Option<usize>,
+    /// Placement in the parent frame (before joints): position and rotation (body -> parent).
+    pub pos: Vector3<f64>,
+    pub rot: Matrix3<f64>,
+    /// Normalised placement quaternion (w, x, y, z).
+    pub quat: [f64; 4],
+    pub mass: f64,
+    pub com: Vector3<f64>,
+    pub inertia: Matrix3<f64>,
+    pub massless: bool,
+    /// Indices of this body's joints (consecutive, in order of application).
+    pub joints: Range<usize>,
+}
+
+/// Internal link: one per joint, or one fixed link for a body without joints. The links of a body
+/// form a chain of massless frames; the last one is the body frame and carries the body inertia.
+#[derive(Clone, Debug)]
+pub(crate) struct Link {
+    pub parent: Option<usize>,
+    /// `^pre X_parent`: fixed transform from the parent link frame to this link's pre-joint frame.
+    pub place: Xform<f64>,
+    pub joint: Option<usize>,
+    pub inertia: Option<Inertia<f64>>,
+}
+
+/// Immutable kinematic tree (bodies, joints, fields). Build with [`Model::new`].
+#[derive(Clone, Debug)]
+pub struct Model {
+    pub(crate) bodies: Vec<Body>,
+    pub(crate) joints: Vec<Joint>,
+    pub(crate) links: Vec<Link>,
+    /// Link index of each body's frame (its last link).
+    pub(crate) body_link: Vec<usize>,
+    pub(crate) fields: Fields,
+    nq: usize,
+    nv: usize,
+    q_names: Vec<String>,
+    v_names: Vec<String>,
+}
+
+fn finite(x: &[f64]) -> bool {
+    x.iter().all(|v| v.is_finite())
+}
+
+impl Model {
+    /// Validate and build. Bodies must be listed parents first; names of bodies and joints must be
+    /// unique and not [`WORLD`].
+    pub fn new(specs: &[BodySpec], fields: Fields) -> Result<Model, ModelError> {
+        let berr = |b: &str, m: String| ModelError::Body {
+            body: b.to_string(),
+            msg: m,
+        };
+        let jerr = |b: &str, j: &str, m: String| ModelError::Joint {
+            body: b.to_string(),
+            joint: j.to_string(),
+            msg: m,
+        };
+        if !finite(&fields.gravity) {
+            return Err(ModelError::Fields("gravity is not finite".into()));
+        }
+        for a in &fields.attractors {
+            if !finite(&a.point) || !a.mu.is_finite() {
+                return Err(ModelError::Fields(
+                    "attractor point or mu is not finite".into(),
+                ));
+            }
+        }
+        let mut bodies: Vec<Body> = Vec::with_capacity(specs.len());
+        let mut joints: Vec<Joint> = Vec::new();
+        let mut links: Vec<Link> = Vec::new();
+        let mut body_link = Vec::with_capacity(specs.len());
+        let (mut nq, mut nv) = (0usize, 0usize);
+        let mut q_names = Vec::new();
+        let mut v_names = Vec::new();
+        for s in specs {
+            let name = s.name.as_str();
+            if name.is_empty() || name == WORLD {
+                return Err(berr(
+                    name,
+                    format!("invalid body name (empty or '{WORLD}')"),
+                ));
+            }
+            if bodies.iter().any(|b| b.name == name) {
+                return Err(berr(name, "duplicate body name".into()));
+            }
+            let parent = if s.parent == WORLD {
+                None
+            } else {
+                match bodies.iter().position(|b| b.name == s.parent) {
+                    Some(p) => Some(p),
+                    None => {
+                        return Err(berr(
+                            name,
+                            format!(
+                            "unknown parent '{}' (parents must be defined before their children)",
+                            s.parent
+                        ),
+                        ))
+                    }
+                }
+            };
+            // placement
+            if !finite(&s.pos) || !finite(&s.quat) {
+                return Err(berr(name, "placement is not finite".into()));
+            }
+            let qn = s.quat.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if qn < 1e-9 {
+                return Err(berr(name, "placement quaternion is zero".into()));
+            }
+            let quat = [
+                s.quat[0] / qn,
+                s.quat[1] / qn,
+                s.quat[2] / qn,
+                s.quat[3] / qn,
+            ];
+            let rot = rot_quat(quat[0], quat[1], quat[2], quat[3]);
+            let pos = Vector3::from(s.pos);
+            // mass properties
+            let inertia = Matrix3::from_row_slice(&s.inertia.concat());
+            let com = Vector3::from(s.com);
+            if !s.mass.is_finite() || !finite(&s.com) || !finite(inertia.as_slice()) {
+                return Err(berr(name, "mass properties are not finite".into()));
+            }
+            if s.massless {
+                if s.mass != 0.0 || inertia.iter().any(|x| *x != 0.0) {
+                    return Err(berr(
+                        name,
+                        "flagged massless but mass or inertia is nonzero".into(),
+                    ));
+                }
+            } else {
+                if s.mass <= 0.0 {
+                    return Err(berr(
+                        name,
+                        format!(
+                            "mass must be positive, got {} (set massless = true for a massless body)",
+                            s.mass
+                        ),
+                    ));
+                }
+                check_inertia(&inertia).map_err(|m| berr(name, m))?;
+            }
+            // joints
+            let j0 = joints.len();
+            let b = bodies.len();
+            for (k, js) in s.joints.iter().enumerate() {
+                let jn = js.name.as_str();
+                if jn.is_empty() {
+                    return Err(jerr(name, jn, "empty joint name".into()));
+                }
+                if joints.iter().any(|j| j.name == jn) {
+                    return Err(jerr(name, jn, "duplicate joint name".into()));
+                }
+                if !finite(&js.anchor)
+                    || !js.stiffness.is_finite()
+                    || !js.spring_ref.is_finite()
+                    || !js.damping.is_finite()
+                {
+                    return Err(jerr(name, jn, "parameters are not finite".into()));
+                }
+                if js.stiffness < 0.0 || js.damping < 0.0 {
+                    return Err(jerr(name, jn, "stiffness and damping must be >= 0".into()));
+                }
+                let unit = |a: &[f64; 3]| -> Result<Vector3<f64>, ModelError> {
+                    let u = Vector3::from(*a);
+                    let n = u.norm();
+                    if !n.is_finite() || n < 1e-12 {
+                        return Err(jerr(name, jn, format!("axis {a:?} is zero or not finite")));
+                    }
+                    Ok(u / n)
+                };
+                let kind = match &js.kind {
+                    JointType::Hinge { axis } => JointKind::Hinge(unit(axis)?),
+                    JointType::Slide { axis } => JointKind::Slide(unit(axis)?),
+                    JointType::Ball => JointKind::Ball,
+                    JointType::Free => {
+                        if parent.is_some() || s.joints.len() != 1 || k != 0 {
+                            return Err(jerr(
+                                name,
+                                jn,
+                                "a free joint must be the only joint of a child of the world"
+                                    .into(),
+                            ));
+                        }
+                        if js.anchor != [0.0; 3] {
+                            return Err(jerr(name, jn, "a free joint has no anchor".into()));
+                        }
+                        JointKind::Free
+                    }
+                };
+                if js.stiffness != 0.0 && matches!(kind, JointKind::Ball | JointKind::Free) {
+                    return Err(jerr(
+                        name,
+                        jn,
+                        "springs are supported on hinge and slide joints only".into(),
+                    ));
+                }
+                let (jnq, jnv) = (js.kind.nq(), js.kind.nv());
+                match kind {
+                    JointKind::Hinge(_) | JointKind::Slide(_) => {
+                        q_names.push(jn.to_string());
+                        v_names.push(jn.to_string());
+                    }
+                    JointKind::Ball => {
+                        for e in ["qw", "qx", "qy", "qz"] {
+                            q_names.push(format!("{jn}.{e}"));
+                        }
+                        for e in ["wx", "wy", "wz"] {
+                            v_names.push(format!("{jn}.{e}"));
+                        }
+                    }
+                    JointKind::Free => {
+                        for e in ["x", "y", "z", "qw", "qx", "qy", "qz"] {
+                            q_names.push(format!("{jn}.{e}"));
+                        }
+                        for e in ["vx", "vy", "vz", "wx", "wy", "wz"] {
+                            v_names.push(format!("{jn}.{e}"));
+                        }
+                    }
+                }
+                joints.push(Joint {
+                    name: jn.to_string(),
+                    body: b,
+                    kind,
+                    anchor: Vector3::from(js.anchor),
+                    stiffness: js.stiffness,
+                    spring_ref: js.spring_ref,
+                    damping: js.damping,
+                    iq: nq,
+                    iv: nv,
+                    nq: jnq,
+                    nv: jnv,
+                });
+                nq += jnq;
+                nv += jnv;
+            }
+            // links
+            let parent_link = parent.map(|p| body_link[p]);
+            let place = if matches!(s.joints.first().map(|j| &j.kind), Some(JointType::Free)) {
+                Xform::identity() // q of the free joint is the world pose
+            } else {
+                Xform::from_pose(rot, pos)
+            };
+            let inertia6 = if s.massless {
+                None
+            } else {
+                Some(Inertia::from_com(s.mass, com, inertia))
+            };
+            let nj = s.joints.len();
+            if nj == 0 {
+                links.push(Link {
+                    parent: parent_link,
+                    place,
+                    joint: None,
+                    inertia: inertia6,
+                });
+            } else {
+                for k in 0..nj {
+                    let par = if k == 0 {
+                        parent_link
+                    } else {
+                        Some(links.len() - 1)
+                    };
+                    links.push(Link {
+                        parent: par,
+                        place: if k == 0 { place } else { Xform::identity() },
+                        joint: Some(j0 + k),
+                        inertia: if k + 1 == nj { inertia6 } else { None },
+                    });
+                }
+            }
+            body_link.push(links.len() - 1);
+            bodies.push(Body {
+                name: name.to_string(),
+                parent,
+                pos,
+                rot,
+                quat,
+                mass: s.mass,
+                com,
+                inertia,
+                massless: s.massless,
+                joints: j0..joints.len(),
+            });
+        }
+        Ok(Model {
+            bodies,
+            joints,
+            links,
+            body_link,
+            fields,
+            nq,
+            nv,
+            q_names,
+            v_names,
+        })
+    }
+
+    /// Number of configuration coordinates.
+    pub fn nq(&self) -> usize {
+        self.nq
+    }
+    /// Number of velocity coordinates (degrees of freedom).
+    pub fn nv(&self) -> usize {
+        self.nv
+    }
+    pub fn bodies(&self) -> &[Body] {
+        &self.bodies
+    }
+    pub fn joints(&self) -> &[Joint] {
+        &self.joints
+    }
+    pub fn fields(&self) -> &Fields {
+        &self.fields
+    }
+    /// Index of a body by name.
+    pub fn body_id(&self, name: &str) -> Option<usize> {
+        self.bodies.iter().position(|b| b.name == name)
+    }
+    /// Index of a joint by name.
+    pub fn joint_id(&self, name: &str) -> Option<usize> {
+        self.joints.iter().position(|j| j.name == name)
+    }
+    /// Range of joint `j`'s entries in q.
+    pub fn joint_q_range(&self, j: usize) -> Range<usize> {
+        let jt = &self.joints[j];
+        jt.iq..jt.iq + jt.nq
+    }
+    /// Range of joint `j`'s entries in v.
+    pub fn joint_v_range(&self, j: usize) -> Range<usize> {
+        let jt = &self.joints[j];
+        jt.iv..jt.iv + jt.nv
+    }
+    /// Names of the q entries: hinge/slide `name`; ball `name.qw, name.qx, name.qy, name.qz`;
+    /// free `name.x, name.y, name.z, name.qw, name.qx, name.qy, name.qz`.
+    pub fn q_names(&self) -> &[String] {
+        &self.q_names
+    }
+    /// Names of the v entries: hinge/slide `name`; ball `name.wx, name.wy, name.wz` (body frame);
+    /// free `name.vx, name.vy, name.vz` (world) then `name.wx, name.wy, name.wz` (body frame).
+    pub fn v_names(&self) -> &[String] {
+        &self.v_names
+    }
+    /// Whether any joint is a ball or free joint (q is then not a plain vector space chart).
+    pub fn has_quaternions(&self) -> bool {
+        self.joints
+            .iter()
+            .any(|j| matches!(j.kind, JointKind::Ball | JointKind::Free))
+    }
+}
+
+/// Inertia about the CoM: zero (point mass) or symmetric positive definite with principal moments
+/// satisfying the triangle inequality (A + B >= C for every permutation).
+fn check_inertia(i: &Matrix3<f64>) -> Result<(), String> {
+    if i.iter().all(|x| *x == 0.0) {
+        return Ok(());
+    }
+    let scale = i.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let tol = 1e-12 * scale;
+    if (i - i.transpose()).iter().any(|x| x.abs() > tol) {
+        return Err("inertia is not symmetric".into());
+    }
+    if i.cholesky().is_none() {
+        return Err("inertia is not positive definite (use exactly zero for a point mass)".into());
+    }
+    let e = i.symmetric_eigenvalues();
+    let (a, b, c) = (e[0], e[1], e[2]);
+    if a + b < c - tol || b + c < a - tol || a + c < b - tol {
+        return Err(format!(
+            "principal moments ({a}, {b}, {c}) violate the triangle inequality"
+        ));
+    }
+    Ok(())
+}

@@ -1,0 +1,781 @@
+//! Tests of the kinematic-tree module against closed-form Lagrangians and internal identities.
+
+use super::*;
+use crate::scalar::Scalar;
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+use num_dual::Dual64;
+
+const EPS: f64 = f64::EPSILON;
+
+/// xorshift64* in [-1, 1).
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        let x = self.0.wrapping_mul(0x2545F4914F6CDD1D);
+        (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    }
+}
+
+fn inr(a: f64, b: f64, c: f64, off: f64) -> [[f64; 3]; 3] {
+    [
+        [a, off, 0.05 * a],
+        [off, b, -0.03 * a],
+        [0.05 * a, -0.03 * a, c],
+    ]
+}
+
+/// A tree exercising every joint type, several joints per body, anchors, a massless coordinate
+/// body, a welded body and two roots.
+fn zoo(fields: Fields) -> Model {
+    let bodies = vec![
+        BodySpec::new(
+            "base",
+            WORLD,
+            2.0,
+            [0.1, -0.05, 0.02],
+            inr(0.3, 0.4, 0.5, 0.05),
+        )
+        .at([0.1, 0.2, 0.3])
+        .rotated([0.9, 0.1, 0.2, 0.3])
+        .joint(JointSpec::free("float").with_damping(0.05)),
+        BodySpec::new(
+            "arm1",
+            "base",
+            1.2,
+            [0.2, 0.05, -0.03],
+            inr(0.2, 0.25, 0.3, -0.03),
+        )
+        .at([0.3, 0.1, 0.0])
+        .rotated([0.8, 0.2, -0.1, 0.3])
+        .joint(
+            JointSpec::ball("shoulder")
+                .with_anchor([0.05, 0.0, 0.1])
+                .with_damping(0.1),
+        ),
+        BodySpec::new(
+            "arm2",
+            "arm1",
+            0.8,
+            [0.1, 0.0, 0.02],
+            inr(0.1, 0.12, 0.15, 0.01),
+        )
+        .at([0.4, 0.0, 0.0])
+        .joint(
+            JointSpec::hinge("elbow", [0.2, 1.0, 0.1])
+                .with_anchor([0.02, 0.01, 0.0])
+                .with_spring(3.0, 0.2)
+                .with_damping(0.2),
+        )
+        .joint(JointSpec::slide("extend", [1.0, 0.3, 0.0]).with_spring(2.0, 0.1)),
+        BodySpec::massless("coord", "arm2")
+            .at([0.1, 0.1, 0.0])
+            .joint(JointSpec::hinge("yaw", [0.0, 0.0, 1.0])),
+        BodySpec::point_mass("tip", "coord", 0.5, [0.05, 0.3, 0.1])
+            .at([0.2, 0.0, 0.0])
+            .rotated([0.7, 0.0, 0.7, 0.1])
+            .joint(JointSpec::hinge("roll", [1.0, 0.0, 0.0]))
+            .joint(JointSpec::slide("push", [0.0, 1.0, 0.0]).with_damping(0.3)),
+        BodySpec::new(
+            "weld",
+            "arm1",
+            0.3,
+            [0.0, 0.1, 0.0],
+            inr(0.01, 0.012, 0.015, 0.001),
+        )
+        .at([0.0, 0.0, 0.2])
+        .rotated([0.5, 0.5, 0.5, 0.5]),
+        BodySpec::new(
+            "pend",
+            WORLD,
+            1.0,
+            [0.0, 0.0, -0.5],
+            inr(0.05, 0.05, 0.02, 0.0),
+        )
+        .at([1.0, 0.0, 0.0])
+        .joint(JointSpec::hinge("swing", [0.0, 1.0, 0.0]).with_anchor([0.0, 0.0, 0.2])),
+    ];
+    Model::new(&bodies, fields).unwrap()
+}
+
+fn zoo_fields() -> Fields {
+    Fields {
+        gravity: [0.3, -0.2, -9.81],
+        attractors: vec![Attractor {
+            point: [3.0, -2.0, 4.0],
+            mu: 5.0,
+        }],
+    }
+}
+
+/// Random state with unit quaternions; `scale` for the coordinates.
+fn random_state(model: &Model, rng: &mut Rng) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let mut q: Vec<f64> = (0..model.nq()).map(|_| rng.next()).collect();
+    normalize_quaternions(model, &mut q);
+    let v = (0..model.nv()).map(|_| rng.next()).collect();
+    let a = (0..model.nv()).map(|_| rng.next()).collect();
+    (q, v, a)
+}
+
+fn max_abs(m: &DMatrix<f64>) -> f64 {
+    m.iter().fold(0.0, |s, x| s.max(x.abs()))
+}
+
+fn lift(x: &[f64]) -> Vec<Dual64> {
+    x.iter().map(|&y| Dual64::from_re(y)).collect()
+}
+
+/// `x + eps d` over Dual64.
+fn seeded(x: &[f64], d: &[f64]) -> Vec<Dual64> {
+    x.iter().zip(d).map(|(&a, &b)| Dual64::new(a, b)).collect()
+}
+
+fn eps_of(x: &[Dual64]) -> Vec<f64> {
+    x.iter().map(|y| y.eps).collect()
+}
+
+#[test]
+fn names_and_sizes() {
+    let m = zoo(Fields::default());
+    assert_eq!(m.nq(), 7 + 4 + 2 + 1 + 2 + 1);
+    assert_eq!(m.nv(), 6 + 3 + 2 + 1 + 2 + 1);
+    assert_eq!(
+        &m.q_names()[..8],
+        &[
+            "float.x",
+            "float.y",
+            "float.z",
+            "float.qw",
+            "float.qx",
+            "float.qy",
+            "float.qz",
+            "shoulder.qw"
+        ]
+    );
+    assert_eq!(
+        &m.v_names()[..7],
+        &[
+            "float.vx",
+            "float.vy",
+            "float.vz",
+            "float.wx",
+            "float.wy",
+            "float.wz",
+            "shoulder.wx"
+        ]
+    );
+    let j = m.joint_id("extend").unwrap();
+    assert_eq!(m.joint_q_range(j), 12..13);
+    assert_eq!(m.joint_v_range(j), 10..11);
+    let q0 = neutral(&m);
+    assert_eq!(q0[7], 1.0);
+    assert!((q0[0] - 0.1).abs() < EPS && (q0[3] - 0.9 / (0.95f64).sqrt()).abs() < 4.0 * EPS);
+}
+
+/// Columns of M equal rnea(q, 0, e_i) - rnea(q, 0, 0) (Featherstone ch. 6); also
+/// rnea(q, v, a) = M a + rnea(q, v, 0).
+#[test]
+fn crba_matches_rnea() {
+    let m = zoo(zoo_fields());
+    let mut d = TreeData::<f64>::new(&m);
+    let mut rng = Rng(0x1234_5678_9abc_def1);
+    let g = Vector3::new(0.3, -0.2, -9.81);
+    let nv = m.nv();
+    let mut mm = DMatrix::zeros(0, 0);
+    for _ in 0..20 {
+        let (q, v, a) = random_state(&m, &mut rng);
+        crba(&m, &mut d, &q, &mut mm);
+        let scale = max_abs(&mm);
+        assert!(max_abs(&(&mm - mm.transpose())) <= 8.0 * EPS * scale);
+        let zero = vec![0.0; nv];
+        let t0 = rnea(&m, &mut d, &q, &zero, &zero, &g).clone();
+        let mut cols = DMatrix::zeros(nv, nv);
+        for i in 0..nv {
+            let mut e = zero.clone();
+            e[i] = 1.0;
+            let ti = rnea(&m, &mut d, &q, &zero, &e, &g).clone();
+            cols.set_column(i, &(ti - &t0));
+        }
+        let err = max_abs(&(&cols - &mm));
+        assert!(err <= 64.0 * EPS * scale.max(9.81), "crba vs rnea: {err:e}");
+        let bias0 = rnea(&m, &mut d, &q, &v, &zero, &g).clone();
+        let full = rnea(&m, &mut d, &q, &v, &a, &g).clone();
+        let err2 = (full - bias0 - &mm * DVector::from_vec(a.clone())).amax();
+        assert!(err2 <= 64.0 * EPS * 20.0, "rnea linear in a: {err2:e}");
+        // M positive definite
+        assert!(mm.clone().cholesky().is_some());
+    }
+}
+
+fn double_pendulum(m1: f64, m2: f64, l1: f64, l2: f64, j1: f64, j2: f64, g0: f64) -> Model {
+    let iso = |j: f64| [[j, 0.0, 0.0], [0.0, j, 0.0], [0.0, 0.0, j]];
+    let bodies = vec![
+        BodySpec::new("link1", WORLD, m1, [l1, 0.0, 0.0], iso(j1))
+            .joint(JointSpec::hinge("theta1", [0.0, 0.0, 1.0])),
+        BodySpec::new("link2", "link1", m2, [l2, 0.0, 0.0], iso(j2))
+            .at([l1, 0.0, 0.0])
+            .joint(JointSpec::hinge("theta2", [0.0, 0.0, 1.0])),
+    ];
+    Model::new(
+        &bodies,
+        Fields {
+            gravity: [0.0, -g0, 0.0],
+            attractors: vec![],
+        },
+    )
+    .unwrap()
+}
+
+/// Planar double pendulum (relative angles, masses at the link ends with central inertias J1, J2):
+/// M11 = J1 + J2 + m1 l1² + m2 (l1² + l2² + 2 l1 l2 cos θ2), M12 = J2 + m2 (l2² + l1 l2 cos θ2),
+/// M22 = J2 + m2 l2²; G = (m2 l1 l2 s2 (2 θ1' θ2' + θ2'²), -m2 l1 l2 s2 θ1'²); gravity -g0 ŷ:
+/// Q = -∂V/∂θ with V = g0 (m1 l1 s1 + m2 (l1 s1 + l2 s12)).
+#[test]
+fn double_pendulum_closed_form() {
+    let (m1, m2, l1, l2, j1, j2, g0) = (1.3, 0.7, 0.9, 0.6, 0.02, 0.03, 9.81);
+    let model = double_pendulum(m1, m2, l1, l2, j1, j2, g0);
+    let mut d = TreeData::<f64>::new(&model);
+    let mut rng = Rng(42);
+    let (mut mm, mut gg, mut qq) = (DMatrix::zeros(0, 0), DVector::zeros(0), DVector::zeros(0));
+    for _ in 0..10 {
+        let q = [3.0 * rng.next(), 3.0 * rng.next()];
+        let v = [2.0 * rng.next(), 2.0 * rng.next()];
+        let (s2, c2) = (q[1].sin(), q[1].cos());
+        let m12 = j2 + m2 * (l2 * l2 + l1 * l2 * c2);
+        let mex = DMatrix::from_row_slice(
+            2,
+            2,
+            &[
+                j1 + j2 + m1 * l1 * l1 + m2 * (l1 * l1 + l2 * l2 + 2.0 * l1 * l2 * c2),
+                m12,
+                m12,
+                j2 + m2 * l2 * l2,
+            ],
+        );
+        mass_matrix(&model, &mut d, &q, &mut mm);
+        assert!(
+            max_abs(&(&mm - &mex)) <= 8.0 * EPS * max_abs(&mex),
+            "{mm} vs {mex}"
+        );
+        velocity_terms(&model, &mut d, &q, &v, &mut gg);
+        let h = m2 * l1 * l2 * s2;
+        let gex = DVector::from_vec(vec![
+            h * (2.0 * v[0] * v[1] + v[1] * v[1]),
+            -h * v[0] * v[0],
+        ]);
+        assert!(
+            (&gg - &gex).amax() <= 16.0 * EPS * (1.0 + gex.amax()),
+            "{gg} vs {gex}"
+        );
+        applied_forces(&model, &mut d, 0.0, &q, &v, &mut qq);
+        let c1 = q[0].cos();
+        let c12 = (q[0] + q[1]).cos();
+        let qex = DVector::from_vec(vec![
+            -g0 * ((m1 + m2) * l1 * c1 + m2 * l2 * c12),
+            -g0 * m2 * l2 * c12,
+        ]);
+        assert!((&qq - &qex).amax() <= 16.0 * EPS * 20.0, "{qq} vs {qex}");
+    }
+}
+
+/// Mass matrix over Dual64 with q seeded along a direction d: the dual part is dM/dq · d =
+/// -m2 l1 l2 sin θ2 d2 [[2, 1], [1, 0]].
+#[test]
+fn double_pendulum_mass_matrix_derivative_over_duals() {
+    let (m1, m2, l1, l2) = (1.3, 0.7, 0.9, 0.6);
+    let model = double_pendulum(m1, m2, l1, l2, 0.02, 0.03, 9.81);
+    let mut d = TreeData::<Dual64>::new(&model);
+    let mut mm = DMatrix::zeros(0, 0);
+    for (q, dir) in [([0.3, -1.1], [0.7, 1.3]), ([2.0, 2.5], [-0.4, 0.9])] {
+        mass_matrix(&model, &mut d, &seeded(&q, &dir), &mut mm);
+        let k = -m2 * l1 * l2 * q[1].sin() * dir[1];
+        let ex = [2.0 * k, k, k, 0.0];
+        for (i, e) in ex.iter().enumerate() {
+            let got = mm[(i / 2, i % 2)].eps;
+            assert!((got - e).abs() <= 8.0 * EPS, "{got} vs {e}");
+        }
+    }
+}
+
+fn spherical_particle(m: f64, mu: f64) -> Model {
+    // x = r cosθ cosφ, y = r cosθ sinφ, z = r sinθ: rotate by φ about z, then by θ about -y
+    // (elevation), then slide along x.
+    let bodies = vec![BodySpec::point_mass("particle", WORLD, m, [0.0; 3])
+        .joint(JointSpec::hinge("phi", [0.0, 0.0, 1.0]))
+        .joint(JointSpec::hinge("theta", [0.0, -1.0, 0.0]))
+        .joint(JointSpec::slide("r", [1.0, 0.0, 0.0]))];
+    let fields = Fields {
+        gravity: [0.0; 3],
+        attractors: vec![Attractor {
+            point: [0.0; 3],
+            mu,
+        }],
+    };
+    Model::new(&bodies, fields).unwrap()
+}
+
+/// Particle in spherical coordinates (phi, theta, r) in ONE body: A = m diag(r² cos²θ, r², 1),
+/// G from the Lagrangian, Newtonian attraction Q_r = -mu m / r², and the position map.
+#[test]
+fn spherical_particle_closed_form() {
+    let (m, mu) = (1.7, 2.3);
+    let model = spherical_particle(m, mu);
+    assert_eq!(model.q_names(), &["phi", "theta", "r"]);
+    let mut d = TreeData::<f64>::new(&model);
+    let mut rng = Rng(7);
+    let (mut mm, mut gg, mut qq) = (DMatrix::zeros(0, 0), DVector::zeros(0), DVector::zeros(0));
+    for _ in 0..10 {
+        let q = [3.0 * rng.next(), 1.4 * rng.next(), 1.5 + rng.next()];
+        let v = [rng.next(), rng.next(), rng.next()];
+        let (ph, th, r) = (q[0], q[1], q[2]);
+        let (st, ct) = (th.sin(), th.cos());
+        let p = point_position(&model, &mut d, &q, 0, &Vector3::zeros());
+        let pex = Vector3::new(r * ct * ph.cos(), r * ct * ph.sin(), r * st);
+        assert!((p - pex).amax() <= 8.0 * EPS * r);
+        mass_matrix(&model, &mut d, &q, &mut mm);
+        let mex =
+            DMatrix::from_diagonal(&DVector::from_vec(vec![m * r * r * ct * ct, m * r * r, m]));
+        assert!(
+            max_abs(&(&mm - &mex)) <= 16.0 * EPS * max_abs(&mex),
+            "{mm} vs {mex}"
+        );
+        velocity_terms(&model, &mut d, &q, &v, &mut gg);
+        let (dph, dth, dr) = (v[0], v[1], v[2]);
+        let gex = DVector::from_vec(vec![
+            -2.0 * m * (r * ct * ct * dr * dph - r * r * ct * st * dth * dph),
+            -m * (2.0 * r * dr * dth + r * r * ct * st * dph * dph),
+            m * (r * ct * ct * dph * dph + r * dth * dth),
+        ]);
+        assert!(
+            (&gg - &gex).amax() <= 32.0 * EPS * (1.0 + gex.amax()),
+            "{gg} vs {gex}"
+        );
+        applied_forces(&model, &mut d, 0.0, &q, &v, &mut qq);
+        let qex = DVector::from_vec(vec![0.0, 0.0, -mu * m / (r * r)]);
+        assert!(
+            (&qq - &qex).amax() <= 16.0 * EPS * qex.amax(),
+            "{qq} vs {qex}"
+        );
+    }
+}
+
+fn ball_body(mass: f64, com: [f64; 3], ic: Matrix3<f64>, g: [f64; 3]) -> Model {
+    let i: [[f64; 3]; 3] = ic.transpose().into();
+    let bodies = vec![BodySpec::new("top", WORLD, mass, com, i)
+        .at([0.2, -0.1, 0.5])
+        .rotated([0.9, -0.3, 0.1, 0.2])
+        .joint(JointSpec::ball("pivot"))];
+    Model::new(
+        &bodies,
+        Fields {
+            gravity: g,
+            attractors: vec![],
+        },
+    )
+    .unwrap()
+}
+
+/// Rigid body on a ball joint: M = I_O (body frame, constant), G = -ω x (I_O ω) (Euler);
+/// heavy top: Q = c x (Rᵀ m g) in the body frame.
+#[test]
+fn ball_joint_euler_and_heavy_top() {
+    let ic = Matrix3::new(0.3, 0.02, -0.01, 0.02, 0.4, 0.03, -0.01, 0.03, 0.5);
+    let mut rng = Rng(99);
+    // (a) principal axes, CoM at the pivot
+    let diag = Matrix3::from_diagonal(&Vector3::new(0.3, 0.4, 0.6));
+    let model = ball_body(2.0, [0.0; 3], diag, [0.0; 3]);
+    let mut d = TreeData::<f64>::new(&model);
+    let (mut mm, mut gg, mut qq) = (DMatrix::zeros(0, 0), DVector::zeros(0), DVector::zeros(0));
+    for _ in 0..5 {
+        let (q, v, _) = random_state(&model, &mut rng);
+        mass_matrix(&model, &mut d, &q, &mut mm);
+        assert!(max_abs(&(&mm - DMatrix::from_iterator(3, 3, diag.iter().cloned()))) <= 4.0 * EPS);
+        velocity_terms(&model, &mut d, &q, &v, &mut gg);
+        let w = Vector3::new(v[0], v[1], v[2]);
+        let gex = -w.cross(&(diag * w));
+        assert!((Vector3::new(gg[0], gg[1], gg[2]) - gex).amax() <= 8.0 * EPS);
+    }
+    // (b) heavy top: CoM offset, general inertia, gravity
+    let (mass, com) = (1.5, Vector3::new(0.05, -0.02, 0.3));
+    let gvec = Vector3::new(0.0, 0.0, -9.81);
+    let model = ball_body(mass, [com[0], com[1], com[2]], ic, [0.0, 0.0, -9.81]);
+    let mut d = TreeData::<f64>::new(&model);
+    let io = ic + (Matrix3::identity() * com.dot(&com) - com * com.transpose()) * mass;
+    for _ in 0..5 {
+        let (q, v, _) = random_state(&model, &mut rng);
+        mass_matrix(&model, &mut d, &q, &mut mm);
+        assert!(max_abs(&(&mm - DMatrix::from_iterator(3, 3, io.iter().cloned()))) <= 8.0 * EPS);
+        velocity_terms(&model, &mut d, &q, &v, &mut gg);
+        let w = Vector3::new(v[0], v[1], v[2]);
+        let gex = -w.cross(&(io * w));
+        assert!((Vector3::new(gg[0], gg[1], gg[2]) - gex).amax() <= 16.0 * EPS);
+        applied_forces(&model, &mut d, 0.0, &q, &v, &mut qq);
+        let (r, _) = body_pose(&model, &mut d, &q, 0);
+        let qex = com.cross(&(r.transpose() * gvec * mass));
+        assert!(
+            (Vector3::new(qq[0], qq[1], qq[2]) - qex).amax() <= 32.0 * EPS * 15.0,
+            "{qq} {qex}"
+        );
+    }
+}
+
+/// Free body under gravity: the CoM accelerates with g and the angular part obeys Euler's equations
+/// about the CoM, I_c ω' = -ω x I_c ω (body frame).
+#[test]
+fn free_body_falls() {
+    let ic = Matrix3::new(0.3, 0.02, -0.01, 0.02, 0.4, 0.03, -0.01, 0.03, 0.5);
+    let com = Vector3::new(0.1, -0.2, 0.05);
+    let i: [[f64; 3]; 3] = ic.into();
+    let g = [0.5, -0.3, -9.81];
+    let bodies =
+        vec![BodySpec::new("b", WORLD, 1.7, [com[0], com[1], com[2]], i)
+            .joint(JointSpec::free("root"))];
+    let model = Model::new(
+        &bodies,
+        Fields {
+            gravity: g,
+            attractors: vec![],
+        },
+    )
+    .unwrap();
+    let mut d = TreeData::<f64>::new(&model);
+    let mut rng = Rng(5);
+    let (mut mm, mut gg, mut qq) = (DMatrix::zeros(0, 0), DVector::zeros(0), DVector::zeros(0));
+    for _ in 0..5 {
+        let (q, v, _) = random_state(&model, &mut rng);
+        mass_matrix(&model, &mut d, &q, &mut mm);
+        velocity_terms(&model, &mut d, &q, &v, &mut gg);
+        applied_forces(&model, &mut d, 0.0, &q, &v, &mut qq);
+        let acc = mm.clone().cholesky().unwrap().solve(&(&gg + &qq));
+        // v[0..3] is the world velocity of the body origin, so acc[0..3] is its acceleration:
+        // a_com = a_O + R (ω' x c + ω x (ω x c)).
+        let w = Vector3::new(v[3], v[4], v[5]);
+        let wdot = Vector3::new(acc[3], acc[4], acc[5]);
+        let (r, _) = body_pose(&model, &mut d, &q, 0);
+        let acom =
+            Vector3::new(acc[0], acc[1], acc[2]) + r * (wdot.cross(&com) + w.cross(&w.cross(&com)));
+        assert!(
+            (acom - Vector3::from(g)).amax() <= 64.0 * EPS * 10.0,
+            "{acom}"
+        );
+        let (acom2, alpha_w) = point_acceleration(&model, &mut d, &q, &v, acc.as_slice(), 0, &com);
+        assert!((acom2 - acom).amax() <= 64.0 * EPS * 10.0);
+        assert!((r * wdot - alpha_w).amax() <= 16.0 * EPS);
+        let euler = ic * wdot + w.cross(&(ic * w));
+        assert!(euler.amax() <= 64.0 * EPS, "{euler}");
+    }
+}
+
+/// dT/dt along (q' = qdot(q, v), v' = A⁻¹ G) vanishes for a free conservative system without
+/// fields, with T = ½ vᵀ A(q) v evaluated over Dual64 — checks G against A (skew-symmetry of
+/// Ȧ - 2C). Also T from body velocities equals ½ vᵀ A v.
+#[test]
+fn kinetic_energy_is_conserved_by_g() {
+    let model = zoo(Fields::default());
+    let mut d = TreeData::<f64>::new(&model);
+    let mut dd = TreeData::<Dual64>::new(&model);
+    let mut rng = Rng(2024);
+    let (mut mm, mut gg, mut qd) = (DMatrix::zeros(0, 0), DVector::zeros(0), DVector::zeros(0));
+    let mut md = DMatrix::zeros(0, 0);
+    for _ in 0..10 {
+        let (q, v, _) = random_state(&model, &mut rng);
+        mass_matrix(&model, &mut d, &q, &mut mm);
+        velocity_terms(&model, &mut d, &q, &v, &mut gg);
+        let acc = mm.clone().cholesky().unwrap().solve(&gg);
+        qdot(&model, &q, &v, &mut qd);
+        let (qs, vs) = (seeded(&q, qd.as_slice()), seeded(&v, acc.as_slice()));
+        mass_matrix(&model, &mut dd, &qs, &mut md);
+        let vv = DVector::from_vec(vs.clone());
+        let t = vv.dot(&(&md * &vv)) * 0.5;
+        assert!(
+            t.eps.abs() <= 1e3 * EPS * t.re,
+            "dT/dt = {:e}, T = {}",
+            t.eps,
+            t.re
+        );
+        let t2 = kinetic_energy(&model, &mut dd, &qs, &vs);
+        assert!((t2 - t).re.abs() <= 64.0 * EPS * t.re && (t2 - t).eps.abs() <= 1e3 * EPS * t.re);
+    }
+}
+
+/// Full energy balance with gravity, attraction, springs and dampers:
+/// d(T + V)/dt = -Σ d v² along the motion, over Dual64.
+#[test]
+fn energy_balance_with_fields() {
+    let model = zoo(zoo_fields());
+    let mut d = TreeData::<f64>::new(&model);
+    let mut dd = TreeData::<Dual64>::new(&model);
+    let mut rng = Rng(77);
+    let (mut mm, mut gg, mut qq, mut qd) = (
+        DMatrix::zeros(0, 0),
+        DVector::zeros(0),
+        DVector::zeros(0),
+        DVector::zeros(0),
+    );
+    for _ in 0..10 {
+        let (q, v, _) = random_state(&model, &mut rng);
+        mass_matrix(&model, &mut d, &q, &mut mm);
+        velocity_terms(&model, &mut d, &q, &v, &mut gg);
+        applied_forces(&model, &mut d, 0.0, &q, &v, &mut qq);
+        let acc = mm.clone().cholesky().unwrap().solve(&(&gg + &qq));
+        qdot(&model, &q, &v, &mut qd);
+        let (qs, vs) = (seeded(&q, qd.as_slice()), seeded(&v, acc.as_slice()));
+        let e = kinetic_energy(&model, &mut dd, &qs, &vs) + potential_energy(&model, &mut dd, &qs);
+        let mut diss = 0.0;
+        for j in model.joints() {
+            for k in 0..j.nv {
+                diss -= j.damping * v[j.iv + k] * v[j.iv + k];
+            }
+        }
+        assert!(
+            (e.eps - diss).abs() <= 1e3 * EPS * (1.0 + e.re.abs()),
+            "{} vs {diss}",
+            e.eps
+        );
+    }
+}
+
+/// Point kinematics: velocity = d/dt position (dual numbers along qdot), Jacobian · v = (ω, v_p),
+/// acceleration = d/dt velocity, Ṙ = [ω]x R, and Jᵀ F from `body_point_force` has power F · v_p.
+#[test]
+fn point_kinematics_consistency() {
+    let model = zoo(Fields::default());
+    let mut d = TreeData::<f64>::new(&model);
+    let mut dd = TreeData::<Dual64>::new(&model);
+    let mut rng = Rng(31337);
+    let (mut qd, mut jac, mut tau) = (DVector::zeros(0), DMatrix::zeros(0, 0), DVector::zeros(0));
+    let p = Vector3::new(0.1, -0.2, 0.3);
+    let pd = p.map(Dual64::from_re);
+    for _ in 0..5 {
+        let (q, v, a) = random_state(&model, &mut rng);
+        qdot(&model, &q, &v, &mut qd);
+        let (qs, vs) = (seeded(&q, qd.as_slice()), seeded(&v, &a));
+        for b in 0..model.bodies().len() {
+            let vp = point_velocity(&model, &mut d, &q, &v, b, &p);
+            let xs = point_position(&model, &mut dd, &qs, b, &pd);
+            assert!((xs.map(|x| x.eps) - vp).amax() <= 64.0 * EPS, "body {b}");
+            let w = body_angular_velocity(&model, &mut d, &q, &v, b);
+            let (rs, _) = body_pose(&model, &mut dd, &qs, b);
+            let (r, _) = body_pose(&model, &mut d, &q, b);
+            let rdot = rs.map(|x| x.eps);
+            assert!((rdot - super::spatial::skew(&w) * r).amax() <= 64.0 * EPS);
+            let (ap, alpha) = point_acceleration(&model, &mut d, &q, &v, &a, b, &p);
+            let vps = point_velocity(&model, &mut dd, &qs, &vs, b, &pd);
+            assert!((vps.map(|x| x.eps) - ap).amax() <= 256.0 * EPS, "body {b}");
+            let ws = body_angular_velocity(&model, &mut dd, &qs, &vs, b);
+            assert!((ws.map(|x| x.eps) - alpha).amax() <= 256.0 * EPS);
+            point_jacobian(&model, &mut d, &q, b, &p, &mut jac);
+            let jv = &jac * DVector::from_vec(v.clone());
+            assert!((Vector3::new(jv[0], jv[1], jv[2]) - w).amax() <= 16.0 * EPS);
+            assert!((Vector3::new(jv[3], jv[4], jv[5]) - vp).amax() <= 16.0 * EPS);
+            let f = Vector3::new(0.3, -1.2, 0.7);
+            tau.fill(0.0);
+            body_point_force(&model, &mut d, &q, b, &p, &f, &mut tau);
+            let power = tau.dot(&DVector::from_vec(v.clone()));
+            assert!((power - f.dot(&vp)).abs() <= 64.0 * EPS);
+            let quat = body_quaternion(&model, &mut d, &q, b);
+            let rq = super::spatial::rot_quat(quat[0], quat[1], quat[2], quat[3]);
+            assert!((rq - r).amax() <= 16.0 * EPS);
+        }
+    }
+}
+
+/// The free-joint quaternion rate ½ q ⊗ (0, ω_body) agrees with the body rotation's derivative.
+#[test]
+fn qdot_matches_rotation_rate() {
+    let model = zoo(Fields::default());
+    let mut dd = TreeData::<Dual64>::new(&model);
+    let mut rng = Rng(8);
+    let mut qd = DVector::zeros(0);
+    let (q, v, _) = random_state(&model, &mut rng);
+    qdot(&model, &q, &v, &mut qd);
+    // ball quaternion stays unit to first order
+    let b = model.joint_q_range(model.joint_id("shoulder").unwrap());
+    let dn: f64 = b.clone().map(|i| q[i] * qd[i]).sum();
+    assert!(dn.abs() <= 4.0 * EPS);
+    let qs = seeded(&q, qd.as_slice());
+    let (rs, _) = body_pose(&model, &mut dd, &qs, 0);
+    let r = rs.map(|x| x.re);
+    let w = Vector3::new(v[3], v[4], v[5]);
+    assert!((rs.map(|x| x.eps) - r * super::spatial::skew(&w)).amax() <= 16.0 * EPS);
+    let _ = eps_of(&qs);
+    let _ = lift(&q);
+}
+
+/// Nested duals: the second derivative of T along a line is available (generic scalar).
+#[test]
+fn works_over_second_order_duals() {
+    use num_dual::Dual2_64;
+    let model = double_pendulum(1.0, 1.0, 1.0, 1.0, 0.0001, 0.0001, 9.81);
+    let mut d = TreeData::<Dual2_64>::new(&model);
+    let th = Dual2_64::from_re(0.4).derivative();
+    let q = [Dual2_64::from_re(0.1), th];
+    let mut mm = DMatrix::zeros(0, 0);
+    mass_matrix(&model, &mut d, &q, &mut mm);
+    // M11 = J1 + J2 + 1 + 2 + 2 cos θ2: second derivative -2 cos θ2
+    assert!((mm[(0, 0)].v2 + 2.0 * 0.4f64.cos()).abs() <= 8.0 * EPS);
+    fn is_scalar<S: Scalar>(_: &S) {}
+    is_scalar(&mm[(0, 0)]);
+}
+
+#[test]
+fn validation_errors() {
+    let ok = |b: Vec<BodySpec>| Model::new(&b, Fields::default());
+    let err = |b: Vec<BodySpec>| ok(b).unwrap_err().to_string();
+    let iso = [[0.1, 0.0, 0.0], [0.0, 0.1, 0.0], [0.0, 0.0, 0.1]];
+    let e = err(vec![BodySpec::new("neg", WORLD, -1.0, [0.0; 3], iso)]);
+    assert!(
+        e.contains("'neg'") && e.contains("mass must be positive"),
+        "{e}"
+    );
+    let e = err(vec![BodySpec::new(
+        "npd",
+        WORLD,
+        1.0,
+        [0.0; 3],
+        [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]],
+    )]);
+    assert!(
+        e.contains("'npd'") && e.contains("positive definite"),
+        "{e}"
+    );
+    let e = err(vec![BodySpec::new(
+        "tri",
+        WORLD,
+        1.0,
+        [0.0; 3],
+        [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 3.0]],
+    )]);
+    assert!(e.contains("'tri'") && e.contains("triangle"), "{e}");
+    let e = err(vec![BodySpec::new(
+        "asym",
+        WORLD,
+        1.0,
+        [0.0; 3],
+        [[1.0, 0.1, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+    )]);
+    assert!(e.contains("symmetric"), "{e}");
+    let e = err(vec![
+        BodySpec::new("b", WORLD, 1.0, [0.0; 3], iso).joint(JointSpec::hinge("h0", [0.0; 3]))
+    ]);
+    assert!(
+        e.contains("'h0'") && e.contains("'b'") && e.contains("axis"),
+        "{e}"
+    );
+    let e = err(vec![BodySpec::new("orphan", "nobody", 1.0, [0.0; 3], iso)]);
+    assert!(
+        e.contains("'orphan'") && e.contains("unknown parent 'nobody'"),
+        "{e}"
+    );
+    let e = err(vec![
+        BodySpec::new("a", WORLD, 1.0, [0.0; 3], iso),
+        BodySpec::new("b", "a", 1.0, [0.0; 3], iso).joint(JointSpec::free("f")),
+    ]);
+    assert!(e.contains("'f'") && e.contains("free joint"), "{e}");
+    let e = err(vec![BodySpec::new("z", WORLD, 0.0, [0.0; 3], iso)]);
+    assert!(e.contains("massless"), "{e}");
+    let mut ml = BodySpec::massless("m", WORLD);
+    ml.mass = 1.0;
+    assert!(err(vec![ml]).contains("flagged massless"));
+    let e = err(vec![
+        BodySpec::new("a", WORLD, 1.0, [0.0; 3], iso).joint(JointSpec::hinge("j", [1.0, 0.0, 0.0])),
+        BodySpec::new("a", WORLD, 1.0, [0.0; 3], iso),
+    ]);
+    assert!(e.contains("duplicate body"), "{e}");
+    let e = err(vec![BodySpec::new("a", WORLD, 1.0, [0.0; 3], iso)
+        .joint(JointSpec::ball("s").with_spring(1.0, 0.0))]);
+    assert!(e.contains("springs"), "{e}");
+    // accepted: point mass, massless, rod-free PD
+    assert!(ok(vec![
+        BodySpec::massless("m", WORLD).joint(JointSpec::slide("x", [1.0, 0.0, 0.0])),
+        BodySpec::point_mass("p", "m", 1.0, [0.0; 3])
+    ])
+    .is_ok());
+}
+
+/// Serde round trip of the specifications (the scene layer deserialises them).
+#[test]
+fn spec_serde_roundtrip() {
+    let b = BodySpec::new(
+        "a",
+        WORLD,
+        1.0,
+        [0.0; 3],
+        [[0.1, 0.0, 0.0], [0.0, 0.1, 0.0], [0.0, 0.0, 0.1]],
+    )
+    .joint(JointSpec::hinge("h", [0.0, 0.0, 1.0]).with_damping(0.5));
+    let s = serde_json::to_string(&b).unwrap();
+    let b2: BodySpec = serde_json::from_str(&s).unwrap();
+    assert_eq!(b, b2);
+    let j: JointSpec =
+        serde_json::from_str(r#"{"name": "q", "type": "slide", "axis": [1, 0, 0]}"#).unwrap();
+    assert_eq!(j, JointSpec::slide("q", [1.0, 0.0, 0.0]));
+}
+
+/// Springs and dampers of hinge/slide joints: Q = -k (q - q_ref) - d v; ball/free dampers -d v.
+#[test]
+fn springs_and_dampers() {
+    let bodies = vec![
+        BodySpec::massless("m", WORLD)
+            .joint(
+                JointSpec::hinge("h", [0.0, 0.0, 1.0])
+                    .with_spring(3.0, 0.25)
+                    .with_damping(0.5),
+            )
+            .joint(JointSpec::slide("s", [1.0, 0.0, 0.0]).with_spring(2.0, -0.5)),
+        BodySpec::new(
+            "b",
+            "m",
+            1.0,
+            [0.0; 3],
+            [[0.1, 0.0, 0.0], [0.0, 0.1, 0.0], [0.0, 0.0, 0.1]],
+        )
+        .joint(JointSpec::ball("ball").with_damping(0.7)),
+    ];
+    let model = Model::new(&bodies, Fields::default()).unwrap();
+    let mut d = TreeData::<f64>::new(&model);
+    let q = [0.75, 0.5, 1.0, 0.0, 0.0, 0.0];
+    let v = [2.0, -1.0, 0.25, 0.5, -1.0];
+    let mut qq = DVector::zeros(0);
+    applied_forces(&model, &mut d, 0.0, &q, &v, &mut qq);
+    let ex = [
+        -3.0 * 0.5 - 0.5 * 2.0,
+        -2.0 * 1.0,
+        -0.7 * 0.25,
+        -0.7 * 0.5,
+        0.7,
+    ];
+    for (i, e) in ex.iter().enumerate() {
+        assert!((qq[i] - e).abs() <= 4.0 * EPS, "{i}: {} vs {e}", qq[i]);
+    }
+    assert!((potential_energy(&model, &mut d, &q) - (1.5 * 0.25 + 1.0)).abs() <= 4.0 * EPS);
+}
+
+/// Couple hook: power of `body_torque` is τ · ω_world; a non-unit quaternion gives the same
+/// mass matrix as its normalisation (implicit normalisation).
+#[test]
+fn torque_hook_and_quaternion_scaling() {
+    let model = zoo(Fields::default());
+    let mut d = TreeData::<f64>::new(&model);
+    let mut rng = Rng(11);
+    let (q, v, _) = random_state(&model, &mut rng);
+    let tq = Vector3::new(0.4, 0.1, -0.9);
+    let mut tau = DVector::zeros(model.nv());
+    for b in 0..model.bodies().len() {
+        tau.fill(0.0);
+        body_torque(&model, &mut d, &q, b, &tq, &mut tau);
+        let w = body_angular_velocity(&model, &mut d, &q, &v, b);
+        let p = tau.dot(&DVector::from_vec(v.clone()));
+        assert!((p - tq.dot(&w)).abs() <= 32.0 * EPS, "body {b}");
+    }
+    let (mut m1, mut m2) = (DMatrix::zeros(0, 0), DMatrix::zeros(0, 0));
+    mass_matrix(&model, &mut d, &q, &mut m1);
+    let mut q2 = q.clone();
+    for i in 3..11 {
+        q2[i] *= 1.7;
+    }
+    mass_matrix(&model, &mut d, &q2, &mut m2);
+    assert!(max_abs(&(&m1 - &m2)) <= 64.0 * EPS * max_abs(&m1));
+}
