@@ -6,9 +6,15 @@
 //! G re-derived (2.20). Programme (2.18): r^2 thetad^2 + r^2 cos^2(theta) phid^2 + rd^2 - C = 0.
 //!
 //! Independent checks: the reaction of |v|^2 = C is along the velocity, so the motion stays in its
-//! initial plane (angular momentum direction fixed) and |v| is constant; on a circular orbit of
+//! initial plane (angular momentum direction fixed) and |v| = V is constant; on a circular orbit of
 //! speed sqrt(mu / r) the natural motion already satisfies the programme, so u = 0 and r is
 //! constant, with rd = 0 throughout (where the paper's D (2.19) divides by zero).
+//!
+//! A first integral (derived here, not in the paper): with alpha the angle of the velocity above the
+//! local horizontal, the path obeys d(alpha)/ds = (cos(alpha) / r) (1 - mu / (r V^2)) and
+//! dr/ds = sin(alpha), hence h exp(mu / (r V^2)) = const, h = |r x v| (see [`first_integral`]). So
+//! the circular orbit is a saddle: faster than circular the particle escapes, slower it falls in,
+//! and rd passes through 0 at most once.
 
 use super::euclidean_names;
 use crate::model::Model;
@@ -130,11 +136,30 @@ pub fn problem(
     }
 }
 
-/// An inclined orbit, faster than circular, starting at rd = 0 (the paper's D is singular there),
-/// over several revolutions: the programme pushes the particle through rd = 0 repeatedly.
+/// An inclined orbit, faster than circular, starting at rd = 0 (where the paper's D (2.19) is
+/// singular); the particle then spirals out.
 pub fn example_2_1() -> Problem<Particle, ConstantSpeed> {
-    // mu = 1, r = 1: circular speed 1; here speed 1.2 with a tilted velocity.
+    // mu = 1, r = 1: circular speed 1; here speed 1.13 with a tilted velocity.
     problem(1.0, 1.0, [0.1, 0.0, 1.0], [0.3, 1.1, 0.0], 20.0)
+}
+
+/// Starts inward, faster than circular: rd passes through 0 (at r ~ 0.74), then the particle
+/// escapes.
+pub fn example_2_1_through_rd0() -> Problem<Particle, ConstantSpeed> {
+    problem(1.0, 1.0, [0.1, 0.0, 1.0], [0.3, 1.1, -0.4], 10.0)
+}
+
+/// The first integral h exp(mu / (r V^2)) of the constant-speed programme (module docs), per unit
+/// mass, at a state.
+pub fn first_integral(mu: f64, q: &[f64], v: &[f64]) -> f64 {
+    let (p, vel) = cartesian(q, v);
+    let h = [
+        p[1] * vel[2] - p[2] * vel[1],
+        p[2] * vel[0] - p[0] * vel[2],
+        p[0] * vel[1] - p[1] * vel[0],
+    ];
+    let h = (h[0] * h[0] + h[1] * h[1] + h[2] * h[2]).sqrt();
+    h * (mu / (q[2] * speed2(q, v))).exp()
 }
 
 /// A circular orbit: the natural motion satisfies the programme, u = 0 exactly, rd = 0 throughout.

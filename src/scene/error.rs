@@ -1,0 +1,157 @@
+//! Errors of scene files: every message names the file, line, column and field, and shows the line.
+
+use crate::expr::ExprError;
+use std::fmt;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+/// A problem with a scene file, located in it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneError {
+    /// The scene file.
+    pub file: PathBuf,
+    /// 1-based line (0 when the error has no position, e.g. the file cannot be read).
+    pub line: usize,
+    /// 1-based column.
+    pub column: usize,
+    /// The field concerned (`model.bodies[1].mass`), empty when not applicable.
+    pub field: String,
+    /// What is wrong.
+    pub message: String,
+    /// The offending source line and a caret, if known.
+    pub excerpt: String,
+}
+
+impl fmt::Display for SceneError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.file.display())?;
+        if self.line > 0 {
+            write!(f, ":{}:{}", self.line, self.column)?;
+        }
+        write!(f, ": error: ")?;
+        if !self.field.is_empty() {
+            write!(f, "{}: ", self.field)?;
+        }
+        write!(f, "{}", self.message)?;
+        if !self.excerpt.is_empty() {
+            write!(f, "\n{}", self.excerpt)?;
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for SceneError {}
+
+/// The text of a scene file with its name, for locating errors.
+#[derive(Clone, Debug)]
+pub struct Source {
+    pub file: PathBuf,
+    pub text: String,
+}
+
+impl Source {
+    /// 1-based (line, column) of a byte offset.
+    pub fn line_col(&self, offset: usize) -> (usize, usize) {
+        let offset = offset.min(self.text.len());
+        let before = &self.text[..offset];
+        let line = before.matches('\n').count() + 1;
+        let start = before.rfind('\n').map(|i| i + 1).unwrap_or(0);
+        (line, self.text[start..offset].chars().count() + 1)
+    }
+
+    fn excerpt(&self, line: usize, column: usize, width: usize) -> String {
+        let text = self.text.lines().nth(line - 1).unwrap_or("");
+        format!(
+            "    {text}\n    {}{}",
+            " ".repeat(column.saturating_sub(1)),
+            "^".repeat(width.max(1))
+        )
+    }
+
+    /// An error at a byte span.
+    pub fn error(&self, span: Range<usize>, field: &str, message: impl Into<String>) -> SceneError {
+        let (line, column) = self.line_col(span.start);
+        let first_line_len = self.text[span.start.min(self.text.len())..span.end.min(self.text.len())]
+            .lines()
+            .next()
+            .map(|l| l.chars().count())
+            .unwrap_or(1);
+        SceneError {
+            file: self.file.clone(),
+            line,
+            column,
+            field: field.to_string(),
+            message: message.into(),
+            excerpt: self.excerpt(line, column, first_line_len),
+        }
+    }
+
+    /// An error without a position.
+    pub fn general(&self, field: &str, message: impl Into<String>) -> SceneError {
+        SceneError {
+            file: self.file.clone(),
+            line: 0,
+            column: 0,
+            field: field.to_string(),
+            message: message.into(),
+            excerpt: String::new(),
+        }
+    }
+
+    /// An expression error, located inside the TOML string at `span` (the span includes quotes).
+    pub fn expr_error(&self, span: Range<usize>, field: &str, e: &ExprError) -> SceneError {
+        let raw = &self.text[span.start.min(self.text.len())..];
+        let mut start = span.start;
+        if raw.starts_with("\"\"\"") || raw.starts_with("'''") {
+            start += 3;
+            if self.text[start..].starts_with('\n') {
+                start += 1;
+            } else if self.text[start..].starts_with("\r\n") {
+                start += 2;
+            }
+        } else if raw.starts_with('"') || raw.starts_with('\'') {
+            start += 1;
+        }
+        let (line, col) = self.line_col(start);
+        let rendered = e.render(&self.file.display().to_string(), line, col);
+        // render() gives "file:line:col: error: message\n<excerpt>"; keep its position and excerpt.
+        let (head, excerpt) = rendered.split_once('\n').unwrap_or((&rendered, ""));
+        let (eline, ecol) = parse_position(head).unwrap_or((line, col));
+        SceneError {
+            file: self.file.clone(),
+            line: eline,
+            column: ecol,
+            field: field.to_string(),
+            message: e.message(),
+            excerpt: excerpt.to_string(),
+        }
+    }
+
+    /// A TOML syntax or type error.
+    pub fn toml_error(&self, e: &toml::de::Error) -> SceneError {
+        let msg = e.message().trim().to_string();
+        match e.span() {
+            Some(span) => self.error(span, "", msg),
+            None => self.general("", msg),
+        }
+    }
+}
+
+fn parse_position(head: &str) -> Option<(usize, usize)> {
+    let mut parts = head.split_once(": error:")?.0.rsplitn(3, ':');
+    let col = parts.next()?.parse().ok()?;
+    let line = parts.next()?.parse().ok()?;
+    Some((line, col))
+}
+
+/// An error reading the file itself.
+pub fn io_error(file: &Path, e: &std::io::Error) -> SceneError {
+    SceneError {
+        file: file.to_path_buf(),
+        line: 0,
+        column: 0,
+        field: String::new(),
+        message: format!("cannot read the scene file: {e}"),
+        excerpt: String::new(),
+    }
+}

@@ -1,0 +1,204 @@
+//! The scene file as written (TOML), before validation. The reference page is `FORMAT.md` beside
+//! this file and the JSON Schema is `scene.schema.json`; a test keeps the three in step.
+
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use toml::Spanned;
+
+/// A number or an expression in the parameters (`"2*pi"`, `"sqrt(mu/r0)"`).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(untagged)]
+pub enum Number {
+    Value(f64),
+    Expr(String),
+}
+
+/// One joint coordinate's initial value: a number/expression, or several for ball and free joints.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(untagged)]
+pub enum Initial {
+    One(Number),
+    Many(Vec<Number>),
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneFile {
+    pub name: String,
+    #[serde(default)]
+    pub description: String,
+    /// Why this scene is in the catalog (what it tests).
+    #[serde(default)]
+    pub purpose: String,
+    #[serde(default)]
+    pub parameters: BTreeMap<String, Spanned<Number>>,
+    pub model: Spanned<ModelFile>,
+    #[serde(default)]
+    pub constraints: Vec<RowFile>,
+    #[serde(default)]
+    pub programme: Vec<RowFile>,
+    pub initial: Spanned<InitialFile>,
+    pub time: Spanned<TimeFile>,
+    #[serde(default)]
+    pub solver: SolverFile,
+    #[serde(default)]
+    pub tolerances: BTreeMap<String, Spanned<ToleranceFile>>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelFile {
+    /// "lagrangian" or "tree".
+    pub kind: Spanned<String>,
+    // lagrangian
+    #[serde(default)]
+    pub coordinates: Vec<Spanned<String>>,
+    #[serde(default)]
+    pub mass_matrix: Option<Spanned<Vec<Spanned<Vec<Spanned<String>>>>>>,
+    #[serde(default)]
+    pub mass_diagonal: Option<Spanned<Vec<Spanned<String>>>>,
+    #[serde(default)]
+    pub potential: Option<Spanned<String>>,
+    #[serde(default)]
+    pub forces: BTreeMap<String, Spanned<String>>,
+    // tree
+    #[serde(default)]
+    pub gravity: Option<[f64; 3]>,
+    #[serde(default)]
+    pub bodies: Vec<Spanned<BodyFile>>,
+    #[serde(default)]
+    pub sites: Vec<Spanned<SiteFile>>,
+    #[serde(default)]
+    pub attractors: Vec<Spanned<AttractorFile>>,
+    #[serde(default)]
+    pub point_forces: Vec<Spanned<PointForceFile>>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BodyFile {
+    pub name: String,
+    #[serde(default = "world")]
+    pub parent: String,
+    #[serde(default)]
+    pub pos: [f64; 3],
+    #[serde(default = "identity_quat")]
+    pub quat: [f64; 4],
+    pub mass: Spanned<f64>,
+    #[serde(default)]
+    pub com: [f64; 3],
+    /// Principal moments [ixx, iyy, izz] or the full [ixx, iyy, izz, ixy, ixz, iyz] about the CoM.
+    #[serde(default)]
+    pub inertia: Option<Spanned<Vec<f64>>>,
+    #[serde(default)]
+    pub joints: Vec<Spanned<JointFile>>,
+}
+
+fn world() -> String {
+    "world".to_string()
+}
+
+fn identity_quat() -> [f64; 4] {
+    [1.0, 0.0, 0.0, 0.0]
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointFile {
+    pub name: String,
+    /// "hinge", "slide", "ball" or "free".
+    #[serde(rename = "type")]
+    pub kind: Spanned<String>,
+    #[serde(default)]
+    pub axis: Option<[f64; 3]>,
+    #[serde(default)]
+    pub anchor: [f64; 3],
+    #[serde(default)]
+    pub stiffness: f64,
+    #[serde(default)]
+    pub spring_ref: f64,
+    #[serde(default)]
+    pub damping: f64,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SiteFile {
+    pub name: String,
+    pub body: String,
+    #[serde(default)]
+    pub pos: [f64; 3],
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AttractorFile {
+    #[serde(default)]
+    pub point: [f64; 3],
+    pub mu: f64,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PointForceFile {
+    pub body: String,
+    #[serde(default)]
+    pub point: [f64; 3],
+    /// World-frame force components as expressions.
+    pub force: [Spanned<String>; 3],
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RowFile {
+    pub name: Spanned<String>,
+    pub expr: Spanned<String>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InitialFile {
+    #[serde(default)]
+    pub q: BTreeMap<String, Spanned<Initial>>,
+    #[serde(default)]
+    pub v: BTreeMap<String, Spanned<Initial>>,
+    /// Project an inconsistent initial state onto the constraints instead of refusing it.
+    #[serde(default)]
+    pub assemble: bool,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TimeFile {
+    #[serde(default)]
+    pub t0: f64,
+    pub t1: f64,
+    /// Output sample spacing; absent: one sample per accepted step.
+    #[serde(default)]
+    pub output_dt: Option<f64>,
+}
+
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SolverFile {
+    pub formulation: Option<Spanned<String>>,
+    pub integrator: Option<Spanned<String>>,
+    /// Fixed step of rk4.
+    pub step: Option<f64>,
+    pub rtol: Option<f64>,
+    pub atol: Option<f64>,
+    pub max_step: Option<f64>,
+    /// "projection", "baumgarte" or "none".
+    pub drift: Option<Spanned<String>>,
+    pub projection_tol: Option<f64>,
+    pub baumgarte_alpha: Option<f64>,
+    pub baumgarte_beta: Option<f64>,
+    pub max_drift: Option<f64>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ToleranceFile {
+    pub value: f64,
+    pub reason: String,
+}

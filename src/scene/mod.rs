@@ -1,0 +1,130 @@
+//! Scenes: a system, its programme and what to check, described in a TOML file.
+//!
+//! [`Scene::load`] parses and validates a file (format: `FORMAT.md` beside this file; JSON Schema:
+//! `scene.schema.json`) into a [`Problem`] over one of two kinds of model — model only what the
+//! scene needs:
+//! - `lagrangian`: named coordinates, A(q) and forces (or a potential) as expressions
+//!   ([`lagrangian::LagrangianModel`]);
+//! - `tree`: bodies and joints ([`tree_model::TreeSceneModel`], CRBA/RNEA of `crate::tree`).
+//!
+//! Every error names the file, line, column and field ([`SceneError`]).
+
+mod error;
+pub mod file;
+pub mod lagrangian;
+pub mod layout;
+mod load;
+pub mod rows;
+pub mod signals;
+pub mod tree_model;
+
+pub use error::{SceneError, Source};
+
+use crate::solve::{self, Problem, SampleSink, Settings, Solution};
+use lagrangian::LagrangianModel;
+use rows::ExprConstraints;
+use std::path::{Path, PathBuf};
+use tree_model::TreeSceneModel;
+
+/// A check tolerance of the scene, with the reason for its value.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Tolerance {
+    pub name: String,
+    pub value: f64,
+    pub reason: String,
+}
+
+/// The problem of a scene, by model kind.
+#[derive(Clone, Debug)]
+pub enum SceneSystem {
+    /// A Lagrangian model.
+    Lagrangian(Problem<LagrangianModel, ExprConstraints>),
+    /// A kinematic tree.
+    Tree(Problem<TreeSceneModel, ExprConstraints>),
+}
+
+/// Run `$body` with `$p` bound to the scene's `Problem`, whatever its model kind.
+#[macro_export]
+macro_rules! with_problem {
+    ($system:expr, $p:ident => $body:expr) => {
+        match $system {
+            $crate::scene::SceneSystem::Lagrangian($p) => $body,
+            $crate::scene::SceneSystem::Tree($p) => $body,
+        }
+    };
+}
+
+/// A loaded, validated scene.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// Scene name (unique in a catalog).
+    pub name: String,
+    /// What it is.
+    pub description: String,
+    /// Why it is in the catalog.
+    pub purpose: String,
+    /// The file it came from.
+    pub path: PathBuf,
+    /// Parameters after evaluation, in file order.
+    pub parameters: Vec<(String, f64)>,
+    /// The problem.
+    pub system: SceneSystem,
+    /// Solver settings of the scene (defaults where the file is silent).
+    pub settings: Settings,
+    /// Check tolerances with their reasons.
+    pub tolerances: Vec<Tolerance>,
+}
+
+impl Scene {
+    /// Load and validate a scene file.
+    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        let text = std::fs::read_to_string(path).map_err(|e| error::io_error(path, &e))?;
+        Scene::from_text(path, &text)
+    }
+
+    /// Load from text (`path` is used in messages only).
+    pub fn from_text(path: &Path, text: &str) -> Result<Scene, SceneError> {
+        load::load(Source {
+            file: path.to_path_buf(),
+            text: text.to_string(),
+        })
+    }
+
+    /// Names of q.
+    pub fn q_names(&self) -> Vec<String> {
+        use crate::model::Model;
+        with_problem!(&self.system, p => p.model.q_names())
+    }
+
+    /// Names of v (and of u).
+    pub fn v_names(&self) -> Vec<String> {
+        use crate::model::Model;
+        with_problem!(&self.system, p => p.model.v_names())
+    }
+
+    /// Constraint rows (system constraints and programme).
+    pub fn rows(&self) -> Vec<crate::programme::RowSpec> {
+        use crate::programme::Constraints;
+        with_problem!(&self.system, p => p.constraints.rows().to_vec())
+    }
+
+    /// Time span.
+    pub fn span(&self) -> (f64, f64) {
+        with_problem!(&self.system, p => (p.t0, p.t1))
+    }
+
+    /// Solve with `settings`, keeping the trajectory in memory.
+    pub fn solve(&self, settings: &Settings) -> Solution {
+        with_problem!(&self.system, p => solve::solve(p, settings))
+    }
+
+    /// Solve with `settings`, streaming samples into `sink`.
+    pub fn solve_into(&self, settings: &Settings, sink: &mut dyn SampleSink) -> Solution {
+        with_problem!(&self.system, p => solve::solve_into(p, settings, sink))
+    }
+
+    /// A tolerance by name.
+    pub fn tolerance(&self, name: &str) -> Option<f64> {
+        self.tolerances.iter().find(|t| t.name == name).map(|t| t.value)
+    }
+}
