@@ -19,11 +19,13 @@
 //!   (+ [`body_point_force`] for user forces). In simulator terms `bias = C v + g = -G - Q_gravity`.
 //! - Names of q/v entries: [`Model::q_names`], [`Model::v_names`].
 
+mod config;
 mod dynamics;
 mod kinematics;
 mod model;
 pub mod spatial;
 
+pub use config::{difference_configuration, integrate_configuration, quat_exp, quat_log};
 pub use dynamics::{
     applied_forces, bias, body_point_force, body_torque, crba, gravity_forces, kinetic_energy,
     mass_matrix, potential_energy, rnea, velocity_terms,
