@@ -834,3 +834,40 @@ impl ErkWork {
         }
     }
 }
+
+#[cfg(test)]
+mod tableau_tests {
+    use super::*;
+
+    /// Row sums of A equal c (for every stage formed from the table), the weights satisfy the
+    /// quadrature conditions sum b_i c_i^(q-1) = 1/q up to the method's order, and the error
+    /// weights of the embedded pairs annihilate constants (sum e_i = 0).
+    #[test]
+    fn tableaux_are_consistent() {
+        for (kind, order) in [(Kind::Rk4, 4), (Kind::Dopri5, 5), (Kind::Dop853, 8)] {
+            let (c, a, b) = (kind.c(), kind.a(), kind.b());
+            for (s, row) in a.iter().enumerate().skip(1) {
+                if row.is_empty() {
+                    continue; // DOP853's FSAL stage 13
+                }
+                let sum: f64 = row.iter().sum();
+                assert!(
+                    (sum - c[s]).abs() < 1e-13,
+                    "{kind:?} stage {s}: {sum} vs {}",
+                    c[s]
+                );
+            }
+            for q in 1..=order {
+                let lhs: f64 = b.iter().zip(c).map(|(bi, ci)| bi * ci.powi(q - 1)).sum();
+                assert!(
+                    (lhs - 1.0 / q as f64).abs() < 1e-13,
+                    "{kind:?} B({q}): {lhs}"
+                );
+            }
+        }
+        assert!(DP5_E.iter().sum::<f64>().abs() < 1e-15);
+        assert!(DP8_ER.iter().sum::<f64>().abs() < 1e-13);
+        let bsum: f64 = DP8_B.iter().sum();
+        assert!((bsum - DP8_BHH.iter().sum::<f64>()).abs() < 1e-13);
+    }
+}

@@ -12,6 +12,20 @@
 //! (Hairer, Norsett, Wanner, *Solving ODEs I*, II.5); DOP853 with 7th-order dense output (ibid.);
 //! Radau IIA order 5 with simplified Newton and exact Jacobians (Hairer & Wanner, *Solving ODEs II*,
 //! IV.8).
+//!
+//! Driver conventions (all methods):
+//! - error norm: RMS of err_i / sc_i with sc from [`OdeProblem::error_scale`]`(y0, y1, atol, rtol)`;
+//!   DOP853 combines its 5th- and 3rd-order estimates as HNW I, II.10 (err5^2 / sqrt(err5^2 +
+//!   0.01 err3^2)); Radau5 uses RADAU5's transformed tolerances (see `radau5`);
+//! - PI step-size control (HNW I, IV.2) for DOPRI5 (beta = 0.04) and DOP853 (beta = 0), never
+//!   increasing h right after a rejection; Gustafsson's predictive controller for Radau5;
+//! - non-finite stages or error estimates reject the step and divide h by 4;
+//! - after [`Accept::Changed`] the explicit methods re-evaluate f(t1, y) instead of reusing the FSAL
+//!   stage (counted in `rhs_evals`); h and the controller memory are kept;
+//! - the last step lands exactly on t1 (steps within 1% of the remaining interval are stretched);
+//! - [`DriverOptions::fixed_step`] turns the adaptive methods into fixed-step ones (convergence
+//!   studies); RK4 is always fixed-step;
+//! - all buffers live in the [`Integrator`]; a run allocates nothing.
 
 use nalgebra::DMatrix;
 

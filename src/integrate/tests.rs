@@ -21,12 +21,15 @@ enum Eq {
     Logistic2,
     /// Van der Pol in Hairer's scaling: y1' = y2, y2' = ((1 - y1^2) y2 - y1) / eps.
     VanDerPol(f64),
+    /// Robertson's chemical kinetics (HNW II, IV.1 (1.4)), y(0) = (1, 0, 0).
+    Robertson,
 }
 
 impl Eq {
     fn dim(self) -> usize {
         match self {
             Eq::Decay | Eq::ProtheroRobinson(_) => 1,
+            Eq::Robertson => 3,
             _ => 2,
         }
     }
@@ -36,6 +39,7 @@ impl Eq {
             Eq::Harmonic => vec![1.0, 0.0],
             Eq::Logistic2 => vec![0.1, 1.0],
             Eq::VanDerPol(_) => vec![2.0, -0.66],
+            Eq::Robertson => vec![1.0, 0.0, 0.0],
         }
     }
     fn exact(self, t: f64) -> Vec<f64> {
@@ -47,7 +51,7 @@ impl Eq {
                 let e = t.exp();
                 vec![e / (e + 9.0), 10.0 / (e + 9.0)]
             }
-            Eq::VanDerPol(_) => panic!("no closed form"),
+            Eq::VanDerPol(_) | Eq::Robertson => panic!("no closed form"),
         }
     }
 }
@@ -112,6 +116,12 @@ impl OdeProblem for Prob {
                 dy[0] = y[1];
                 dy[1] = ((1.0 - y[0] * y[0]) * y[1] - y[0]) / eps;
             }
+            Eq::Robertson => {
+                let (r1, r2, r3) = (0.04 * y[0], 1e4 * y[1] * y[2], 3e7 * y[1] * y[1]);
+                dy[0] = -r1 + r2;
+                dy[1] = r1 - r2 - r3;
+                dy[2] = r3;
+            }
         }
         if self.nan_after.is_some_and(|tn| t > tn) {
             dy[0] = f64::NAN;
@@ -138,6 +148,14 @@ impl OdeProblem for Prob {
                     (-2.0 * y[0] * y[1] - 1.0) / eps,
                     1.0,
                     (1.0 - y[0] * y[0]) / eps,
+                ]);
+            }
+            Eq::Robertson => {
+                #[rustfmt::skip]
+                j.copy_from_slice(&[
+                    -0.04, 0.04, 0.0,
+                    1e4 * y[2], -1e4 * y[2] - 6e7 * y[1], 6e7 * y[1],
+                    1e4 * y[1], -1e4 * y[1], 0.0,
                 ]);
             }
         }
@@ -437,6 +455,53 @@ fn stiff_van_der_pol() {
         .collect();
     eprintln!("VdP short: radau {yr:?} dop853 {y8:?} scaled {scaled:?} dop853 {st8:?}");
     assert!(scaled.iter().all(|e| *e < 10.0), "{scaled:?}");
+}
+
+/// Robertson on [0, 40] with Radau5 (rtol 1e-6, atol 1e-10): the linear invariant
+/// y1 + y2 + y3 = 1 is kept (Runge-Kutta methods preserve linear invariants), the values at
+/// t = 40 agree with Radau5 at rtol 1e-11 in units of the error scale, and that reference agrees
+/// with the tabulated solution. DOPRI5 in the same budget of attempts cannot finish.
+#[test]
+fn stiff_robertson() {
+    let o = DriverOptions {
+        rtol: 1e-6,
+        atol: 1e-10,
+        ..Default::default()
+    };
+    let mut p = Prob::new(Eq::Robertson);
+    let (out, st, y) = run(Method::Radau5, o.clone(), &mut p, 0.0, 40.0);
+    assert_eq!(out, Outcome::Finished);
+    let mut p = Prob::new(Eq::Robertson);
+    let oref = DriverOptions {
+        rtol: 1e-11,
+        atol: 1e-15,
+        ..Default::default()
+    };
+    let (out, _, yref) = run(Method::Radau5, oref, &mut p, 0.0, 40.0);
+    assert_eq!(out, Outcome::Finished);
+    eprintln!("Robertson {st:?}: {y:?} vs {yref:?}");
+    // The tight run reproduces the tabulated solution at t = 40 (0.7158270687,
+    // 9.185534765e-6, 0.2841637457; e.g. the Hairer-Wanner / Bari test sets).
+    let lit = [0.7158270687, 9.185534765e-6, 0.2841637457];
+    for i in 0..3 {
+        assert!(
+            (yref[i] - lit[i]).abs() < 1e-9 * lit[i].abs().max(1e-3),
+            "{i}: {}",
+            yref[i]
+        );
+    }
+    assert!((y.iter().sum::<f64>() - 1.0).abs() < 1e-10);
+    for i in 0..3 {
+        let e = (y[i] - yref[i]).abs() / (o.atol + o.rtol * yref[i].abs());
+        assert!(e < 10.0, "component {i}: {e}");
+    }
+    let mut p = Prob::new(Eq::Robertson);
+    let od = DriverOptions {
+        max_steps: 20 * (st.steps + st.rejected),
+        ..o
+    };
+    let (out, _, _) = run(Method::Dopri5, od, &mut p, 0.0, 40.0);
+    assert!(matches!(out, Outcome::MaxSteps { .. }), "{out:?}");
 }
 
 /// The `accepted` hook: called once per accepted step with contiguous (t0, t1) from t0 to t1; a

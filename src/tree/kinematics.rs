@@ -345,6 +345,8 @@ pub fn body_angular_velocity<S: Scalar>(
 /// World-frame classical acceleration of a body point and angular acceleration of the body, given
 /// `(q, v, dv/dt)`: `a_P = R (a_O + α x p + ω x (v_O + ω x p))` from the spatial acceleration
 /// `(α, a_O)` (classical vs spatial acceleration, Featherstone ch. 2).
+/// With `a = 0` this is the drift term `J̇(q, v) v` of the point (rows 3..6 of [`point_jacobian`])
+/// and of the angular velocity (rows 0..3), as needed by task-space programmes.
 pub fn point_acceleration<S: Scalar>(
     model: &Model,
     data: &mut TreeData<S>,

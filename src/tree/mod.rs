@@ -18,12 +18,37 @@
 //!   `A` = [`mass_matrix`], `G` = [`velocity_terms`] `= -C(q,v) v`, `Q` = [`applied_forces`]
 //!   (+ [`body_point_force`] for user forces). In simulator terms `bias = C v + g = -G - Q_gravity`.
 //! - Names of q/v entries: [`Model::q_names`], [`Model::v_names`].
+//! - MuJoCo correspondence: body `pos`/`quat`, joint `axis`/`pos` (our `anchor`), `stiffness`,
+//!   `springref`, `damping` map one to one; a hinge/slide joint `ref` must be folded into q by the
+//!   caller (here the joint angle is q itself).
+//!
+//! ```
+//! use progmo::tree::*;
+//! use nalgebra::{DMatrix, DVector};
+//! // particle in spherical coordinates (phi, theta, r): three joints in ONE body
+//! let body = BodySpec::point_mass("p", WORLD, 2.0, [0.0; 3])
+//!     .joint(JointSpec::hinge("phi", [0.0, 0.0, 1.0]))
+//!     .joint(JointSpec::hinge("theta", [0.0, -1.0, 0.0]))
+//!     .joint(JointSpec::slide("r", [1.0, 0.0, 0.0]));
+//! let fields = Fields { gravity: [0.0, 0.0, -9.81], attractors: vec![] };
+//! let model = Model::new(&[body], fields).unwrap();
+//! let mut data = model.data::<f64>();
+//! let (q, v) = ([0.1, 0.2, 1.5], [0.3, -0.1, 0.2]);
+//! let (mut a, mut g, mut f) = (DMatrix::zeros(3, 3), DVector::zeros(3), DVector::zeros(3));
+//! mass_matrix(&model, &mut data, &q, &mut a);
+//! velocity_terms(&model, &mut data, &q, &v, &mut g);
+//! applied_forces(&model, &mut data, 0.0, &q, &v, &mut f);
+//! let dv = a.cholesky().unwrap().solve(&(g + f)); // A dv/dt - G = Q
+//! assert_eq!(dv.len(), 3);
+//! ```
 
+mod config;
 mod dynamics;
 mod kinematics;
 mod model;
 pub mod spatial;
 
+pub use config::{difference_configuration, integrate_configuration, quat_exp, quat_log};
 pub use dynamics::{
     applied_forces, bias, body_point_force, body_torque, crba, gravity_forces, kinetic_energy,
     mass_matrix, potential_energy, rnea, velocity_terms,

@@ -601,6 +601,10 @@ impl Model {
     pub fn v_names(&self) -> &[String] {
         &self.v_names
     }
+    /// A workspace for this model over the scalar type `S`.
+    pub fn data<S: crate::scalar::Scalar>(&self) -> super::TreeData<S> {
+        super::TreeData::new(self)
+    }
     /// Whether any joint is a ball or free joint (q is then not a plain vector space chart).
     pub fn has_quaternions(&self) -> bool {
         self.joints

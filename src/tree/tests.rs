@@ -123,17 +123,9 @@ fn max_abs(m: &DMatrix<f64>) -> f64 {
     m.iter().fold(0.0, |s, x| s.max(x.abs()))
 }
 
-fn lift(x: &[f64]) -> Vec<Dual64> {
-    x.iter().map(|&y| Dual64::from_re(y)).collect()
-}
-
 /// `x + eps d` over Dual64.
 fn seeded(x: &[f64], d: &[f64]) -> Vec<Dual64> {
     x.iter().zip(d).map(|(&a, &b)| Dual64::new(a, b)).collect()
-}
-
-fn eps_of(x: &[Dual64]) -> Vec<f64> {
-    x.iter().map(|y| y.eps).collect()
 }
 
 #[test]
@@ -600,8 +592,6 @@ fn qdot_matches_rotation_rate() {
     let r = rs.map(|x| x.re);
     let w = Vector3::new(v[3], v[4], v[5]);
     assert!((rs.map(|x| x.eps) - r * super::spatial::skew(&w)).amax() <= 16.0 * EPS);
-    let _ = eps_of(&qs);
-    let _ = lift(&q);
 }
 
 /// Nested duals: the second derivative of T along a line is available (generic scalar).
@@ -773,9 +763,76 @@ fn torque_hook_and_quaternion_scaling() {
     let (mut m1, mut m2) = (DMatrix::zeros(0, 0), DMatrix::zeros(0, 0));
     mass_matrix(&model, &mut d, &q, &mut m1);
     let mut q2 = q.clone();
-    for i in 3..11 {
-        q2[i] *= 1.7;
+    for x in &mut q2[3..11] {
+        *x *= 1.7; // free and ball quaternions
     }
     mass_matrix(&model, &mut d, &q2, &mut m2);
     assert!(max_abs(&(&m1 - &m2)) <= 64.0 * EPS * max_abs(&m1));
+}
+
+/// Charts: (q ⊕ δ) ⊖ q = δ; d/dε (q ⊕ ε v) at 0 = qdot(q, v) and d/dε ((q ⊕ ε v) ⊖ q) = v over
+/// Dual64 (the series branches at δ = 0 carry exact derivatives).
+#[test]
+fn configuration_charts() {
+    let model = zoo(Fields::default());
+    let mut rng = Rng(4242);
+    let (mut q1, mut dl, mut qd) = (DVector::zeros(0), DVector::zeros(0), DVector::zeros(0));
+    let (mut q1d, mut dld) = (DVector::zeros(0), DVector::zeros(0));
+    for k in 0..10 {
+        let (q, v, _) = random_state(&model, &mut rng);
+        let s = [1e-3, 0.1, 1.0][k % 3];
+        let delta: Vec<f64> = v.iter().map(|x| x * s).collect();
+        integrate_configuration(&model, &q, &delta, &mut q1);
+        difference_configuration(&model, &q, q1.as_slice(), &mut dl);
+        let err = (&dl - DVector::from_vec(delta.clone())).amax();
+        assert!(err <= 16.0 * EPS, "{err:e}");
+        let qs: Vec<Dual64> = q.iter().map(|&x| Dual64::from_re(x)).collect();
+        let ev: Vec<Dual64> = v.iter().map(|&x| Dual64::new(0.0, x)).collect();
+        integrate_configuration(&model, &qs, &ev, &mut q1d);
+        qdot(&model, &q, &v, &mut qd);
+        assert!((q1d.map(|x| x.eps) - &qd).amax() <= 4.0 * EPS);
+        difference_configuration(&model, &qs, q1d.as_slice(), &mut dld);
+        assert!((dld.map(|x| x.eps) - DVector::from_vec(v.clone())).amax() <= 8.0 * EPS);
+    }
+    let q = [0.6f64, 0.0, 0.8, 0.0];
+    let l = quat_log(&q);
+    let e = quat_exp(&l);
+    assert!((0..4).all(|i| (e[i] - q[i]).abs() <= 4.0 * EPS));
+    assert!((l[1] - 2.0 * 0.8f64.atan2(0.6)).abs() <= 4.0 * EPS);
+}
+
+/// Anchored joints rotate about the anchor (MuJoCo `pos`): the anchor stays fixed, and the anchored
+/// hinge's inertia is I_yy + m d² about the axis.
+#[test]
+fn anchors_are_fixed_points() {
+    let model = zoo(Fields::default());
+    let mut d = TreeData::<f64>::new(&model);
+    let mut rng = Rng(3);
+    let pend = model.body_id("pend").unwrap();
+    let arm1 = model.body_id("arm1").unwrap();
+    let sh = model.joint_q_range(model.joint_id("shoulder").unwrap());
+    let a_pend = Vector3::new(0.0, 0.0, 0.2);
+    let a_sh = Vector3::new(0.05, 0.0, 0.1);
+    let (q0, _, _) = random_state(&model, &mut rng);
+    let p0 = point_position(&model, &mut d, &q0, pend, &a_pend);
+    let s0 = point_position(&model, &mut d, &q0, arm1, &a_sh);
+    assert!((p0 - Vector3::new(1.0, 0.0, 0.2)).amax() <= 4.0 * EPS);
+    let mut mm = DMatrix::zeros(0, 0);
+    for _ in 0..5 {
+        let (mut q, _, _) = random_state(&model, &mut rng);
+        q[..7].copy_from_slice(&q0[..7]); // same base pose
+        let p = point_position(&model, &mut d, &q, pend, &a_pend);
+        assert!((p - p0).amax() <= 4.0 * EPS);
+        let s = point_position(&model, &mut d, &q, arm1, &a_sh);
+        assert!((s - s0).amax() <= 16.0 * EPS, "{} {}", s, s0);
+        // hinge angle theta about y: CoM = (1,0,0) + a + R_y(theta) (c - a)
+        let th = q[model.nq() - 1];
+        let com = point_position(&model, &mut d, &q, pend, &Vector3::new(0.0, 0.0, -0.5));
+        let ex = Vector3::new(1.0 - 0.7 * th.sin(), 0.0, 0.2 - 0.7 * th.cos());
+        assert!((com - ex).amax() <= 8.0 * EPS, "{com} {ex}");
+        mass_matrix(&model, &mut d, &q, &mut mm);
+        let n = model.nv() - 1;
+        assert!((mm[(n, n)] - (0.05 + 1.0 * 0.49)).abs() <= 8.0 * EPS);
+        assert!(q[sh.start] != q0[sh.start]);
+    }
 }
