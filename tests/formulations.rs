@@ -312,18 +312,36 @@ fn baumgarte_terms_enter_as_written() {
     let mut ev = Evaluator::<_, _, f64>::new(&p.model, &p.constraints);
     ev.prepare(0.0, &q, &v);
     let (f, gamma0, b) = (ev.jet.value[0], ev.jet.gamma[0], ev.jet.b.clone());
-    ev.evaluate(Formulation::NullSpace, &RankTolerances::default(), Some(bg), 0.0, &q, &v)
-        .unwrap();
+    ev.evaluate(
+        Formulation::NullSpace,
+        &RankTolerances::default(),
+        Some(bg),
+        0.0,
+        &q,
+        &v,
+    )
+    .unwrap();
     let fdot = (0..3).map(|j| b[(0, j)] * ev.acc[j]).sum::<f64>() - gamma0;
-    assert!((fdot + bg.alpha * f).abs() < 1e-13, "{fdot} vs {}", -bg.alpha * f);
+    assert!(
+        (fdot + bg.alpha * f).abs() < 1e-13,
+        "{fdot} vs {}",
+        -bg.alpha * f
+    );
 
     let d = pendulum::double_pendulum();
     let (t, q, v) = (0.4, vec![0.1, 0.3], vec![0.2, 0.1]);
     let mut ev = Evaluator::<_, _, f64>::new(&d.model, &d.constraints);
     ev.prepare(t, &q, &v);
     let (g, gd, gamma0) = (ev.jet.value[0], ev.jet.gdot[0], ev.jet.gamma[0]);
-    ev.evaluate(Formulation::NullSpace, &RankTolerances::default(), Some(bg), t, &q, &v)
-        .unwrap();
+    ev.evaluate(
+        Formulation::NullSpace,
+        &RankTolerances::default(),
+        Some(bg),
+        t,
+        &q,
+        &v,
+    )
+    .unwrap();
     let gdd = ev.acc[1] - gamma0;
     let want = -2.0 * bg.alpha * gd - bg.beta * bg.beta * g;
     assert!((gdd - want).abs() < 1e-13, "{gdd} vs {want}");

@@ -989,8 +989,14 @@ fn real_power_at_zero_base_has_finite_derivatives() {
     t.insert("p");
     t.insert("q");
     let e = Expr::compile("(p^2 + q^2)^1.5", &t).unwrap();
-    let d = e.eval(&[Dual64::new(0.0, 1.0), Dual64::new(0.0, 0.0)], &mut Vec::new());
+    let d = e.eval(
+        &[Dual64::new(0.0, 1.0), Dual64::new(0.0, 0.0)],
+        &mut Vec::new(),
+    );
     assert_eq!((d.re, d.eps), (0.0, 0.0));
-    let d = e.eval(&[Dual64::new(0.3, 1.0), Dual64::new(0.4, 0.0)], &mut Vec::new());
+    let d = e.eval(
+        &[Dual64::new(0.3, 1.0), Dual64::new(0.4, 0.0)],
+        &mut Vec::new(),
+    );
     assert!((d.eps - 1.5 * 0.25f64.sqrt() * 0.6).abs() < 1e-15);
 }

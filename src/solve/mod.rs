@@ -73,6 +73,8 @@ pub struct Settings {
     pub atol: f64,
     /// Largest step. Default: unlimited.
     pub h_max: f64,
+    /// Force a fixed step on the adaptive methods (convergence studies). Default: None.
+    pub fixed_step: Option<f64>,
     /// Maximum step attempts. Default 10_000_000.
     pub max_steps: usize,
     /// Drift control. Default: projection to 1e-12 with up to 8 Newton iterations.
@@ -101,6 +103,7 @@ impl Default for Settings {
             rtol: 1e-10,
             atol: 1e-12,
             h_max: f64::INFINITY,
+            fixed_step: None,
             max_steps: 10_000_000,
             drift: DriftControl::Projection {
                 tol: 1e-12,
@@ -393,6 +396,7 @@ pub fn solve_into<M: Model, C: Constraints>(
         rtol: settings.rtol,
         atol: settings.atol,
         h_max: settings.h_max,
+        fixed_step: settings.fixed_step,
         max_steps: settings.max_steps,
         ..Default::default()
     };
