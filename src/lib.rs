@@ -16,5 +16,6 @@ pub mod model;
 pub mod problems;
 pub mod programme;
 pub mod scalar;
+pub mod scene;
 pub mod solve;
 pub mod tree;

@@ -71,7 +71,8 @@ impl Source {
     /// An error at a byte span.
     pub fn error(&self, span: Range<usize>, field: &str, message: impl Into<String>) -> SceneError {
         let (line, column) = self.line_col(span.start);
-        let first_line_len = self.text[span.start.min(self.text.len())..span.end.min(self.text.len())]
+        let first_line_len = self.text
+            [span.start.min(self.text.len())..span.end.min(self.text.len())]
             .lines()
             .next()
             .map(|l| l.chars().count())

@@ -73,6 +73,10 @@ pub struct Scene {
     pub settings: Settings,
     /// Check tolerances with their reasons.
     pub tolerances: Vec<Tolerance>,
+    /// The file's text, for locating later errors.
+    pub source: Source,
+    /// Byte span of each row's expression in the file (row order of the constraints).
+    pub row_spans: Vec<std::ops::Range<usize>>,
 }
 
 impl Scene {
@@ -125,6 +129,9 @@ impl Scene {
 
     /// A tolerance by name.
     pub fn tolerance(&self, name: &str) -> Option<f64> {
-        self.tolerances.iter().find(|t| t.name == name).map(|t| t.value)
+        self.tolerances
+            .iter()
+            .find(|t| t.name == name)
+            .map(|t| t.value)
     }
 }

@@ -1,0 +1,1013 @@
+//! From the TOML file to a validated [`Scene`].
+
+use super::error::{SceneError, Source};
+use super::file::*;
+use super::lagrangian::LagrangianModel;
+use super::layout::Layout;
+use super::rows::ExprConstraints;
+use super::signals::{Signals, Site};
+use super::tree_model::{PointForce, TreeSceneModel};
+use super::{Scene, SceneSystem, Tolerance};
+use crate::expr::{self, Expr, SymbolTable};
+use crate::formulation::Formulation;
+use crate::integrate::Method;
+use crate::model::Model;
+use crate::programme::{Constraints, Level, Role, RowSpec};
+use crate::solve::{DriftControl, Output, Problem, Settings};
+use crate::tree::{self, BodySpec, Fields, JointSpec, ModelError};
+use std::collections::BTreeMap;
+use std::ops::Range;
+use std::sync::Arc;
+use toml::Spanned;
+
+type R<T> = Result<T, SceneError>;
+
+/// Symbols of a scene: the slot layout, parameters as constants, signals discovered on demand.
+struct Symbols {
+    table: SymbolTable,
+    layout: Layout,
+    signals: Signals,
+    /// Level of each signal slot (index k = slot - layout.signals).
+    signal_levels: Vec<Level>,
+}
+
+impl Symbols {
+    /// Compile a spanned expression, creating body-point signals it names.
+    fn compile(&mut self, src: &Source, s: &Spanned<String>, field: &str) -> R<Expr> {
+        let text = s.get_ref();
+        if let Ok(names) = expr::referenced_names(text) {
+            for n in names {
+                if self.table.get(&n).is_none() && self.table.constant(&n).is_none() {
+                    if let Some((site, q)) = self.signals.resolve(&n) {
+                        let slot = self.table.insert(n.clone());
+                        let k = self.signals.push(site, q);
+                        debug_assert_eq!(slot, self.layout.signals + k);
+                        self.signal_levels.push(q.level());
+                    }
+                }
+            }
+        }
+        Expr::compile(text, &self.table).map_err(|e| src.expr_error(s.span(), field, &e))
+    }
+
+    /// Level of the highest-level slot an expression reads (None if it reads no slot).
+    fn level(&self, e: &Expr) -> Option<Level> {
+        e.slots()
+            .iter()
+            .map(|&s| match self.layout.level(s) {
+                Some(l) => l,
+                None => self.signal_levels[s - self.layout.signals],
+            })
+            .max_by_key(|l| *l as u8)
+    }
+
+    /// First slot an expression reads outside `allowed`, by name.
+    fn outside(&self, e: &Expr, allowed: &[Range<usize>]) -> Option<String> {
+        e.slots()
+            .iter()
+            .find(|s| !allowed.iter().any(|r| r.contains(s)))
+            .map(|&s| self.table.name(s).unwrap_or("?").to_string())
+    }
+
+    fn total_slots(&self) -> usize {
+        self.table.len()
+    }
+}
+
+pub(super) fn load(src: Source) -> R<Scene> {
+    let file: SceneFile = toml::from_str(&src.text).map_err(|e| src.toml_error(&e))?;
+    if file.name.trim().is_empty() {
+        return Err(src.general("name", "the scene needs a non-empty name"));
+    }
+    let params = parameters(&src, &file.parameters)?;
+    let model = file.model.get_ref();
+    let kind = model.kind.get_ref().as_str();
+    let (system, spans) = match kind {
+        "lagrangian" => {
+            let (m, mut sym) = lagrangian(&src, model, &params)?;
+            let (c, spans) = rows(&src, &file, &mut sym)?;
+            let (q0, v0) = initial(&src, &file, &params, &m.q_names(), &m.v_names(), None)?;
+            let (t0, t1) = span(&src, &file)?;
+            let p = Problem {
+                model: m,
+                constraints: c,
+                t0,
+                t1,
+                q0,
+                v0,
+            };
+            check_mass(&src, &file, &p)?;
+            (SceneSystem::Lagrangian(p), spans)
+        }
+        "tree" => {
+            let (m, mut sym) = tree_scene(&src, model, &params)?;
+            let (c, spans) = rows(&src, &file, &mut sym)?;
+            let neutral = tree::neutral(m.tree());
+            let (q0, v0) = initial(
+                &src,
+                &file,
+                &params,
+                &m.q_names(),
+                &m.v_names(),
+                Some((m.tree(), neutral.as_slice())),
+            )?;
+            let (t0, t1) = span(&src, &file)?;
+            let p = Problem {
+                model: m,
+                constraints: c,
+                t0,
+                t1,
+                q0,
+                v0,
+            };
+            check_mass(&src, &file, &p)?;
+            (SceneSystem::Tree(p), spans)
+        }
+        other => {
+            return Err(src.error(
+                model.kind.span(),
+                "model.kind",
+                format!("unknown model kind `{other}`: expected `lagrangian` or `tree`"),
+            ))
+        }
+    };
+    crate::with_problem!(&system, p => check_acceleration_rows(&src, p, &spans)?);
+    let settings = solver(&src, &file)?;
+    let tolerances = tolerances(&src, &file)?;
+    Ok(Scene {
+        name: file.name.clone(),
+        description: file.description.clone(),
+        purpose: file.purpose.clone(),
+        path: src.file.clone(),
+        parameters: params,
+        system,
+        settings,
+        tolerances,
+        source: src,
+        row_spans: spans,
+    })
+}
+
+/// Evaluate parameters (numbers or expressions of other parameters) in dependency order.
+fn parameters(src: &Source, p: &BTreeMap<String, Spanned<Number>>) -> R<Vec<(String, f64)>> {
+    let mut done: Vec<(String, f64)> = vec![];
+    let mut table = SymbolTable::new();
+    for name in p.keys() {
+        if !is_identifier(name) || name == "t" || name == "pi" {
+            let s = &p[name];
+            return Err(src.error(
+                s.span(),
+                &format!("parameters.{name}"),
+                "a parameter name must be an identifier other than `t` and `pi`",
+            ));
+        }
+    }
+    let mut pending: Vec<&String> = p.keys().collect();
+    while !pending.is_empty() {
+        let mut progress = false;
+        let mut still = vec![];
+        for name in pending {
+            let s = &p[name];
+            let value = match s.get_ref() {
+                Number::Value(x) => Some(*x),
+                Number::Expr(text) => match Expr::compile(text, &table) {
+                    Ok(e) => Some(e.value::<f64>(&[])),
+                    Err(_) => None,
+                },
+            };
+            match value {
+                Some(x) => {
+                    if !x.is_finite() {
+                        return Err(src.error(
+                            s.span(),
+                            &format!("parameters.{name}"),
+                            format!("evaluates to {x}"),
+                        ));
+                    }
+                    table.define(name.clone(), x);
+                    done.push((name.clone(), x));
+                    progress = true;
+                }
+                None => still.push(name),
+            }
+        }
+        if !progress {
+            // Report the first failing expression with its own error.
+            let name = still[0];
+            let s = &p[name];
+            if let Number::Expr(text) = s.get_ref() {
+                if let Err(e) = Expr::compile(text, &table) {
+                    let spanned = Spanned::new(s.span(), text.clone());
+                    return Err(src.expr_error(spanned.span(), &format!("parameters.{name}"), &e));
+                }
+            }
+            return Err(src.error(
+                s.span(),
+                &format!("parameters.{name}"),
+                "cannot be evaluated",
+            ));
+        }
+        pending = still;
+    }
+    Ok(done)
+}
+
+fn is_identifier(s: &str) -> bool {
+    let mut c = s.chars();
+    matches!(c.next(), Some(ch) if ch.is_ascii_alphabetic() || ch == '_')
+        && c.all(|ch| ch.is_ascii_alphanumeric() || ch == '_')
+}
+
+fn symbols(q: &[String], v: &[String], params: &[(String, f64)], signals: Signals) -> Symbols {
+    let mut table = SymbolTable::new();
+    let layout = Layout::build(&mut table, q, v);
+    for (n, x) in params {
+        table.define(n.clone(), *x);
+    }
+    Symbols {
+        table,
+        layout,
+        signals,
+        signal_levels: vec![],
+    }
+}
+
+fn lagrangian(
+    src: &Source,
+    m: &ModelFile,
+    params: &[(String, f64)],
+) -> R<(LagrangianModel, Symbols)> {
+    if !m.bodies.is_empty()
+        || !m.sites.is_empty()
+        || m.gravity.is_some()
+        || !m.point_forces.is_empty()
+    {
+        return Err(src.error(
+            m.kind.span(),
+            "model",
+            "bodies, sites, gravity and point_forces belong to `tree` models",
+        ));
+    }
+    if m.coordinates.is_empty() {
+        return Err(src.error(
+            m.kind.span(),
+            "model.coordinates",
+            "a lagrangian model needs coordinates",
+        ));
+    }
+    let mut names: Vec<String> = vec![];
+    for c in &m.coordinates {
+        let n = c.get_ref();
+        if !is_identifier(n) || n == "t" || n == "pi" || params.iter().any(|p| &p.0 == n) {
+            return Err(src.error(
+                c.span(),
+                "model.coordinates",
+                format!("`{n}` is not a valid coordinate name (an identifier, not `t`, `pi` or a parameter)"),
+            ));
+        }
+        if names.contains(n) {
+            return Err(src.error(
+                c.span(),
+                "model.coordinates",
+                format!("`{n}` appears twice"),
+            ));
+        }
+        names.push(n.clone());
+    }
+    let n = names.len();
+    let mut sym = symbols(&names, &names, params, Signals::none());
+    let q_only = [sym.layout.q..sym.layout.q + n];
+    let mut mass = vec![];
+    match (&m.mass_matrix, &m.mass_diagonal) {
+        (Some(_), Some(_)) | (None, None) => {
+            let span = m
+                .mass_diagonal
+                .as_ref()
+                .map(|d| d.span())
+                .unwrap_or(m.kind.span());
+            return Err(src.error(
+                span,
+                "model",
+                "give exactly one of `mass_matrix` (n x n) and `mass_diagonal` (n entries)",
+            ));
+        }
+        (None, Some(diag)) => {
+            if diag.get_ref().len() != n {
+                return Err(src.error(
+                    diag.span(),
+                    "model.mass_diagonal",
+                    format!("has {} entries for {n} coordinates", diag.get_ref().len()),
+                ));
+            }
+            for (i, s) in diag.get_ref().iter().enumerate() {
+                let field = format!("model.mass_diagonal[{i}]");
+                let e = sym.compile(src, s, &field)?;
+                if let Some(bad) = sym.outside(&e, &q_only) {
+                    return Err(src.error(
+                        s.span(),
+                        &field,
+                        format!(
+                            "the mass matrix may depend on the coordinates only, not on `{bad}`"
+                        ),
+                    ));
+                }
+                mass.push((i, i, e));
+            }
+        }
+        (Some(full), None) => {
+            let rows = full.get_ref();
+            if rows.len() != n || rows.iter().any(|r| r.get_ref().len() != n) {
+                return Err(src.error(
+                    full.span(),
+                    "model.mass_matrix",
+                    format!("must be {n} x {n} (one row per coordinate)"),
+                ));
+            }
+            for i in 0..n {
+                for j in i..n {
+                    let s = &rows[i].get_ref()[j];
+                    let field = format!("model.mass_matrix[{i}][{j}]");
+                    let e = sym.compile(src, s, &field)?;
+                    if let Some(bad) = sym.outside(&e, &q_only) {
+                        return Err(src.error(s.span(), &field, format!("the mass matrix may depend on the coordinates only, not on `{bad}`")));
+                    }
+                    // The lower triangle must be the same expression text or value (checked at q0).
+                    let sl = &rows[j].get_ref()[i];
+                    let fl = format!("model.mass_matrix[{j}][{i}]");
+                    let el = sym.compile(src, sl, &fl)?;
+                    if el.source().trim() != e.source().trim() && el.constant() != e.constant() {
+                        let probe: Vec<f64> = (0..sym.total_slots())
+                            .map(|k| 0.3 + 0.1 * k as f64)
+                            .collect();
+                        if (el.value(&probe) - e.value(&probe)).abs()
+                            > 1e-12 * e.value(&probe).abs().max(1.0)
+                        {
+                            return Err(src.error(sl.span(), &fl, format!("the mass matrix must be symmetric: differs from entry [{i}][{j}]")));
+                        }
+                    }
+                    if e.constant() != Some(0.0) {
+                        mass.push((i, j, e));
+                    }
+                }
+            }
+        }
+    }
+    let potential = match &m.potential {
+        Some(s) => {
+            let e = sym.compile(src, s, "model.potential")?;
+            let allowed = [
+                sym.layout.t..sym.layout.t + 1,
+                sym.layout.q..sym.layout.q + n,
+            ];
+            if let Some(bad) = sym.outside(&e, &allowed) {
+                return Err(src.error(
+                    s.span(),
+                    "model.potential",
+                    format!(
+                        "the potential may depend on t and the coordinates only, not on `{bad}`"
+                    ),
+                ));
+            }
+            Some(e)
+        }
+        None => None,
+    };
+    let mut forces = vec![];
+    for (name, s) in &m.forces {
+        let field = format!("model.forces.{name}");
+        let i = names.iter().position(|x| x == name).ok_or_else(|| {
+            src.error(
+                s.span(),
+                &field,
+                format!(
+                    "`{name}` is not a coordinate (coordinates: {})",
+                    names.join(", ")
+                ),
+            )
+        })?;
+        let e = sym.compile(src, s, &field)?;
+        let allowed = [sym.layout.t..sym.layout.a];
+        if let Some(bad) = sym.outside(&e, &allowed) {
+            return Err(src.error(
+                s.span(),
+                &field,
+                format!("a force may depend on t, q and v only, not on `{bad}`"),
+            ));
+        }
+        forces.push((i, e));
+    }
+    let model = LagrangianModel::new(names, sym.layout.clone(), mass, potential, forces);
+    Ok((model, sym))
+}
+
+fn tree_scene(
+    src: &Source,
+    m: &ModelFile,
+    params: &[(String, f64)],
+) -> R<(TreeSceneModel, Symbols)> {
+    if !m.coordinates.is_empty()
+        || m.mass_matrix.is_some()
+        || m.mass_diagonal.is_some()
+        || m.potential.is_some()
+    {
+        return Err(src.error(
+            m.kind.span(),
+            "model",
+            "coordinates, mass_matrix, mass_diagonal and potential belong to `lagrangian` models",
+        ));
+    }
+    if m.bodies.is_empty() {
+        return Err(src.error(
+            m.kind.span(),
+            "model.bodies",
+            "a tree model needs at least one body",
+        ));
+    }
+    let mut specs = vec![];
+    for (bi, b) in m.bodies.iter().enumerate() {
+        let bf = b.get_ref();
+        let field = format!("model.bodies[{bi}]");
+        let mass = *bf.mass.get_ref();
+        if !(mass >= 0.0) || !mass.is_finite() {
+            return Err(src.error(
+                bf.mass.span(),
+                &format!("{field}.mass"),
+                format!("mass must be positive (or 0 for a massless link), got {mass}"),
+            ));
+        }
+        let inertia = match &bf.inertia {
+            None => [[0.0; 3]; 3],
+            Some(i) => {
+                let v = i.get_ref();
+                match v.len() {
+                    3 => [[v[0], 0.0, 0.0], [0.0, v[1], 0.0], [0.0, 0.0, v[2]]],
+                    6 => [[v[0], v[3], v[4]], [v[3], v[1], v[5]], [v[4], v[5], v[2]]],
+                    k => {
+                        return Err(src.error(i.span(), &format!("{field}.inertia"), format!("give 3 principal moments or 6 entries [ixx, iyy, izz, ixy, ixz, iyz], not {k}")))
+                    }
+                }
+            }
+        };
+        let mut spec = if mass == 0.0 && inertia == [[0.0; 3]; 3] {
+            BodySpec::massless(&bf.name, &bf.parent)
+        } else {
+            BodySpec::new(&bf.name, &bf.parent, mass, bf.com, inertia)
+        };
+        spec = spec.at(bf.pos).rotated(bf.quat);
+        for (ji, j) in bf.joints.iter().enumerate() {
+            let jf = j.get_ref();
+            let jfield = format!("{field}.joints[{ji}]");
+            let kind = jf.kind.get_ref().as_str();
+            let axis = || {
+                jf.axis.ok_or_else(|| {
+                    src.error(
+                        j.span(),
+                        &format!("{jfield}.axis"),
+                        format!("a {kind} joint needs an axis"),
+                    )
+                })
+            };
+            let mut js = match kind {
+                "hinge" => JointSpec::hinge(&jf.name, axis()?),
+                "slide" => JointSpec::slide(&jf.name, axis()?),
+                "ball" => JointSpec::ball(&jf.name),
+                "free" => JointSpec::free(&jf.name),
+                other => {
+                    return Err(src.error(
+                        jf.kind.span(),
+                        &format!("{jfield}.type"),
+                        format!(
+                            "unknown joint type `{other}`: expected hinge, slide, ball or free"
+                        ),
+                    ))
+                }
+            };
+            js = js.with_anchor(jf.anchor);
+            if jf.stiffness != 0.0 {
+                js = js.with_spring(jf.stiffness, jf.spring_ref);
+            }
+            if jf.damping != 0.0 {
+                js = js.with_damping(jf.damping);
+            }
+            spec = spec.joint(js);
+        }
+        specs.push(spec);
+    }
+    let fields = Fields {
+        gravity: m.gravity.unwrap_or([0.0; 3]),
+        attractors: m
+            .attractors
+            .iter()
+            .map(|a| tree::Attractor {
+                point: a.get_ref().point,
+                mu: a.get_ref().mu,
+            })
+            .collect(),
+    };
+    let tree = tree::Model::new(&specs, fields).map_err(|e| {
+        let (body, msg) = match &e {
+            ModelError::Body { body, .. } | ModelError::Joint { body, .. } => {
+                (Some(body.clone()), e.to_string())
+            }
+            _ => (None, e.to_string()),
+        };
+        let idx = body.and_then(|b| m.bodies.iter().position(|x| x.get_ref().name == b));
+        match idx {
+            Some(i) => src.error(m.bodies[i].span(), &format!("model.bodies[{i}]"), msg),
+            None => src.error(m.kind.span(), "model", msg),
+        }
+    })?;
+    let tree = Arc::new(tree);
+    let mut sites = vec![];
+    for (si, s) in m.sites.iter().enumerate() {
+        let sf = s.get_ref();
+        let body = tree.body_id(&sf.body).ok_or_else(|| {
+            src.error(
+                s.span(),
+                &format!("model.sites[{si}].body"),
+                format!("unknown body `{}`", sf.body),
+            )
+        })?;
+        if !is_identifier(&sf.name) {
+            return Err(src.error(
+                s.span(),
+                &format!("model.sites[{si}].name"),
+                "a site name must be an identifier",
+            ));
+        }
+        sites.push(Site {
+            name: sf.name.clone(),
+            body,
+            pos: sf.pos,
+        });
+    }
+    let q_names = tree.q_names().to_vec();
+    let v_names = tree.v_names().to_vec();
+    let mut sym = symbols(
+        &q_names,
+        &v_names,
+        params,
+        Signals::new(tree.clone(), sites),
+    );
+    let state = [sym.layout.t..sym.layout.a];
+    let mut point_forces = vec![];
+    for (fi, f) in m.point_forces.iter().enumerate() {
+        let pf = f.get_ref();
+        let field = format!("model.point_forces[{fi}]");
+        let body = tree.body_id(&pf.body).ok_or_else(|| {
+            src.error(
+                f.span(),
+                &format!("{field}.body"),
+                format!("unknown body `{}`", pf.body),
+            )
+        })?;
+        let mut exprs = vec![];
+        for (k, s) in pf.force.iter().enumerate() {
+            let e = sym.compile(src, s, &format!("{field}.force[{k}]"))?;
+            if let Some(bad) = sym.outside(&e, &state) {
+                return Err(src.error(
+                    s.span(),
+                    &format!("{field}.force[{k}]"),
+                    format!("a force may depend on t, q and v only, not on `{bad}`"),
+                ));
+            }
+            exprs.push(e);
+        }
+        let [a, b, c]: [Expr; 3] = exprs.try_into().expect("three components");
+        point_forces.push(PointForce {
+            body,
+            point: pf.point,
+            force: [a, b, c],
+        });
+    }
+    let mut coordinate_forces = vec![];
+    for (name, s) in &m.forces {
+        let field = format!("model.forces.{name}");
+        let i = v_names.iter().position(|x| x == name).ok_or_else(|| {
+            src.error(
+                s.span(),
+                &field,
+                format!(
+                    "`{name}` is not a velocity coordinate (have: {})",
+                    v_names.join(", ")
+                ),
+            )
+        })?;
+        let e = sym.compile(src, s, &field)?;
+        if let Some(bad) = sym.outside(&e, &state) {
+            return Err(src.error(
+                s.span(),
+                &field,
+                format!("a force may depend on t, q and v only, not on `{bad}`"),
+            ));
+        }
+        coordinate_forces.push((i, e));
+    }
+    let model = TreeSceneModel::new(tree, sym.layout.clone(), point_forces, coordinate_forces);
+    Ok((model, sym))
+}
+
+/// Constraint rows: the system's own constraints, then the programme.
+fn rows(
+    src: &Source,
+    file: &SceneFile,
+    sym: &mut Symbols,
+) -> R<(ExprConstraints, Vec<Range<usize>>)> {
+    let mut specs = vec![];
+    let mut exprs = vec![];
+    let mut spans = vec![];
+    let all = file
+        .constraints
+        .iter()
+        .enumerate()
+        .map(|(i, r)| (r, Role::System, format!("constraints[{i}]")))
+        .chain(
+            file.programme
+                .iter()
+                .enumerate()
+                .map(|(i, r)| (r, Role::Programme, format!("programme[{i}]"))),
+        )
+        .collect::<Vec<_>>();
+    if file.programme.is_empty() {
+        return Err(src.general(
+            "programme",
+            "the scene has no programme rows ([[programme]] tables)",
+        ));
+    }
+    for (r, role, field) in all {
+        let name = r.name.get_ref();
+        if !is_identifier(name) {
+            return Err(src.error(
+                r.name.span(),
+                &format!("{field}.name"),
+                "a row name must be an identifier",
+            ));
+        }
+        if specs.iter().any(|s: &RowSpec| &s.name == name) {
+            return Err(src.error(
+                r.name.span(),
+                &format!("{field}.name"),
+                format!("row name `{name}` is used twice"),
+            ));
+        }
+        let e = sym.compile(src, &r.expr, &format!("{field}.expr"))?;
+        let level = match sym.level(&e) {
+            Some(l) => l,
+            None => {
+                return Err(src.error(
+                    r.expr.span(),
+                    &format!("{field}.expr"),
+                    "the row depends on neither time nor the state",
+                ))
+            }
+        };
+        if level == Level::Position && !e.slots().iter().any(|&s| s != sym.layout.t) {
+            return Err(src.error(
+                r.expr.span(),
+                &format!("{field}.expr"),
+                "the row depends on time only: it constrains nothing",
+            ));
+        }
+        specs.push(RowSpec::new(name, level, role));
+        exprs.push(e);
+        spans.push(r.expr.span());
+    }
+    let nv = sym.layout.nv;
+    if specs.len() > nv {
+        return Err(src.general(
+            "programme",
+            format!(
+                "{} rows (constraints + programme) for {nv} degrees of freedom: at most {nv}",
+                specs.len()
+            ),
+        ));
+    }
+    let signals = std::mem::take(&mut sym.signals);
+    Ok((
+        ExprConstraints::new(specs, exprs, sym.layout.clone(), signals),
+        spans,
+    ))
+}
+
+/// The initial state: every coordinate by name (tree scenes: missing ones take the neutral value),
+/// velocities default to 0.
+fn initial(
+    src: &Source,
+    file: &SceneFile,
+    params: &[(String, f64)],
+    q_names: &[String],
+    v_names: &[String],
+    tree: Option<(&Arc<tree::Model>, &[f64])>,
+) -> R<(Vec<f64>, Vec<f64>)> {
+    let init = file.initial.get_ref();
+    let mut consts = SymbolTable::new();
+    for (n, x) in params {
+        consts.define(n.clone(), *x);
+    }
+    let value = |n: &Number, span: Range<usize>, field: &str| -> R<f64> {
+        match n {
+            Number::Value(x) => Ok(*x),
+            Number::Expr(text) => Expr::compile(text, &consts)
+                .map(|e| e.value::<f64>(&[]))
+                .map_err(|e| src.expr_error(span, field, &e)),
+        }
+    };
+    let fill = |map: &BTreeMap<String, Spanned<Initial>>,
+                names: &[String],
+                out: &mut Vec<Option<f64>>,
+                what: &str,
+                is_q: bool|
+     -> R<()> {
+        for (key, s) in map {
+            let field = format!("initial.{what}.{key}");
+            let targets: Vec<usize> = if let Some(i) = names.iter().position(|n| n == key) {
+                vec![i]
+            } else if let Some((t, _)) = tree {
+                match t.joint_id(key) {
+                    Some(j) => {
+                        let r = if is_q {
+                            t.joint_q_range(j)
+                        } else {
+                            t.joint_v_range(j)
+                        };
+                        r.collect()
+                    }
+                    None => vec![],
+                }
+            } else {
+                vec![]
+            };
+            if targets.is_empty() {
+                return Err(src.error(
+                    s.span(),
+                    &field,
+                    format!("`{key}` is not a coordinate (have: {})", names.join(", ")),
+                ));
+            }
+            let vals: Vec<f64> = match s.get_ref() {
+                Initial::One(n) => vec![value(n, s.span(), &field)?],
+                Initial::Many(ns) => ns
+                    .iter()
+                    .map(|n| value(n, s.span(), &field))
+                    .collect::<R<_>>()?,
+            };
+            if vals.len() != targets.len() {
+                return Err(src.error(
+                    s.span(),
+                    &field,
+                    format!("needs {} values, got {}", targets.len(), vals.len()),
+                ));
+            }
+            for (i, x) in targets.into_iter().zip(vals) {
+                if !x.is_finite() {
+                    return Err(src.error(s.span(), &field, format!("is {x}")));
+                }
+                out[i] = Some(x);
+            }
+        }
+        Ok(())
+    };
+    let mut q: Vec<Option<f64>> = vec![None; q_names.len()];
+    fill(&init.q, q_names, &mut q, "q", true)?;
+    let mut v: Vec<Option<f64>> = vec![None; v_names.len()];
+    fill(&init.v, v_names, &mut v, "v", false)?;
+    let q: Vec<f64> = match tree {
+        Some((_, neutral)) => q
+            .iter()
+            .zip(neutral)
+            .map(|(x, n)| x.unwrap_or(*n))
+            .collect(),
+        None => {
+            let missing: Vec<&str> = q_names
+                .iter()
+                .zip(&q)
+                .filter(|(_, x)| x.is_none())
+                .map(|(n, _)| n.as_str())
+                .collect();
+            if !missing.is_empty() {
+                return Err(src.error(
+                    file.initial.span(),
+                    "initial.q",
+                    format!("missing initial values for {}", missing.join(", ")),
+                ));
+            }
+            q.into_iter().map(|x| x.unwrap_or(0.0)).collect()
+        }
+    };
+    Ok((q, v.into_iter().map(|x| x.unwrap_or(0.0)).collect()))
+}
+
+fn span(src: &Source, file: &SceneFile) -> R<(f64, f64)> {
+    let t = file.time.get_ref();
+    if !(t.t1 > t.t0) || !t.t0.is_finite() || !t.t1.is_finite() {
+        return Err(src.error(
+            file.time.span(),
+            "time.t1",
+            format!("t1 = {} must be after t0 = {}", t.t1, t.t0),
+        ));
+    }
+    if let Some(dt) = t.output_dt {
+        if !(dt > 0.0) || !dt.is_finite() {
+            return Err(src.error(
+                file.time.span(),
+                "time.output_dt",
+                format!("must be positive, got {dt}"),
+            ));
+        }
+    }
+    Ok((t.t0, t.t1))
+}
+
+fn choose<T: Copy>(
+    src: &Source,
+    s: &Option<Spanned<String>>,
+    field: &str,
+    options: &[(&str, T)],
+    default: T,
+) -> R<T> {
+    match s {
+        None => Ok(default),
+        Some(s) => options
+            .iter()
+            .find(|(n, _)| *n == s.get_ref())
+            .map(|(_, v)| *v)
+            .ok_or_else(|| {
+                let names: Vec<&str> = options.iter().map(|o| o.0).collect();
+                src.error(
+                    s.span(),
+                    field,
+                    format!(
+                        "unknown value `{}`: expected one of {}",
+                        s.get_ref(),
+                        names.join(", ")
+                    ),
+                )
+            }),
+    }
+}
+
+fn solver(src: &Source, file: &SceneFile) -> R<Settings> {
+    let f = &file.solver;
+    let mut s = Settings::default();
+    s.formulation = choose(
+        src,
+        &f.formulation,
+        "solver.formulation",
+        &[
+            ("null_space", Formulation::NullSpace),
+            ("kkt", Formulation::Kkt),
+            ("range_space", Formulation::RangeSpace),
+            ("udwadia_kalaba", Formulation::UdwadiaKalaba),
+        ],
+        s.formulation,
+    )?;
+    let step = f.step.unwrap_or(0.0);
+    s.integrator = choose(
+        src,
+        &f.integrator,
+        "solver.integrator",
+        &[
+            ("dop853", Method::Dop853),
+            ("dopri5", Method::Dopri5),
+            ("radau5", Method::Radau5),
+            ("rk4", Method::Rk4 { h: step }),
+        ],
+        s.integrator,
+    )?;
+    if let Method::Rk4 { h } = s.integrator {
+        if !(h > 0.0) {
+            let span = f.integrator.as_ref().map(|x| x.span()).unwrap_or(0..0);
+            return Err(src.error(span, "solver.step", "rk4 needs a positive fixed `step`"));
+        }
+    }
+    for (name, x) in [
+        ("rtol", f.rtol),
+        ("atol", f.atol),
+        ("max_step", f.max_step),
+        ("projection_tol", f.projection_tol),
+        ("max_drift", f.max_drift),
+    ] {
+        if let Some(x) = x {
+            if !(x > 0.0) || !x.is_finite() {
+                return Err(src.general(
+                    &format!("solver.{name}"),
+                    format!("must be positive, got {x}"),
+                ));
+            }
+        }
+    }
+    s.rtol = f.rtol.unwrap_or(s.rtol);
+    s.atol = f.atol.unwrap_or(s.atol);
+    s.h_max = f.max_step.unwrap_or(s.h_max);
+    s.max_drift = f.max_drift;
+    let drift = choose(
+        src,
+        &f.drift,
+        "solver.drift",
+        &[("projection", 0), ("baumgarte", 1), ("none", 2)],
+        0,
+    )?;
+    s.drift = match drift {
+        0 => DriftControl::Projection {
+            tol: f.projection_tol.unwrap_or(1e-12),
+            max_iter: 8,
+        },
+        1 => DriftControl::Baumgarte {
+            alpha: f.baumgarte_alpha.unwrap_or(1.0),
+            beta: f.baumgarte_beta.unwrap_or(1.0),
+        },
+        _ => DriftControl::None,
+    };
+    s.output = match file.time.get_ref().output_dt {
+        Some(dt) => Output::Every(dt),
+        None => Output::Steps,
+    };
+    s.assemble = file.initial.get_ref().assemble;
+    Ok(s)
+}
+
+fn tolerances(src: &Source, file: &SceneFile) -> R<Vec<Tolerance>> {
+    let mut out = vec![];
+    for (name, t) in &file.tolerances {
+        let tf = t.get_ref();
+        let field = format!("tolerances.{name}");
+        if !(tf.value > 0.0) || !tf.value.is_finite() {
+            return Err(src.error(
+                t.span(),
+                &field,
+                format!("value must be positive, got {}", tf.value),
+            ));
+        }
+        if tf.reason.trim().is_empty() {
+            return Err(src.error(t.span(), &field, "every tolerance needs a one-line reason"));
+        }
+        out.push(Tolerance {
+            name: name.clone(),
+            value: tf.value,
+            reason: tf.reason.clone(),
+        });
+    }
+    Ok(out)
+}
+
+/// A(q0) must be symmetric positive definite.
+fn check_mass<M: Model, C: Constraints>(
+    src: &Source,
+    file: &SceneFile,
+    p: &Problem<M, C>,
+) -> R<()> {
+    let mut ws = p.model.workspace::<f64>();
+    let n = p.model.nv();
+    let mut a = nalgebra::DMatrix::zeros(n, n);
+    p.model.mass_matrix(&mut ws, &p.q0, &mut a);
+    let bad =
+        a.iter().any(|x| !x.is_finite()) || crate::linalg::cholesky(&mut a.clone(), n).is_err();
+    if bad {
+        return Err(src.error(
+            file.model.span(),
+            "model",
+            "the mass matrix is not positive definite (or not finite) at the initial configuration",
+        ));
+    }
+    Ok(())
+}
+
+/// Acceleration-level rows must be linear in dv/dt (checked at the initial state).
+fn check_acceleration_rows<M: Model, C: Constraints>(
+    src: &Source,
+    p: &Problem<M, C>,
+    spans: &[Range<usize>],
+) -> R<()> {
+    let rows = p.constraints.rows();
+    if !rows.iter().any(|r| r.level == Level::Acceleration) {
+        return Ok(());
+    }
+    let nv = p.model.nv();
+    let mut ws = p.constraints.workspace::<f64>();
+    let mut h0 = vec![0.0; rows.len()];
+    let mut h1 = vec![0.0; rows.len()];
+    let mut h2 = vec![0.0; rows.len()];
+    let mut a = vec![0.0; nv];
+    p.constraints.eval(&mut ws, p.t0, &p.q0, &p.v0, &a, &mut h0);
+    for j in 0..nv {
+        a[j] = 1.0;
+        p.constraints.eval(&mut ws, p.t0, &p.q0, &p.v0, &a, &mut h1);
+        a[j] = 2.0;
+        p.constraints.eval(&mut ws, p.t0, &p.q0, &p.v0, &a, &mut h2);
+        a[j] = 0.0;
+        for (i, r) in rows.iter().enumerate() {
+            if r.level != Level::Acceleration {
+                continue;
+            }
+            let scale = h0[i].abs().max(h1[i].abs()).max(h2[i].abs()).max(1.0);
+            if (h2[i] - 2.0 * h1[i] + h0[i]).abs() > 1e-9 * scale {
+                return Err(src.error(
+                    spans[i].clone(),
+                    &format!("row {}", r.name),
+                    "an acceleration-level row must be linear in the accelerations",
+                ));
+            }
+        }
+    }
+    Ok(())
+}
