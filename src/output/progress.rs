@@ -115,7 +115,7 @@ impl<S: SampleSink> SampleSink for Progress<S> {
         for r in s.residual {
             // NaN propagates: a non-finite residual should show.
             let a = r.abs();
-            if !(a <= self.max_residual) {
+            if a.is_nan() || a > self.max_residual {
                 self.max_residual = a;
             }
         }
