@@ -129,7 +129,11 @@ mod tests {
         let mut e = Every::new(dt, l.trajectory());
         feed(&mut e, &l, n, step);
         e.finish().unwrap();
-        e.into_inner().t
+        let t = e.inner().t.clone();
+        // Finishing again, or into_inner, passes nothing more.
+        e.finish().unwrap();
+        assert_eq!(e.into_inner().t, t);
+        t
     }
 
     #[test]
