@@ -330,6 +330,9 @@ impl<W: Write + Seek> McapSink<W> {
     }
 
     fn write_raw(&mut self, channel: u16, t: f64, data: &[u8]) {
+        if self.error.is_some() {
+            return;
+        }
         let Some(w) = self.writer.as_mut() else {
             return;
         };

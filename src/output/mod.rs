@@ -103,6 +103,8 @@
 //! - `command_line`: array of strings, the arguments to rerun (program first).
 
 mod csv_sink;
+#[cfg(test)]
+mod e2e;
 mod error;
 mod mcap_sink;
 mod progress;
