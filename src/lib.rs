@@ -13,6 +13,7 @@ pub mod formulation;
 pub mod integrate;
 pub mod linalg;
 pub mod model;
+pub mod output;
 pub mod problems;
 pub mod programme;
 pub mod scalar;

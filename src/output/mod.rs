@@ -1,0 +1,330 @@
+//! Result writers: streaming CSV, MCAP recordings, JSON run summaries, and sink adapters
+//! (tee, decimation, progress bar).
+//!
+//! Every writer implements [`SampleSink`] (so it can be handed to
+//! [`solve_into`](crate::solve::solve_into)) and [`OutputSink`], whose `finish` flushes and returns
+//! the first error met. `sample` never panics on I/O errors: the first error is kept, later samples
+//! are dropped, and `finish` reports it. Dropping a writer without `finish` still flushes on a
+//! best-effort basis but loses the error.
+//!
+//! ```no_run
+//! # use progmo::output::*;
+//! # use progmo::solve::{solve_into, Settings};
+//! let problem = progmo::problems::rigid_body::heavy_top();
+//! let layout = Layout::from_problem(&problem);
+//! let csv = CsvSink::create("top.csv", &layout).unwrap();
+//! let rec = McapSink::create("top.mcap", &layout).unwrap();
+//! let mut sink = Progress::new(Tee::new(Every::new(0.01, csv), rec), "top", problem.t0, problem.t1);
+//! let solution = solve_into(&problem, &Settings::default(), &mut sink);
+//! sink.finish().unwrap();
+//! ```
+//!
+//! # Column names
+//!
+//! All formats use the names of [`Layout`]: `q_names` for q, `v_names` for v, dv/dt, u and the
+//! reactions, `row_names` (programme rows and system constraints, in the solver's order) for
+//! lambda and the residuals.
+//!
+//! # CSV format ([`CsvSink`], [`read_csv`])
+//!
+//! RFC 4180 CSV, `,` separator, `\n` line ends, UTF-8. Fields are quoted only when needed (a name
+//! containing `,`, `"` or a line break). The first line is the header; then one line per sample,
+//! in the order received. Columns, in this order:
+//!
+//! | column                    | count | meaning                                                      |
+//! |---------------------------|-------|--------------------------------------------------------------|
+//! | `t`                       | 1     | time                                                         |
+//! | `q:<q name>`              | nq    | configuration                                                |
+//! | `v:<v name>`              | nv    | velocity                                                     |
+//! | `a:<v name>`              | nv    | acceleration dv/dt                                           |
+//! | `u:<v name>`              | nv    | control force of the programme rows (2.12)                   |
+//! | `reaction:<v name>`       | nv    | reactions of system constraints; only if `Layout::reactions` |
+//! | `lambda:<row name>`       | s     | multipliers                                                  |
+//! | `residual:<row name>`     | s     | residual of the row (g, f or h by level)                     |
+//! | `residual_rate:<row name>`| s     | dg/dt of position rows, 0 for other rows                     |
+//!
+//! A column name is split at its first `:` into group and name, so names may contain `:`.
+//! Numbers are written with Rust's `{:e}` formatting: the shortest decimal that reads back to the
+//! same `f64` bit for bit, in exponent form (`1.25e0`, `-3e-17`, `-0e0`); non-finite values are
+//! written `NaN`, `inf`, `-inf`. Python's `float()`, numpy and pandas read all of these.
+//!
+//! # MCAP format ([`McapSink`])
+//!
+//! An MCAP file (uncompressed chunks with message indexes and a summary section written by
+//! `finish`), header profile `""`, library `progmo <version>`. Every channel has message encoding
+//! `json` and a schema of encoding `jsonschema`. Log time and publish time are the sample time in
+//! nanoseconds, `round(t * 1e9)` as u64 (negative or non-finite t give 0; the exact `t` is also in
+//! each message). Sequence numbers count from 0 per channel. Numbers are JSON numbers (shortest
+//! round-trip form); non-finite values are written as `null`. Each object below maps names to
+//! numbers, keys in [`Layout`] order.
+//!
+//! | topic               | schema name         | message                                             |
+//! |---------------------|---------------------|-----------------------------------------------------|
+//! | `/progmo/state`     | `progmo.State`      | `{"t", "q": {q name: ..}, "v": {v name: ..}, "a": {v name: ..}}` |
+//! | `/progmo/control`   | `progmo.Control`    | `{"t", "u": {v name: ..}, "lambda": {row name: ..}}` |
+//! | `/progmo/residual`  | `progmo.Residual`   | `{"t", "residual": {row name: ..}, "residual_rate": {row name: ..}}` |
+//! | `/progmo/reaction`  | `progmo.Reaction`   | `{"t", "reaction": {v name: ..}}`; only if `Layout::reactions` |
+//! | `/progmo/tf` (opt.) | `foxglove.FrameTransform` | see [`McapSink::frame_transform`]              |
+//!
+//! One message per sample on each of the first three (four) channels. In Foxglove, plot e.g.
+//! `/progmo/state.q.theta` or `/progmo/residual.residual["speed"]`. Further channels can be added
+//! with [`McapSink::add_json_channel`].
+//!
+//! # JSON summary ([`write_summary`])
+//!
+//! One JSON object (pretty-printed, trailing newline). Non-finite numbers are written as `null`.
+//! Fields:
+//!
+//! - `format`: `"progmo.summary"`; `format_version`: `1` (bumped on incompatible changes; fields
+//!   may be added without a bump).
+//! - `scene`: scene name given by the caller.
+//! - `success`: `true` iff the code is `success`.
+//! - `code`: the [`ReturnCode`](crate::solve::ReturnCode) as an object: `"code"` holds its machine
+//!   name (as in `code_name`), the other keys its fields, e.g.
+//!   `{"code": "drift_exceeded", "t": 1.5, "row": "speed", "residual": 2e-6}`.
+//! - `code_name`: the machine name (`success`, `step_too_small`, `singular_programme`,
+//!   `singular_system`, `drift_exceeded`, `non_finite`, `max_steps`, `inconsistent_initial_state`,
+//!   `projection_failed`).
+//! - `t_end`: last time reached.
+//! - `max_residual`: largest |residual| over all rows and accepted steps (0 when there is no row).
+//! - `max_residual_rate`: largest |dg/dt| over all position rows and accepted steps.
+//! - `rows`: array, one object per constraint row in solver order:
+//!   `{"name", "max_residual", "max_residual_rate"}`.
+//! - `statistics`: the [`Statistics`](crate::solve::Statistics) as serialized by serde (fields
+//!   `integrator` {`steps`, `rejected`, ...}, `factorizations`, `projections`,
+//!   `projection_iterations`, `max_position_correction`, `max_velocity_correction`, `max_du`,
+//!   `min_b_rcond`).
+//! - `initial_correction`: `null`, or `{"position", "velocity"}` when the initial state was
+//!   assembled.
+//! - `settings`: the [`Settings`](crate::solve::Settings) as serialized by serde (an infinite
+//!   `h_max` appears as `null`).
+//! - `wall_seconds`: wall-clock duration of the run, as measured by the caller.
+//! - `versions`: `{"progmo": crate version, "git_revision": string or null}`.
+//! - `command_line`: array of strings, the arguments to rerun (program first).
+
+mod csv_sink;
+#[cfg(test)]
+mod e2e;
+mod error;
+mod mcap_sink;
+mod progress;
+mod sinks;
+mod summary;
+
+pub use csv_sink::{read_csv, read_csv_from, CsvSink};
+pub use error::OutputError;
+pub use mcap_sink::{McapChannel, McapSink, FRAME_TRANSFORM_SCHEMA, FRAME_TRANSFORM_TOPIC};
+pub use progress::Progress;
+pub use sinks::{Every, Tee};
+pub use summary::{summary_json, write_summary, write_summary_to_path, SummaryInput};
+
+use crate::model::Model;
+use crate::programme::{Constraints, Role};
+use crate::solve::{Problem, SampleSink, Trajectory};
+
+/// A sink whose output must be completed: `finish` flushes everything (and for wrappers, finishes
+/// the wrapped sinks) and returns the first error met since creation.
+pub trait OutputSink: SampleSink {
+    /// Flush and complete the output. Calling it again is harmless.
+    fn finish(&mut self) -> Result<(), OutputError>;
+}
+
+impl OutputSink for Trajectory {
+    fn finish(&mut self) -> Result<(), OutputError> {
+        Ok(())
+    }
+}
+
+/// Names of the sampled quantities, and whether reactions are written.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Layout {
+    /// Names of q.
+    pub q_names: Vec<String>,
+    /// Names of v (also of dv/dt, u and reactions).
+    pub v_names: Vec<String>,
+    /// Names of the constraint rows (lambda, residuals).
+    pub row_names: Vec<String>,
+    /// Write the reactions of system constraints.
+    pub reactions: bool,
+}
+
+impl Layout {
+    /// Names from a problem; `reactions` is true iff it has system-constraint rows.
+    pub fn from_problem<M: Model, C: Constraints>(problem: &Problem<M, C>) -> Self {
+        let rows = problem.constraints.rows();
+        Layout {
+            q_names: problem.model.q_names(),
+            v_names: problem.model.v_names(),
+            row_names: rows.iter().map(|r| r.name.clone()).collect(),
+            reactions: rows.iter().any(|r| r.role == Role::System),
+        }
+    }
+
+    /// Names of a trajectory; `reactions` is true iff some reaction is non-zero.
+    pub fn from_trajectory(traj: &Trajectory) -> Self {
+        Layout {
+            q_names: traj.q_names.clone(),
+            v_names: traj.v_names.clone(),
+            row_names: traj.row_names.clone(),
+            reactions: traj.reactions.iter().any(|&r| r != 0.0),
+        }
+    }
+
+    /// Set whether reactions are written.
+    pub fn with_reactions(mut self, reactions: bool) -> Self {
+        self.reactions = reactions;
+        self
+    }
+
+    /// An empty trajectory with these names.
+    pub fn trajectory(&self) -> Trajectory {
+        Trajectory {
+            q_names: self.q_names.clone(),
+            v_names: self.v_names.clone(),
+            row_names: self.row_names.clone(),
+            ..Default::default()
+        }
+    }
+
+    /// Check the lengths of a sample against the names.
+    pub(crate) fn check(&self, s: &crate::solve::Sample<'_>) -> Result<(), String> {
+        let nv = self.v_names.len();
+        let ns = self.row_names.len();
+        let checks: [(&str, usize, usize); 8] = [
+            ("q", s.q.len(), self.q_names.len()),
+            ("v", s.v.len(), nv),
+            ("a", s.a.len(), nv),
+            ("u", s.u.len(), nv),
+            ("lambda", s.lambda.len(), ns),
+            ("residual", s.residual.len(), ns),
+            ("residual_rate", s.residual_rate.len(), ns),
+            (
+                "reactions",
+                s.reactions.len(),
+                if self.reactions {
+                    nv
+                } else {
+                    s.reactions.len()
+                },
+            ),
+        ];
+        for (what, got, want) in checks {
+            if got != want {
+                return Err(format!(
+                    "sample at t = {:e}: {what} has {got} values, the layout names {want}",
+                    s.t
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A sample with owned storage (kept by [`Every`] for the last sample).
+#[derive(Clone, Debug, Default)]
+pub(crate) struct OwnedSample {
+    t: f64,
+    q: Vec<f64>,
+    v: Vec<f64>,
+    a: Vec<f64>,
+    u: Vec<f64>,
+    reactions: Vec<f64>,
+    lambda: Vec<f64>,
+    residual: Vec<f64>,
+    residual_rate: Vec<f64>,
+}
+
+impl OwnedSample {
+    pub(crate) fn set(&mut self, s: &crate::solve::Sample<'_>) {
+        fn copy(dst: &mut Vec<f64>, src: &[f64]) {
+            dst.clear();
+            dst.extend_from_slice(src);
+        }
+        self.t = s.t;
+        copy(&mut self.q, s.q);
+        copy(&mut self.v, s.v);
+        copy(&mut self.a, s.a);
+        copy(&mut self.u, s.u);
+        copy(&mut self.reactions, s.reactions);
+        copy(&mut self.lambda, s.lambda);
+        copy(&mut self.residual, s.residual);
+        copy(&mut self.residual_rate, s.residual_rate);
+    }
+
+    pub(crate) fn as_sample(&self) -> crate::solve::Sample<'_> {
+        crate::solve::Sample {
+            t: self.t,
+            q: &self.q,
+            v: &self.v,
+            a: &self.a,
+            u: &self.u,
+            reactions: &self.reactions,
+            lambda: &self.lambda,
+            residual: &self.residual,
+            residual_rate: &self.residual_rate,
+        }
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod testutil {
+    use super::Layout;
+    use crate::solve::{Sample, SampleSink};
+
+    /// A layout with awkward names (a comma, a quote, a colon) and reactions.
+    pub fn layout() -> Layout {
+        Layout {
+            q_names: vec!["x".into(), "th,eta".into()],
+            v_names: vec!["vx".into(), "w\"z".into()],
+            row_names: vec!["speed".into(), "pos:1".into(), "sys".into()],
+            reactions: true,
+        }
+    }
+
+    /// Feed `n` samples with values that exercise full precision, at times `k * dt`.
+    pub fn feed(sink: &mut dyn SampleSink, layout: &Layout, n: usize, dt: f64) {
+        for k in 0..n {
+            let o = sample_values(layout, k);
+            let t = k as f64 * dt;
+            sink.sample(&Sample {
+                t,
+                q: &o[0],
+                v: &o[1],
+                a: &o[2],
+                u: &o[3],
+                reactions: &o[4],
+                lambda: &o[5],
+                residual: &o[6],
+                residual_rate: &o[7],
+            });
+        }
+    }
+
+    /// Values of sample k: q, v, a, u, reactions, lambda, residual, residual_rate.
+    pub fn sample_values(layout: &Layout, k: usize) -> [Vec<f64>; 8] {
+        let nq = layout.q_names.len();
+        let nv = layout.v_names.len();
+        let ns = layout.row_names.len();
+        let f = |g: usize, i: usize| -> f64 {
+            let x = (k * 31 + g * 7 + i + 1) as f64;
+            match (g + i + k) % 5 {
+                0 => 1.0 / 3.0 * x,
+                1 => -x.sqrt() * 1e-300,
+                2 => x.sin() * 1e17,
+                3 => -0.0,
+                _ => std::f64::consts::PI / x,
+            }
+        };
+        let v = |g: usize, n: usize| (0..n).map(|i| f(g, i)).collect::<Vec<_>>();
+        [
+            v(0, nq),
+            v(1, nv),
+            v(2, nv),
+            v(3, nv),
+            v(4, nv),
+            v(5, ns),
+            v(6, ns),
+            v(7, ns),
+        ]
+    }
+}
