@@ -127,6 +127,17 @@ impl Scene {
         with_problem!(&self.system, p => solve::solve_into(p, settings, sink))
     }
 
+    /// An error located at a row's expression (e.g. a row violated at the initial state).
+    pub fn row_error(&self, row: &str, message: impl Into<String>) -> SceneError {
+        let rows = self.rows();
+        match rows.iter().position(|r| r.name == row) {
+            Some(i) => self
+                .source
+                .error(self.row_spans[i].clone(), &format!("row {row}"), message),
+            None => self.source.general("", message),
+        }
+    }
+
     /// A tolerance by name.
     pub fn tolerance(&self, name: &str) -> Option<f64> {
         self.tolerances

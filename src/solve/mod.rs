@@ -412,6 +412,31 @@ pub fn solve_into<M: Model, C: Constraints>(
     sol
 }
 
+/// The state at t0 as the solver will start from it: consistency checked (and assembled if the
+/// settings ask for it), the right-hand side evaluated once. Returns the first sample (residuals,
+/// u, ...) and any initial correction, or the return code that would stop the solve at t0.
+pub fn check_initial<M: Model, C: Constraints>(
+    problem: &Problem<M, C>,
+    settings: &Settings,
+) -> Result<(Trajectory, Option<InitialCorrection>), ReturnCode> {
+    let mut traj = Trajectory {
+        q_names: problem.model.q_names(),
+        v_names: problem.model.v_names(),
+        row_names: problem
+            .constraints
+            .rows()
+            .iter()
+            .map(|r| r.name.clone())
+            .collect(),
+        ..Default::default()
+    };
+    let corr = {
+        let ode = ode::MotionOde::new(problem, settings, &mut traj)?;
+        ode.initial_correction.clone()
+    };
+    Ok((traj, corr))
+}
+
 /// Is row i one whose residual the state itself must satisfy (position or velocity level)?
 pub(crate) fn is_state_row(level: Level) -> bool {
     matches!(level, Level::Position | Level::Velocity)

@@ -1,0 +1,362 @@
+//! `progmo`: compute programmed motions from scene files.
+//!
+//! Exit codes (stable; scripts and the nightly check branch on them):
+//! - 0: success;
+//! - 1: the solve stopped early with a non-success return code (what was computed is written);
+//! - 2: bad input: the scene file (or the command line) is invalid, or its initial state is off
+//!   the programme;
+//! - 3: the results could not be written.
+
+use clap::{Parser, Subcommand, ValueEnum};
+use progmo::formulation::Formulation;
+use progmo::integrate::Method;
+use progmo::output::{
+    write_summary_to_path, CsvSink, Layout, McapSink, OutputSink, Progress, SummaryInput, Tee,
+};
+use progmo::scene::{Scene, SceneError};
+use progmo::solve::{DriftControl, Output, ReturnCode, Settings};
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+const GIT_REVISION: &str = env!("PROGMO_GIT_REVISION");
+
+#[derive(Parser)]
+#[command(
+    name = "progmo",
+    version,
+    about = "Programmed motions of mechanical systems (Do Sanh 1998): motion and control forces from a scene file",
+    after_help = "Exit codes: 0 success, 1 solve stopped early (partial results written), 2 bad input, 3 cannot write results.\nScene format: src/scene/FORMAT.md. Bundled scenes: references/scenes/."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Solve a scene: writes trajectory.csv, summary.json and recording.mcap into the output folder.
+    Solve(SolveArgs),
+    /// Check scenes without solving: parse, dimensions, consistency of the initial state.
+    Validate {
+        /// Scene files (TOML).
+        #[arg(required = true)]
+        scenes: Vec<PathBuf>,
+    },
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum FormulationArg {
+    NullSpace,
+    Kkt,
+    RangeSpace,
+    UdwadiaKalaba,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum IntegratorArg {
+    Dop853,
+    Dopri5,
+    Radau5,
+    Rk4,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum DriftArg {
+    Projection,
+    Baumgarte,
+    None,
+}
+
+#[derive(clap::Args)]
+struct SolveArgs {
+    /// Scene file (TOML).
+    scene: PathBuf,
+    /// Output folder [default: out/<scene name>].
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Override the scene's formulation.
+    #[arg(long, value_enum)]
+    formulation: Option<FormulationArg>,
+    /// Override the scene's integrator (rk4 needs --step).
+    #[arg(long, value_enum)]
+    integrator: Option<IntegratorArg>,
+    /// Fixed step for rk4.
+    #[arg(long)]
+    step: Option<f64>,
+    /// Relative tolerance.
+    #[arg(long)]
+    rtol: Option<f64>,
+    /// Absolute tolerance.
+    #[arg(long)]
+    atol: Option<f64>,
+    /// Drift control.
+    #[arg(long, value_enum)]
+    drift: Option<DriftArg>,
+    /// End time (overrides the scene's time.t1).
+    #[arg(long)]
+    t1: Option<f64>,
+    /// Output sample spacing (overrides time.output_dt).
+    #[arg(long)]
+    output_dt: Option<f64>,
+    /// Do not write the MCAP recording.
+    #[arg(long)]
+    no_mcap: bool,
+    /// Never show a progress bar (it is shown only on a terminal anyway).
+    #[arg(long)]
+    quiet: bool,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Solve(a) => solve(a),
+        Command::Validate { scenes } => validate(&scenes),
+    }
+}
+
+fn load(path: &Path) -> Result<Scene, ExitCode> {
+    Scene::load(path).map_err(|e: SceneError| {
+        eprintln!("{e}");
+        ExitCode::from(2)
+    })
+}
+
+fn settings_from(a: &SolveArgs, base: &Settings) -> Result<Settings, String> {
+    let mut s = base.clone();
+    if let Some(f) = a.formulation {
+        s.formulation = match f {
+            FormulationArg::NullSpace => Formulation::NullSpace,
+            FormulationArg::Kkt => Formulation::Kkt,
+            FormulationArg::RangeSpace => Formulation::RangeSpace,
+            FormulationArg::UdwadiaKalaba => Formulation::UdwadiaKalaba,
+        };
+    }
+    if let Some(i) = a.integrator {
+        s.integrator = match i {
+            IntegratorArg::Dop853 => Method::Dop853,
+            IntegratorArg::Dopri5 => Method::Dopri5,
+            IntegratorArg::Radau5 => Method::Radau5,
+            IntegratorArg::Rk4 => Method::Rk4 {
+                h: a.step.ok_or("--integrator rk4 needs --step")?,
+            },
+        };
+    } else if let (Some(h), Method::Rk4 { .. }) = (a.step, s.integrator) {
+        s.integrator = Method::Rk4 { h };
+    }
+    for (name, x) in [
+        ("--rtol", a.rtol),
+        ("--atol", a.atol),
+        ("--step", a.step),
+        ("--output-dt", a.output_dt),
+    ] {
+        if let Some(x) = x {
+            if !(x > 0.0) || !x.is_finite() {
+                return Err(format!("{name} must be positive, got {x}"));
+            }
+        }
+    }
+    s.rtol = a.rtol.unwrap_or(s.rtol);
+    s.atol = a.atol.unwrap_or(s.atol);
+    if let Some(d) = a.drift {
+        s.drift = match d {
+            DriftArg::Projection => DriftControl::Projection {
+                tol: 1e-12,
+                max_iter: 8,
+            },
+            DriftArg::Baumgarte => DriftControl::Baumgarte {
+                alpha: 1.0,
+                beta: 1.0,
+            },
+            DriftArg::None => DriftControl::None,
+        };
+    }
+    if let Some(dt) = a.output_dt {
+        s.output = Output::Every(dt);
+    }
+    Ok(s)
+}
+
+fn solve(a: SolveArgs) -> ExitCode {
+    let mut scene = match load(&a.scene) {
+        Ok(s) => s,
+        Err(c) => return c,
+    };
+    let settings = match settings_from(&a, &scene.settings) {
+        Ok(s) => s,
+        Err(msg) => {
+            eprintln!("progmo solve: error: {msg}");
+            return ExitCode::from(2);
+        }
+    };
+    if let Some(t1) = a.t1 {
+        let (t0, _) = scene.span();
+        if !(t1 > t0) {
+            eprintln!("progmo solve: error: --t1 {t1} must be after t0 = {t0}");
+            return ExitCode::from(2);
+        }
+        progmo::with_problem!(&mut scene.system, p => p.t1 = t1);
+    }
+    let out = a
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("out").join(&scene.name));
+    if let Err(e) = std::fs::create_dir_all(&out) {
+        eprintln!("progmo solve: error: cannot create {}: {e}", out.display());
+        return ExitCode::from(3);
+    }
+    let layout = progmo::with_problem!(&scene.system, p => Layout::from_problem(p));
+    let (t0, t1) = scene.span();
+    let csv_path = out.join("trajectory.csv");
+    let csv = match CsvSink::create(&csv_path, &layout) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("progmo solve: error: {e}");
+            return ExitCode::from(3);
+        }
+    };
+    let show = !a.quiet && std::io::stderr().is_terminal();
+    let started = Instant::now();
+    let (solution, write_error) = if a.no_mcap {
+        let mut sink = Progress::new(csv, &scene.name, t0, t1).enabled(show);
+        let sol = scene.solve_into(&settings, &mut sink);
+        (sol, sink.finish().err())
+    } else {
+        let mcap = match McapSink::create(out.join("recording.mcap"), &layout) {
+            Ok(m) => m,
+            Err(e) => {
+                eprintln!("progmo solve: error: {e}");
+                return ExitCode::from(3);
+            }
+        };
+        let mut sink = Progress::new(Tee::new(csv, mcap), &scene.name, t0, t1).enabled(show);
+        let sol = scene.solve_into(&settings, &mut sink);
+        (sol, sink.finish().err())
+    };
+    let wall = started.elapsed().as_secs_f64();
+    let command_line: Vec<String> = std::env::args().collect();
+    let rows = layout.row_names.clone();
+    let summary = SummaryInput {
+        scene: &scene.name,
+        solution: &solution,
+        row_names: &rows,
+        settings: &settings,
+        wall_seconds: wall,
+        git_revision: (!GIT_REVISION.is_empty()).then_some(GIT_REVISION),
+        command_line: &command_line,
+    };
+    let summary_error = write_summary_to_path(out.join("summary.json"), &summary).err();
+    for e in write_error.iter().chain(summary_error.iter()) {
+        eprintln!("progmo solve: error: {e}");
+    }
+    let worst = solution.max_residual.iter().cloned().fold(0.0, f64::max);
+    let st = &solution.stats.integrator;
+    match &solution.code {
+        ReturnCode::Success => {
+            println!(
+                "{}: success, t = {:.6} .. {:.6}, max programme residual {:.2e}, {} steps ({} rejected), {} RHS evaluations, {:.3} s -> {}",
+                scene.name, t0, solution.t_end, worst, st.steps, st.rejected, st.rhs_evals, wall, out.display()
+            );
+        }
+        ReturnCode::InconsistentInitialState { row, residual } => {
+            let name = row.split(' ').next().unwrap_or(row);
+            eprintln!(
+                "{}",
+                scene.row_error(
+                    name,
+                    format!("the initial state violates this row by {residual:.3e} (tolerance {:.1e}); set `assemble = true` in [initial] to project it", settings.consistency_tol)
+                )
+            );
+            return ExitCode::from(2);
+        }
+        code => {
+            eprintln!(
+                "{}: stopped at t = {:.6} with {}: {:?}; results up to there are in {}",
+                scene.name,
+                solution.t_end,
+                code.name(),
+                code,
+                out.display()
+            );
+            return ExitCode::from(1);
+        }
+    }
+    if write_error.is_some() || summary_error.is_some() {
+        return ExitCode::from(3);
+    }
+    ExitCode::SUCCESS
+}
+
+fn validate(scenes: &[PathBuf]) -> ExitCode {
+    let mut failed = false;
+    for path in scenes {
+        let scene = match load(path) {
+            Ok(s) => s,
+            Err(_) => {
+                failed = true;
+                continue;
+            }
+        };
+        let rows = scene.rows();
+        let check = progmo::with_problem!(&scene.system, p => progmo::solve::check_initial(p, &scene.settings));
+        match check {
+            Ok((traj, corr)) => {
+                let res = traj.residual_at(0);
+                println!(
+                    "{}: ok: nq = {}, nv = {}, {} rows ({}), t = {} .. {}",
+                    scene.name,
+                    scene.q_names().len(),
+                    scene.v_names().len(),
+                    rows.len(),
+                    rows.iter()
+                        .zip(res)
+                        .map(|(r, x)| format!(
+                            "{} {:?}/{:?} residual {x:.1e}",
+                            r.name, r.level, r.role
+                        ))
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    scene.span().0,
+                    scene.span().1
+                );
+                if let Some(c) = corr {
+                    println!(
+                        "  initial state assembled: |dq| = {:.3e}, |dv| = {:.3e}",
+                        c.position, c.velocity
+                    );
+                }
+            }
+            Err(ReturnCode::InconsistentInitialState { row, residual }) => {
+                failed = true;
+                let name = row.split(' ').next().unwrap_or(&row).to_string();
+                eprintln!(
+                    "{}",
+                    scene.row_error(&name, format!("the initial state violates this row by {residual:.3e}; set `assemble = true` in [initial] to project it"))
+                );
+            }
+            Err(ReturnCode::SingularProgramme {
+                rows: bad, rcond, ..
+            }) => {
+                failed = true;
+                let first = bad.first().cloned().unwrap_or_default();
+                eprintln!(
+                    "{}",
+                    scene.row_error(&first, format!("the programme Jacobian is singular at the initial state (rows {}; rcond {rcond:.1e})", bad.join(", ")))
+                );
+            }
+            Err(code) => {
+                failed = true;
+                eprintln!(
+                    "{}: error: the initial state cannot be used: {code:?}",
+                    path.display()
+                );
+            }
+        }
+    }
+    if failed {
+        ExitCode::from(2)
+    } else {
+        ExitCode::SUCCESS
+    }
+}

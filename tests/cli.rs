@@ -1,0 +1,175 @@
+//! The `progmo` command line as a user runs it: outputs, messages and exit codes.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn progmo() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_progmo"))
+}
+
+fn scene(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(format!("references/scenes/{name}.toml"))
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("progmo-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn solve_writes_csv_summary_and_mcap() {
+    let out = tmp("solve");
+    let o = progmo()
+        .args(["solve", scene("double_pendulum").to_str().unwrap(), "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let csv = std::fs::read_to_string(out.join("trajectory.csv")).unwrap();
+    let header = csv.lines().next().unwrap();
+    assert!(header.starts_with("t,q:q1,q:q2,v:q1,v:q2,"), "{header}");
+    assert!(header.contains("u:q1") && header.contains("residual:elbow"));
+    assert_eq!(
+        csv.lines().count(),
+        1 + 1001,
+        "samples at output_dt = 0.01 over 10 s"
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["code_name"], "success");
+    assert!(summary["max_residual"].as_f64().unwrap() <= 1e-10);
+    assert!(summary["command_line"].as_array().unwrap().len() >= 3);
+    assert!(std::fs::metadata(out.join("recording.mcap")).unwrap().len() > 1000);
+}
+
+#[test]
+fn overrides_change_the_method() {
+    let out = tmp("override");
+    let o = progmo()
+        .args([
+            "solve",
+            scene("heavy_top").to_str().unwrap(),
+            "--integrator",
+            "rk4",
+            "--step",
+            "0.001",
+            "--formulation",
+            "kkt",
+            "--no-mcap",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["settings"]["formulation"], "kkt");
+    assert_eq!(summary["statistics"]["integrator"]["steps"], 5000);
+    assert!(!out.join("recording.mcap").exists());
+}
+
+#[test]
+fn bad_scene_is_a_located_error_with_exit_2() {
+    let dir = tmp("bad");
+    let text = std::fs::read_to_string(scene("double_pendulum")).unwrap();
+    let bad = text.replace("q2 - amp*sin(w*t)", "q2 - amp*sin(omega*t)");
+    let p = write(&dir, "bad.toml", &bad);
+    let line = bad.lines().position(|l| l.contains("omega*t")).unwrap() + 1;
+    let o = progmo()
+        .args(["solve", p.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains(&format!("bad.toml:{line}:")), "{err}");
+    assert!(err.contains("unknown symbol `omega`"), "{err}");
+    assert!(!err.contains("panicked"));
+}
+
+#[test]
+fn inconsistent_initial_state_points_at_the_row() {
+    let dir = tmp("inconsistent");
+    let text = std::fs::read_to_string(scene("double_pendulum")).unwrap();
+    let bad = text.replace("q = { q1 = 0.3, q2 = 0.0 }", "q = { q1 = 0.3, q2 = 0.1 }");
+    let p = write(&dir, "off.toml", &bad);
+    let line = bad.lines().position(|l| l.contains("q2 - amp")).unwrap() + 1;
+    for cmd in ["validate", "solve"] {
+        let o = progmo()
+            .args([cmd, p.to_str().unwrap()])
+            .arg("--help")
+            .output()
+            .unwrap();
+        assert!(o.status.success());
+        let o = progmo()
+            .args([cmd, p.to_str().unwrap()])
+            .current_dir(&dir)
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2), "{cmd}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains(&format!("off.toml:{line}:")) && err.contains("initial state violates"),
+            "{cmd}: {err}"
+        );
+    }
+    // With assembly the state is projected and the solve succeeds.
+    let fixed = bad.replace("[initial]", "[initial]\nassemble = true");
+    let p = write(&dir, "assembled.toml", &fixed);
+    let o = progmo()
+        .args(["solve", p.to_str().unwrap(), "--no-mcap", "--out"])
+        .arg(dir.join("a"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+#[test]
+fn a_singular_programme_stops_with_exit_1_and_keeps_results() {
+    let dir = tmp("singular");
+    let text = std::fs::read_to_string(scene("example_3_1_free")).unwrap();
+    // Angular velocity along the body z axis: the programme's gradient vanishes at t0.
+    let bad = text.replace(
+        "v = { ball = [0.8, 0.3, 1.2] }",
+        "v = { ball = [0.0, 0.0, 1.2] }",
+    );
+    let p = write(&dir, "degenerate.toml", &bad);
+    let o = progmo()
+        .args(["validate", p.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("singular"));
+    let o = progmo()
+        .args(["solve", p.to_str().unwrap(), "--out"])
+        .arg(dir.join("o"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("o/summary.json")).unwrap())
+            .unwrap();
+    assert_eq!(summary["code_name"], "singular_programme");
+    assert_eq!(summary["code"]["rows"][0], "precession");
+}
+
+#[test]
+fn help_on_every_subcommand() {
+    for sub in [
+        vec!["--help"],
+        vec!["solve", "--help"],
+        vec!["validate", "--help"],
+    ] {
+        let o = progmo().args(&sub).output().unwrap();
+        assert!(o.status.success());
+        assert!(String::from_utf8_lossy(&o.stdout).contains("Usage"));
+    }
+}
