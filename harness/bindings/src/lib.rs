@@ -1,0 +1,400 @@
+//! `progmo_harness._core`: the Rust core seen from Python (private; the public API is the
+//! `progmo_harness` package). Thin glue only: every conversion of errors lives in `scene_error`,
+//! every solve releases the GIL.
+
+use numpy::ndarray::Array2;
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use progmo::formulation::Formulation;
+use progmo::integrate::Method;
+use progmo::model::Model;
+use progmo::programme::{Constraints, Level, Role};
+use progmo::scene::{Scene, SceneSystem};
+use progmo::solve::{DriftControl, Evaluator, Output, Settings, Solution};
+use progmo::with_problem;
+use pyo3::create_exception;
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+use std::path::PathBuf;
+
+create_exception!(
+    _core,
+    SceneError,
+    PyValueError,
+    "A scene file is invalid; the message names file, line, column and field."
+);
+
+fn scene_error(e: progmo::scene::SceneError) -> PyErr {
+    SceneError::new_err(e.to_string())
+}
+
+fn json_to_py<'py>(py: Python<'py>, v: &impl serde::Serialize) -> PyResult<Bound<'py, PyAny>> {
+    let s = serde_json::to_string(v).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    py.import("json")?.call_method1("loads", (s,))
+}
+
+fn matrix<'py>(py: Python<'py>, flat: &[f64], cols: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let rows = if cols == 0 { 0 } else { flat.len() / cols };
+    let a = Array2::from_shape_vec((rows, cols), flat.to_vec())
+        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    Ok(a.into_pyarray(py))
+}
+
+/// A loaded scene.
+#[pyclass(name = "Scene", module = "progmo_harness._core", frozen)]
+struct PyScene {
+    scene: Scene,
+}
+
+fn level_name(l: Level) -> &'static str {
+    match l {
+        Level::Position => "position",
+        Level::Velocity => "velocity",
+        Level::Acceleration => "acceleration",
+    }
+}
+
+#[pymethods]
+impl PyScene {
+    /// Load and validate a scene file; raises SceneError with a located message.
+    #[new]
+    fn new(path: PathBuf) -> PyResult<Self> {
+        Scene::load(&path)
+            .map(|scene| PyScene { scene })
+            .map_err(scene_error)
+    }
+
+    #[getter]
+    fn name(&self) -> String {
+        self.scene.name.clone()
+    }
+    #[getter]
+    fn description(&self) -> String {
+        self.scene.description.clone()
+    }
+    #[getter]
+    fn purpose(&self) -> String {
+        self.scene.purpose.clone()
+    }
+    #[getter]
+    fn path(&self) -> String {
+        self.scene.path.display().to_string()
+    }
+    /// "tree" or "lagrangian".
+    #[getter]
+    fn kind(&self) -> &'static str {
+        match self.scene.system {
+            SceneSystem::Tree(_) => "tree",
+            SceneSystem::Lagrangian(_) => "lagrangian",
+        }
+    }
+    #[getter]
+    fn q_names(&self) -> Vec<String> {
+        self.scene.q_names()
+    }
+    #[getter]
+    fn v_names(&self) -> Vec<String> {
+        self.scene.v_names()
+    }
+    /// Rows as dicts {name, level, role}.
+    #[getter]
+    fn rows<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        let list = PyList::empty(py);
+        for r in self.scene.rows() {
+            let d = PyDict::new(py);
+            d.set_item("name", &r.name)?;
+            d.set_item("level", level_name(r.level))?;
+            d.set_item(
+                "role",
+                if r.role == Role::Programme {
+                    "programme"
+                } else {
+                    "system"
+                },
+            )?;
+            list.append(d)?;
+        }
+        Ok(list)
+    }
+    /// Tolerances {name: (value, reason)}.
+    #[getter]
+    fn tolerances<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        for t in &self.scene.tolerances {
+            d.set_item(&t.name, (t.value, &t.reason))?;
+        }
+        Ok(d)
+    }
+    #[getter]
+    fn parameters(&self) -> Vec<(String, f64)> {
+        self.scene.parameters.clone()
+    }
+    #[getter]
+    fn t0(&self) -> f64 {
+        self.scene.span().0
+    }
+    #[getter]
+    fn t1(&self) -> f64 {
+        self.scene.span().1
+    }
+    #[getter]
+    fn q0<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        let q = with_problem!(&self.scene.system, p => p.q0.clone());
+        PyArray1::from_vec(py, q)
+    }
+    #[getter]
+    fn v0<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        let v = with_problem!(&self.scene.system, p => p.v0.clone());
+        PyArray1::from_vec(py, v)
+    }
+    /// The scene's solver settings as a dict.
+    #[getter]
+    fn settings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        json_to_py(py, &self.scene.settings)
+    }
+
+    /// Solve (the GIL is released meanwhile). Keyword overrides: output_dt, t1, rtol, atol,
+    /// integrator ("dop853", "dopri5", "radau5", "rk4" with step), formulation ("null_space",
+    /// "kkt", "range_space", "udwadia_kalaba"), drift ("projection", "baumgarte", "none").
+    /// Returns a dict of numpy arrays and the return code.
+    #[pyo3(signature = (*, output_dt=None, t1=None, rtol=None, atol=None, integrator=None, step=None, formulation=None, drift=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn solve<'py>(
+        &self,
+        py: Python<'py>,
+        output_dt: Option<f64>,
+        t1: Option<f64>,
+        rtol: Option<f64>,
+        atol: Option<f64>,
+        integrator: Option<&str>,
+        step: Option<f64>,
+        formulation: Option<&str>,
+        drift: Option<&str>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let mut s = self.scene.settings.clone();
+        if let Some(dt) = output_dt {
+            positive("output_dt", dt)?;
+            s.output = Output::Every(dt);
+        }
+        if let Some(x) = rtol {
+            positive("rtol", x)?;
+            s.rtol = x;
+        }
+        if let Some(x) = atol {
+            positive("atol", x)?;
+            s.atol = x;
+        }
+        if let Some(i) = integrator {
+            s.integrator = match i {
+                "dop853" => Method::Dop853,
+                "dopri5" => Method::Dopri5,
+                "radau5" => Method::Radau5,
+                "rk4" => Method::Rk4 {
+                    h: step.ok_or_else(|| PyValueError::new_err("integrator rk4 needs step"))?,
+                },
+                other => {
+                    return Err(PyValueError::new_err(format!(
+                        "unknown integrator {other:?}"
+                    )))
+                }
+            };
+        }
+        if let Some(f) = formulation {
+            s.formulation = match f {
+                "null_space" => Formulation::NullSpace,
+                "kkt" => Formulation::Kkt,
+                "range_space" => Formulation::RangeSpace,
+                "udwadia_kalaba" => Formulation::UdwadiaKalaba,
+                other => {
+                    return Err(PyValueError::new_err(format!(
+                        "unknown formulation {other:?}"
+                    )))
+                }
+            };
+        }
+        if let Some(d) = drift {
+            s.drift = match d {
+                "projection" => DriftControl::Projection {
+                    tol: 1e-12,
+                    max_iter: 8,
+                },
+                "baumgarte" => DriftControl::Baumgarte {
+                    alpha: 1.0,
+                    beta: 1.0,
+                },
+                "none" => DriftControl::None,
+                other => {
+                    return Err(PyValueError::new_err(format!(
+                        "unknown drift control {other:?}"
+                    )))
+                }
+            };
+        }
+        let mut scene = self.scene.clone();
+        if let Some(t1) = t1 {
+            if !(t1 > scene.span().0) {
+                return Err(PyValueError::new_err(format!("t1 = {t1} must be after t0")));
+            }
+            with_problem!(&mut scene.system, p => p.t1 = t1);
+        }
+        let sol: Solution = py.detach(|| scene.solve(&s));
+        solution_dict(py, &sol, &s)
+    }
+
+    /// Residuals of every row along a trajectory (n samples): position rows g(t, q), velocity
+    /// rows f(t, q, v), acceleration rows h(t, q, v, a) (needs `a`; NaN without it). Shape (n, s).
+    #[pyo3(signature = (t, q, v, a=None))]
+    fn residuals<'py>(
+        &self,
+        py: Python<'py>,
+        t: PyReadonlyArray1<'py, f64>,
+        q: PyReadonlyArray2<'py, f64>,
+        v: PyReadonlyArray2<'py, f64>,
+        a: Option<PyReadonlyArray2<'py, f64>>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let (t, q, v) = (
+            t.as_array().to_owned(),
+            q.as_array().to_owned(),
+            v.as_array().to_owned(),
+        );
+        let a = a.map(|a| a.as_array().to_owned());
+        let n = t.len();
+        let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
+        if q.shape() != [n, nq]
+            || v.shape() != [n, nv]
+            || a.as_ref().is_some_and(|a| a.shape() != [n, nv])
+        {
+            return Err(PyValueError::new_err(format!(
+                "shapes: t ({n},), q must be ({n}, {nq}), v and a ({n}, {nv})"
+            )));
+        }
+        let out = py.detach(|| {
+            with_problem!(&self.scene.system, p => {
+                let rows = p.constraints.rows();
+                let s = rows.len();
+                let mut ws = p.constraints.workspace::<f64>();
+                let mut res = vec![0.0; n * s];
+                let zero = vec![0.0; nv];
+                let mut buf = vec![0.0; s];
+                for k in 0..n {
+                    let qk: Vec<f64> = q.row(k).to_vec();
+                    let vk: Vec<f64> = v.row(k).to_vec();
+                    let ak: Vec<f64> = a.as_ref().map(|a| a.row(k).to_vec()).unwrap_or_else(|| zero.clone());
+                    p.constraints.eval(&mut ws, t[k], &qk, &vk, &ak, &mut buf);
+                    for i in 0..s {
+                        res[k * s + i] = if rows[i].level == Level::Acceleration && a.is_none() { f64::NAN } else { buf[i] };
+                    }
+                }
+                (res, s)
+            })
+        });
+        matrix(py, &out.0, out.1)
+    }
+
+    /// Mass matrix A, velocity terms G and applied forces Q (A dv/dt - G = Q, paper eq. 2.2) and
+    /// the constraint Jacobian B with gamma (B dv/dt = gamma) at one state.
+    fn dynamics<'py>(
+        &self,
+        py: Python<'py>,
+        t: f64,
+        q: PyReadonlyArray1<'py, f64>,
+        v: PyReadonlyArray1<'py, f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let (q, v) = (q.as_slice()?.to_vec(), v.as_slice()?.to_vec());
+        let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
+        if q.len() != nq || v.len() != nv {
+            return Err(PyValueError::new_err(format!(
+                "q needs {nq} entries, v {nv}"
+            )));
+        }
+        let d = PyDict::new(py);
+        with_problem!(&self.scene.system, p => {
+            let mut ev = Evaluator::<_, _, f64>::new(&p.model, &p.constraints);
+            ev.prepare(t, &q, &v);
+            let mut ws = p.model.workspace::<f64>();
+            let mut g = vec![0.0; nv];
+            let mut f = vec![0.0; nv];
+            p.model.velocity_terms(&mut ws, &q, &v, &mut g);
+            p.model.applied_forces(&mut ws, t, &q, &v, &mut f);
+            let a: Vec<f64> = (0..nv).flat_map(|i| (0..nv).map(move |j| (i, j))).map(|(i, j)| ev.mass[(i, j)]).collect();
+            let s = ev.jet.gamma.len();
+            let b: Vec<f64> = (0..s).flat_map(|i| (0..nv).map(move |j| (i, j))).map(|(i, j)| ev.jet.b[(i, j)]).collect();
+            d.set_item("mass", matrix(py, &a, nv)?)?;
+            d.set_item("velocity_terms", PyArray1::from_vec(py, g))?;
+            d.set_item("applied_forces", PyArray1::from_vec(py, f))?;
+            d.set_item("B", matrix(py, &b, nv)?)?;
+            d.set_item("gamma", PyArray1::from_vec(py, ev.jet.gamma.clone()))?;
+        });
+        Ok(d)
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "<progmo Scene {:?} ({}) from {}>",
+            self.scene.name,
+            self.kind(),
+            self.scene.path.display()
+        )
+    }
+}
+
+fn positive(name: &str, x: f64) -> PyResult<()> {
+    if x > 0.0 && x.is_finite() {
+        Ok(())
+    } else {
+        Err(PyValueError::new_err(format!(
+            "{name} must be positive, got {x}"
+        )))
+    }
+}
+
+fn solution_dict<'py>(
+    py: Python<'py>,
+    sol: &Solution,
+    settings: &Settings,
+) -> PyResult<Bound<'py, PyDict>> {
+    let tr = &sol.trajectory;
+    let (nq, nv, s) = (tr.q_names.len(), tr.v_names.len(), tr.row_names.len());
+    let d = PyDict::new(py);
+    d.set_item("success", sol.code.is_success())?;
+    d.set_item("code_name", sol.code.name())?;
+    d.set_item("code", json_to_py(py, &sol.code)?)?;
+    d.set_item("t_end", sol.t_end)?;
+    d.set_item("t", PyArray1::from_vec(py, tr.t.clone()))?;
+    d.set_item("q", matrix(py, &tr.q, nq)?)?;
+    d.set_item("v", matrix(py, &tr.v, nv)?)?;
+    d.set_item("a", matrix(py, &tr.a, nv)?)?;
+    d.set_item("u", matrix(py, &tr.u, nv)?)?;
+    d.set_item("reactions", matrix(py, &tr.reactions, nv)?)?;
+    d.set_item("lambda", matrix(py, &tr.lambda, s)?)?;
+    d.set_item("residual", matrix(py, &tr.residual, s)?)?;
+    d.set_item("residual_rate", matrix(py, &tr.residual_rate, s)?)?;
+    d.set_item(
+        "max_residual",
+        PyArray1::from_vec(py, sol.max_residual.clone()),
+    )?;
+    d.set_item(
+        "max_residual_rate",
+        PyArray1::from_vec(py, sol.max_residual_rate.clone()),
+    )?;
+    d.set_item("stats", json_to_py(py, &sol.stats)?)?;
+    d.set_item("settings", json_to_py(py, settings)?)?;
+    d.set_item("q_names", tr.q_names.clone())?;
+    d.set_item("v_names", tr.v_names.clone())?;
+    d.set_item("row_names", tr.row_names.clone())?;
+    Ok(d)
+}
+
+/// Version of the core.
+#[pyfunction]
+fn version() -> &'static str {
+    env!("CARGO_PKG_VERSION")
+}
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyScene>()?;
+    m.add("SceneError", m.py().get_type::<SceneError>())?;
+    m.add_function(wrap_pyfunction!(version, m)?)?;
+    Ok(())
+}
