@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# Prepares everything the harness needs on a fresh machine, idempotently:
+#   .venv with numpy, scipy, MuJoCo, Pinocchio, matplotlib, mcap, pytest (versions pinned in
+#   pyproject.toml) and the Rust core built into it as progmo_harness._core (maturin, release).
+# Sourced by harness/nightly.sh and harness/test.sh; prints what it does, fails loudly.
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$root"
+py="${PYTHON:-python3}"
+if [ ! -x .venv/bin/python ]; then
+  echo "setup: creating .venv with $($py --version)" >&2
+  "$py" -m venv .venv
+fi
+stamp=.venv/.progmo-deps
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+  echo "setup: installing Python dependencies (first run: about a minute)" >&2
+  .venv/bin/python -m pip install -q --upgrade pip
+  .venv/bin/python -m pip install -q "maturin>=1.16,<2" "numpy>=2.4,<2.5" "scipy==1.17.1" "mujoco==4.0.0" "pin==4.1.0" \
+    "matplotlib>=3.11,<3.12" "mcap==1.6.0" "pytest>=9.2,<10"
+  touch "$stamp"
+fi
+echo "setup: building the Rust core into .venv (maturin develop --release)" >&2
+( . .venv/bin/activate && maturin develop --release -q >/dev/null ) || {
+  echo "setup: error: building the Python extension failed (run 'maturin develop --release' in .venv for details)" >&2
+  exit 1
+}

@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# Runs every test of progmo: the Rust core (cargo test) and the Python harness (pytest).
+# On a fresh machine it first creates the environment (harness/setup.sh).
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$root"
+bash harness/setup.sh
+echo "== cargo test (Rust core, pure Rust) ==" >&2
+cargo test --release
+echo "== pytest (harness) ==" >&2
+.venv/bin/python -m pytest -q tests/python
