@@ -44,6 +44,22 @@ enum Command {
         #[arg(required = true)]
         scenes: Vec<PathBuf>,
     },
+    /// The nightly cross-simulator check (Python harness): replay u(t) in MuJoCo and Pinocchio,
+    /// judge against the scenes' budgets and baselines, write the report. `progmo check --help`.
+    #[command(disable_help_flag = true)]
+    Check {
+        /// Arguments for the harness (scenes, --accept, --jobs, --out, --help).
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<String>,
+    },
+    /// A debugging run of one scene (Python harness): MCAP with solver and simulator channels, CSV,
+    /// the first tolerance breach. `progmo debug --help`.
+    #[command(disable_help_flag = true)]
+    Debug {
+        /// Arguments for the harness.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<String>,
+    },
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -113,6 +129,49 @@ fn main() -> ExitCode {
     match cli.command {
         Command::Solve(a) => solve(a),
         Command::Validate { scenes } => validate(&scenes),
+        Command::Check { args } => harness("check", &args),
+        Command::Debug { args } => harness("debug", &args),
+    }
+}
+
+/// The harness's Python: $PROGMO_PYTHON, else the .venv of the checkout this binary was built in
+/// (next to target/), else of the source tree it was compiled from.
+fn harness_python() -> Option<PathBuf> {
+    if let Some(p) = std::env::var_os("PROGMO_PYTHON") {
+        return Some(PathBuf::from(p));
+    }
+    let mut candidates = vec![];
+    if let Ok(exe) = std::env::current_exe() {
+        // <root>/target/<profile>/progmo
+        if let Some(root) = exe
+            .parent()
+            .and_then(|p| p.parent())
+            .and_then(|p| p.parent())
+        {
+            candidates.push(root.join(".venv/bin/python"));
+        }
+    }
+    candidates.push(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python"));
+    candidates.into_iter().find(|p| p.exists())
+}
+
+fn harness(sub: &str, args: &[String]) -> ExitCode {
+    let Some(python) = harness_python() else {
+        eprintln!(
+            "progmo {sub}: error: the Python harness is not set up (no .venv found); run `bash harness/setup.sh` once, or set PROGMO_PYTHON"
+        );
+        return ExitCode::from(2);
+    };
+    let status = std::process::Command::new(&python)
+        .args(["-m", "progmo_harness.cli", sub])
+        .args(args)
+        .status();
+    match status {
+        Ok(s) => ExitCode::from(s.code().unwrap_or(1).clamp(0, 255) as u8),
+        Err(e) => {
+            eprintln!("progmo {sub}: error: cannot run {}: {e}", python.display());
+            ExitCode::from(2)
+        }
     }
 }
 
