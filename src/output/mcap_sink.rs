@@ -10,7 +10,7 @@ use mcap::records::MessageHeader;
 use serde::Serialize;
 use serde_json::json;
 
-use super::{Layout, OutputError, OutputSink};
+use super::{OutputError, OutputSink, SampleLayout};
 use crate::solve::{Sample, SampleSink};
 
 /// Topic of the channel added by [`McapSink::add_frame_transform_channel`].
@@ -23,12 +23,12 @@ pub const FRAME_TRANSFORM_SCHEMA: &str = "foxglove.FrameTransform";
 pub struct McapChannel(u16);
 
 /// Records samples into an MCAP file: one JSON message per sample on `/progmo/state`,
-/// `/progmo/control`, `/progmo/residual` and (if `Layout::reactions`) `/progmo/reaction`.
+/// `/progmo/control`, `/progmo/residual` and (if `SampleLayout::reactions`) `/progmo/reaction`.
 pub struct McapSink<W: Write + Seek> {
     writer: Option<mcap::Writer<W>>,
     done: Option<W>,
     file: String,
-    layout: Layout,
+    layout: SampleLayout,
     state: u16,
     control: u16,
     residual: u16,
@@ -157,7 +157,7 @@ fn push_number(buf: &mut String, x: f64) {
 
 impl McapSink<BufWriter<File>> {
     /// Create (truncate) the file at `path` and write the header, schemas and channels.
-    pub fn create(path: impl AsRef<Path>, layout: &Layout) -> Result<Self, OutputError> {
+    pub fn create(path: impl AsRef<Path>, layout: &SampleLayout) -> Result<Self, OutputError> {
         let name = path.as_ref().display().to_string();
         let f = File::create(path.as_ref()).map_err(|e| OutputError::io(&name, "create", e))?;
         Self::new(BufWriter::new(f), layout, &name)
@@ -166,7 +166,7 @@ impl McapSink<BufWriter<File>> {
 
 impl<W: Write + Seek> McapSink<W> {
     /// Start a recording in `w`; `file` names the destination in errors.
-    pub fn new(w: W, layout: &Layout, file: &str) -> Result<Self, OutputError> {
+    pub fn new(w: W, layout: &SampleLayout, file: &str) -> Result<Self, OutputError> {
         let options = mcap::WriteOptions::new()
             .compression(None)
             .library(format!("progmo {}", env!("CARGO_PKG_VERSION")));
@@ -438,7 +438,7 @@ mod tests {
     use crate::output::testutil::{feed, layout, sample_values};
     use std::io::Cursor;
 
-    fn record(layout: &Layout, n: usize) -> Vec<u8> {
+    fn record(layout: &SampleLayout, n: usize) -> Vec<u8> {
         let mut sink = McapSink::new(Cursor::new(Vec::new()), layout, "<memory>").unwrap();
         feed(&mut sink, layout, n, 0.25);
         sink.frame_transform(
@@ -605,7 +605,7 @@ mod tests {
 
     #[test]
     fn non_finite_values_are_null() {
-        let l = Layout {
+        let l = SampleLayout {
             q_names: vec!["x".into(), "y".into()],
             ..Default::default()
         };
