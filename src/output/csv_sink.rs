@@ -521,6 +521,12 @@ mod tests {
         let traj = read_csv(&path).unwrap();
         std::fs::remove_file(&path).ok();
         assert_eq!(traj.t, vec![0.0, 0.5, 1.0, 1.5]);
+        // Dropping without finish still flushes.
+        let mut sink = CsvSink::create(&path, &l).unwrap();
+        feed(&mut sink, &l, 3, 0.5);
+        drop(sink);
+        assert_eq!(read_csv(&path).unwrap().len(), 3);
+        std::fs::remove_file(&path).ok();
         let missing = read_csv(path.with_extension("nope")).unwrap_err();
         assert!(matches!(missing, OutputError::Io { .. }));
     }

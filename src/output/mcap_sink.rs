@@ -668,6 +668,15 @@ mod tests {
         let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
         assert_eq!(summary.stats.unwrap().message_count, 12);
 
+        // Dropping without finish still completes the file.
+        let mut sink = McapSink::create(&path, &l).unwrap();
+        feed(&mut sink, &l, 2, 0.1);
+        drop(sink);
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::remove_file(&path).ok();
+        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+        assert_eq!(summary.stats.unwrap().message_count, 8);
+
         let mut sink = McapSink::new(Cursor::new(Vec::new()), &l, "bad.mcap").unwrap();
         sink.sample(&Sample {
             t: 0.0,
