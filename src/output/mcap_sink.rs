@@ -633,6 +633,48 @@ mod tests {
         assert_eq!(m.log_time, 2_000_000_000);
     }
 
+    /// A seekable writer that fails once `budget` bytes are written.
+    struct Failing {
+        inner: Cursor<Vec<u8>>,
+        budget: usize,
+    }
+    impl Write for Failing {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            if buf.len() > self.budget {
+                return Err(std::io::Error::other("disk full"));
+            }
+            self.budget -= buf.len();
+            self.inner.write(buf)
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+    impl Seek for Failing {
+        fn seek(&mut self, pos: std::io::SeekFrom) -> std::io::Result<u64> {
+            self.inner.seek(pos)
+        }
+    }
+
+    #[test]
+    fn write_errors_are_kept_and_returned_by_finish() {
+        let l = layout();
+        let w = Failing {
+            inner: Cursor::new(Vec::new()),
+            budget: 50_000,
+        };
+        let mut sink = McapSink::new(w, &l, "full.mcap").unwrap();
+        // Well beyond the budget (chunks are flushed at 1 MiB or at finish); must not panic.
+        feed(&mut sink, &l, 5000, 0.001);
+        sink.frame_transform(1.0, "a", "b", [0.0; 3], [1.0, 0.0, 0.0, 0.0]);
+        let err = sink.finish().unwrap_err().to_string();
+        assert!(
+            err.contains("full.mcap") && err.contains("disk full"),
+            "{err}"
+        );
+        assert!(sink.finish().is_err());
+    }
+
     #[test]
     fn log_times() {
         assert_eq!(log_time(0.0), 0);
