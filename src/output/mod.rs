@@ -48,6 +48,11 @@
 //! same `f64` bit for bit, in exponent form (`1.25e0`, `-3e-17`, `-0e0`); non-finite values are
 //! written `NaN`, `inf`, `-inf`. Python's `float()`, numpy and pandas read all of these.
 //!
+//! [`read_csv`] accepts exactly this layout (groups in this order, each possibly empty; `a:`, `u:`
+//! and `reaction:` must name the `v:` coordinates, `residual:` and `residual_rate:` the `lambda:`
+//! rows). Missing `reaction:` or `residual_rate:` columns read as zeros. Errors give the line and
+//! column (1-based) of the bad field.
+//!
 //! # MCAP format ([`McapSink`])
 //!
 //! An MCAP file (uncompressed chunks with message indexes and a summary section written by
@@ -81,23 +86,30 @@
 //! - `success`: `true` iff the code is `success`.
 //! - `code`: the [`ReturnCode`](crate::solve::ReturnCode) as an object: `"code"` holds its machine
 //!   name (as in `code_name`), the other keys its fields, e.g.
-//!   `{"code": "drift_exceeded", "t": 1.5, "row": "speed", "residual": 2e-6}`.
-//! - `code_name`: the machine name (`success`, `step_too_small`, `singular_programme`,
-//!   `singular_system`, `drift_exceeded`, `non_finite`, `max_steps`, `inconsistent_initial_state`,
-//!   `projection_failed`).
+//!   `{"code": "drift_exceeded", "t": 1.5, "row": "speed", "residual": 2e-6}`. Per code:
+//!   `success` {}; `step_too_small` {`t`, `h`}; `singular_programme` {`t`, `rows` (array of row
+//!   names), `rcond`}; `singular_system` {`t`, `rcond`}; `drift_exceeded` {`t`, `row`,
+//!   `residual`}; `non_finite` {`t`}; `max_steps` {`t`}; `inconsistent_initial_state` {`row`,
+//!   `residual`}; `projection_failed` {`t`, `row`, `residual`}.
+//! - `code_name`: the machine name, one of the codes above.
 //! - `t_end`: last time reached.
 //! - `max_residual`: largest |residual| over all rows and accepted steps (0 when there is no row).
 //! - `max_residual_rate`: largest |dg/dt| over all position rows and accepted steps.
 //! - `rows`: array, one object per constraint row in solver order:
 //!   `{"name", "max_residual", "max_residual_rate"}`.
 //! - `statistics`: the [`Statistics`](crate::solve::Statistics) as serialized by serde (fields
-//!   `integrator` {`steps`, `rejected`, ...}, `factorizations`, `projections`,
+//!   `integrator` {`steps`, `rejected`, `rhs_evals`, `jacobian_evals`, `lu_decompositions`,
+//!   `newton_iterations`}, `factorizations`, `projections`,
 //!   `projection_iterations`, `max_position_correction`, `max_velocity_correction`, `max_du`,
 //!   `min_b_rcond`).
 //! - `initial_correction`: `null`, or `{"position", "velocity"}` when the initial state was
 //!   assembled.
-//! - `settings`: the [`Settings`](crate::solve::Settings) as serialized by serde (an infinite
-//!   `h_max` appears as `null`).
+//! - `settings`: the [`Settings`](crate::solve::Settings) as serialized by serde, e.g. the
+//!   default: `{"formulation": "null_space", "integrator": "dop853", "rtol": 1e-10,
+//!   "atol": 1e-12, "h_max": null, "max_steps": 10000000, "drift": {"kind": "projection",
+//!   "tol": 1e-12, "max_iter": 8}, "rank_dependent": 1e-10, "rank_vanishing": 1e-12,
+//!   "output": "steps", "max_drift": null, "consistency_tol": 1e-10, "assemble": false}`
+//!   (`h_max: null` is the unlimited default; `output` is `"steps"` or `{"every": dt}`).
 //! - `wall_seconds`: wall-clock duration of the run, as measured by the caller.
 //! - `versions`: `{"progmo": crate version, "git_revision": string or null}`.
 //! - `command_line`: array of strings, the arguments to rerun (program first).
