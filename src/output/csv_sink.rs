@@ -5,13 +5,13 @@ use std::fs::File;
 use std::io::{self, Read, Write};
 use std::path::Path;
 
-use super::{Layout, OutputError, OutputSink};
+use super::{OutputError, OutputSink, SampleLayout};
 use crate::solve::{Sample, SampleSink, Trajectory};
 
 /// Streams samples to CSV, one line per sample.
 pub struct CsvSink<W: Write> {
     writer: csv::Writer<W>,
-    layout: Layout,
+    layout: SampleLayout,
     file: String,
     field: String,
     error: Option<OutputError>,
@@ -29,7 +29,7 @@ fn csv_to_io(e: csv::Error) -> io::Error {
 
 impl CsvSink<File> {
     /// Create (truncate) the file at `path` and write the header.
-    pub fn create(path: impl AsRef<Path>, layout: &Layout) -> Result<Self, OutputError> {
+    pub fn create(path: impl AsRef<Path>, layout: &SampleLayout) -> Result<Self, OutputError> {
         let name = path.as_ref().display().to_string();
         let f = File::create(path.as_ref()).map_err(|e| OutputError::io(&name, "create", e))?;
         Self::new(f, layout, &name)
@@ -38,7 +38,7 @@ impl CsvSink<File> {
 
 impl<W: Write> CsvSink<W> {
     /// Write the header to `w`; `file` names the destination in errors.
-    pub fn new(w: W, layout: &Layout, file: &str) -> Result<Self, OutputError> {
+    pub fn new(w: W, layout: &SampleLayout, file: &str) -> Result<Self, OutputError> {
         let writer = csv::WriterBuilder::new()
             .terminator(csv::Terminator::Any(b'\n'))
             .from_writer(w);
@@ -111,7 +111,7 @@ impl<W: Write> CsvSink<W> {
     }
 }
 
-fn header(layout: &Layout) -> Vec<String> {
+fn header(layout: &SampleLayout) -> Vec<String> {
     let mut h = vec!["t".to_string()];
     let mut group = |prefix: &str, names: &[String]| {
         h.extend(names.iter().map(|n| format!("{prefix}:{n}")));
@@ -330,7 +330,7 @@ mod tests {
     use super::*;
     use crate::output::testutil::{feed, layout, sample_values};
 
-    fn write(layout: &Layout, n: usize) -> Vec<u8> {
+    fn write(layout: &SampleLayout, n: usize) -> Vec<u8> {
         let mut sink = CsvSink::new(Vec::new(), layout, "<memory>").unwrap();
         feed(&mut sink, layout, n, 0.1);
         sink.into_inner().unwrap()
@@ -399,7 +399,7 @@ mod tests {
 
     #[test]
     fn non_finite_values_roundtrip() {
-        let l = Layout {
+        let l = SampleLayout {
             q_names: vec!["x".into()],
             ..Default::default()
         };
@@ -521,6 +521,12 @@ mod tests {
         let traj = read_csv(&path).unwrap();
         std::fs::remove_file(&path).ok();
         assert_eq!(traj.t, vec![0.0, 0.5, 1.0, 1.5]);
+        // Dropping without finish still flushes.
+        let mut sink = CsvSink::create(&path, &l).unwrap();
+        feed(&mut sink, &l, 3, 0.5);
+        drop(sink);
+        assert_eq!(read_csv(&path).unwrap().len(), 3);
+        std::fs::remove_file(&path).ok();
         let missing = read_csv(path.with_extension("nope")).unwrap_err();
         assert!(matches!(missing, OutputError::Io { .. }));
     }

@@ -12,13 +12,13 @@ use crate::solve::{solve_into, Problem, Settings, Solution, Trajectory};
 
 #[test]
 fn layouts_of_the_test_problems() {
-    let top = Layout::from_problem(&rigid_body::heavy_top());
+    let top = SampleLayout::from_problem(&rigid_body::heavy_top());
     assert_eq!(top.q_names.len(), rigid_body::heavy_top().q0.len());
     assert_eq!(top.v_names.len(), rigid_body::heavy_top().v0.len());
     assert!(!top.reactions);
-    assert!(!Layout::from_problem(&particle::example_2_1()).reactions);
-    assert!(!Layout::from_problem(&pendulum::double_pendulum()).reactions);
-    let rod = Layout::from_problem(&pendulum::rod_and_swing());
+    assert!(!SampleLayout::from_problem(&particle::example_2_1()).reactions);
+    assert!(!SampleLayout::from_problem(&pendulum::double_pendulum()).reactions);
+    let rod = SampleLayout::from_problem(&pendulum::rod_and_swing());
     assert!(rod.reactions);
     assert_eq!(rod.row_names, ["rod", "swing"]);
     let sink = CsvSink::new(Vec::new(), &rod, "<memory>").unwrap();
@@ -33,7 +33,7 @@ fn layouts_of_the_test_problems() {
 fn run<M: Model, C: Constraints>(
     problem: &Problem<M, C>,
 ) -> Option<(Solution, Trajectory, Vec<u8>, Vec<u8>)> {
-    let layout = Layout::from_problem(problem);
+    let layout = SampleLayout::from_problem(problem);
     let settings = Settings {
         output: crate::solve::Output::Every(0.05),
         ..Settings::default()
@@ -70,7 +70,7 @@ fn check<M: Model, C: Constraints>(problem: Problem<M, C>) {
     let back = read_csv_from(&csv[..], "<memory>").unwrap();
     // Bit-exact (reactions are zero in the CSV when the problem has none).
     let mut expect = mem.clone();
-    if !Layout::from_problem(&problem).reactions {
+    if !SampleLayout::from_problem(&problem).reactions {
         expect.reactions.iter_mut().for_each(|r| *r = 0.0);
     }
     assert_eq!(back, expect);
@@ -88,7 +88,7 @@ fn check<M: Model, C: Constraints>(problem: Problem<M, C>) {
         (mem.t[mem.len() - 1] * 1e9).round() as u64
     );
 
-    let names = Layout::from_problem(&problem).row_names;
+    let names = SampleLayout::from_problem(&problem).row_names;
     let v = summary_json(&SummaryInput {
         scene: "e2e",
         solution: &sol,

@@ -13,7 +13,7 @@ pub enum OutputError {
         source: std::io::Error,
     },
     /// The MCAP writer failed.
-    #[error("{file}: {what}: {source}")]
+    #[error("{file}: {what}: {}", chain(source))]
     Mcap {
         file: String,
         what: String,
@@ -44,6 +44,18 @@ pub enum OutputError {
     /// Data inconsistent with the layout (wrong number of values, mismatched names, ...).
     #[error("{file}: {message}")]
     Invalid { file: String, message: String },
+}
+
+/// An error and its sources, joined by ": ".
+fn chain(e: &dyn std::error::Error) -> String {
+    let mut s = e.to_string();
+    let mut src = e.source();
+    while let Some(e) = src {
+        s.push_str(": ");
+        s.push_str(&e.to_string());
+        src = e.source();
+    }
+    s
 }
 
 fn header_suffix(h: &Option<String>) -> String {
@@ -103,7 +115,7 @@ impl OutputError {
             },
             OutputError::Mcap { file, what, source } => OutputError::Invalid {
                 file: file.clone(),
-                message: format!("{what}: {source}"),
+                message: format!("{what}: {}", chain(source)),
             },
             OutputError::Json { file, what, source } => OutputError::Invalid {
                 file: file.clone(),

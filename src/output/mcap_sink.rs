@@ -10,7 +10,7 @@ use mcap::records::MessageHeader;
 use serde::Serialize;
 use serde_json::json;
 
-use super::{Layout, OutputError, OutputSink};
+use super::{OutputError, OutputSink, SampleLayout};
 use crate::solve::{Sample, SampleSink};
 
 /// Topic of the channel added by [`McapSink::add_frame_transform_channel`].
@@ -23,12 +23,12 @@ pub const FRAME_TRANSFORM_SCHEMA: &str = "foxglove.FrameTransform";
 pub struct McapChannel(u16);
 
 /// Records samples into an MCAP file: one JSON message per sample on `/progmo/state`,
-/// `/progmo/control`, `/progmo/residual` and (if `Layout::reactions`) `/progmo/reaction`.
+/// `/progmo/control`, `/progmo/residual` and (if `SampleLayout::reactions`) `/progmo/reaction`.
 pub struct McapSink<W: Write + Seek> {
     writer: Option<mcap::Writer<W>>,
     done: Option<W>,
     file: String,
-    layout: Layout,
+    layout: SampleLayout,
     state: u16,
     control: u16,
     residual: u16,
@@ -157,7 +157,7 @@ fn push_number(buf: &mut String, x: f64) {
 
 impl McapSink<BufWriter<File>> {
     /// Create (truncate) the file at `path` and write the header, schemas and channels.
-    pub fn create(path: impl AsRef<Path>, layout: &Layout) -> Result<Self, OutputError> {
+    pub fn create(path: impl AsRef<Path>, layout: &SampleLayout) -> Result<Self, OutputError> {
         let name = path.as_ref().display().to_string();
         let f = File::create(path.as_ref()).map_err(|e| OutputError::io(&name, "create", e))?;
         Self::new(BufWriter::new(f), layout, &name)
@@ -166,7 +166,7 @@ impl McapSink<BufWriter<File>> {
 
 impl<W: Write + Seek> McapSink<W> {
     /// Start a recording in `w`; `file` names the destination in errors.
-    pub fn new(w: W, layout: &Layout, file: &str) -> Result<Self, OutputError> {
+    pub fn new(w: W, layout: &SampleLayout, file: &str) -> Result<Self, OutputError> {
         let options = mcap::WriteOptions::new()
             .compression(None)
             .library(format!("progmo {}", env!("CARGO_PKG_VERSION")));
@@ -438,7 +438,7 @@ mod tests {
     use crate::output::testutil::{feed, layout, sample_values};
     use std::io::Cursor;
 
-    fn record(layout: &Layout, n: usize) -> Vec<u8> {
+    fn record(layout: &SampleLayout, n: usize) -> Vec<u8> {
         let mut sink = McapSink::new(Cursor::new(Vec::new()), layout, "<memory>").unwrap();
         feed(&mut sink, layout, n, 0.25);
         sink.frame_transform(
@@ -605,7 +605,7 @@ mod tests {
 
     #[test]
     fn non_finite_values_are_null() {
-        let l = Layout {
+        let l = SampleLayout {
             q_names: vec!["x".into(), "y".into()],
             ..Default::default()
         };
@@ -631,6 +631,48 @@ mod tests {
         assert!(v["q"]["x"].is_null());
         assert_eq!(v["q"]["y"].as_f64().unwrap().to_bits(), (-0.0f64).to_bits());
         assert_eq!(m.log_time, 2_000_000_000);
+    }
+
+    /// A seekable writer that fails once `budget` bytes are written.
+    struct Failing {
+        inner: Cursor<Vec<u8>>,
+        budget: usize,
+    }
+    impl Write for Failing {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            if buf.len() > self.budget {
+                return Err(std::io::Error::other("disk full"));
+            }
+            self.budget -= buf.len();
+            self.inner.write(buf)
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+    impl Seek for Failing {
+        fn seek(&mut self, pos: std::io::SeekFrom) -> std::io::Result<u64> {
+            self.inner.seek(pos)
+        }
+    }
+
+    #[test]
+    fn write_errors_are_kept_and_returned_by_finish() {
+        let l = layout();
+        let w = Failing {
+            inner: Cursor::new(Vec::new()),
+            budget: 50_000,
+        };
+        let mut sink = McapSink::new(w, &l, "full.mcap").unwrap();
+        // Well beyond the budget (chunks are flushed at 1 MiB or at finish); must not panic.
+        feed(&mut sink, &l, 5000, 0.001);
+        sink.frame_transform(1.0, "a", "b", [0.0; 3], [1.0, 0.0, 0.0, 0.0]);
+        let err = sink.finish().unwrap_err().to_string();
+        assert!(
+            err.contains("full.mcap") && err.contains("disk full"),
+            "{err}"
+        );
+        assert!(sink.finish().is_err());
     }
 
     #[test]
@@ -667,6 +709,15 @@ mod tests {
         std::fs::remove_file(&path).ok();
         let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
         assert_eq!(summary.stats.unwrap().message_count, 12);
+
+        // Dropping without finish still completes the file.
+        let mut sink = McapSink::create(&path, &l).unwrap();
+        feed(&mut sink, &l, 2, 0.1);
+        drop(sink);
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::remove_file(&path).ok();
+        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+        assert_eq!(summary.stats.unwrap().message_count, 8);
 
         let mut sink = McapSink::new(Cursor::new(Vec::new()), &l, "bad.mcap").unwrap();
         sink.sample(&Sample {

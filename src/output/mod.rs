@@ -11,7 +11,7 @@
 //! # use progmo::output::*;
 //! # use progmo::solve::{solve_into, Settings};
 //! let problem = progmo::problems::rigid_body::heavy_top();
-//! let layout = Layout::from_problem(&problem);
+//! let layout = SampleLayout::from_problem(&problem);
 //! let csv = CsvSink::create("top.csv", &layout).unwrap();
 //! let rec = McapSink::create("top.mcap", &layout).unwrap();
 //! let mut sink = Progress::new(Tee::new(Every::new(0.01, csv), rec), "top", problem.t0, problem.t1);
@@ -21,7 +21,7 @@
 //!
 //! # Column names
 //!
-//! All formats use the names of [`Layout`]: `q_names` for q, `v_names` for v, dv/dt, u and the
+//! All formats use the names of [`SampleLayout`]: `q_names` for q, `v_names` for v, dv/dt, u and the
 //! reactions, `row_names` (programme rows and system constraints, in the solver's order) for
 //! lambda and the residuals.
 //!
@@ -38,7 +38,7 @@
 //! | `v:<v name>`              | nv    | velocity                                                     |
 //! | `a:<v name>`              | nv    | acceleration dv/dt                                           |
 //! | `u:<v name>`              | nv    | control force of the programme rows (2.12)                   |
-//! | `reaction:<v name>`       | nv    | reactions of system constraints; only if `Layout::reactions` |
+//! | `reaction:<v name>`       | nv    | reactions of system constraints; only if `SampleLayout::reactions` |
 //! | `lambda:<row name>`       | s     | multipliers                                                  |
 //! | `residual:<row name>`     | s     | residual of the row (g, f or h by level)                     |
 //! | `residual_rate:<row name>`| s     | dg/dt of position rows, 0 for other rows                     |
@@ -48,6 +48,11 @@
 //! same `f64` bit for bit, in exponent form (`1.25e0`, `-3e-17`, `-0e0`); non-finite values are
 //! written `NaN`, `inf`, `-inf`. Python's `float()`, numpy and pandas read all of these.
 //!
+//! [`read_csv`] accepts exactly this layout (groups in this order, each possibly empty; `a:`, `u:`
+//! and `reaction:` must name the `v:` coordinates, `residual:` and `residual_rate:` the `lambda:`
+//! rows). Missing `reaction:` or `residual_rate:` columns read as zeros. Errors give the line and
+//! column (1-based) of the bad field.
+//!
 //! # MCAP format ([`McapSink`])
 //!
 //! An MCAP file (uncompressed chunks with message indexes and a summary section written by
@@ -56,18 +61,18 @@
 //! nanoseconds, `round(t * 1e9)` as u64 (negative or non-finite t give 0; the exact `t` is also in
 //! each message). Sequence numbers count from 0 per channel. Numbers are JSON numbers (shortest
 //! round-trip form); non-finite values are written as `null`. Each object below maps names to
-//! numbers, keys in [`Layout`] order.
+//! numbers, keys in [`SampleLayout`] order.
 //!
 //! | topic               | schema name         | message                                             |
 //! |---------------------|---------------------|-----------------------------------------------------|
 //! | `/progmo/state`     | `progmo.State`      | `{"t", "q": {q name: ..}, "v": {v name: ..}, "a": {v name: ..}}` |
 //! | `/progmo/control`   | `progmo.Control`    | `{"t", "u": {v name: ..}, "lambda": {row name: ..}}` |
 //! | `/progmo/residual`  | `progmo.Residual`   | `{"t", "residual": {row name: ..}, "residual_rate": {row name: ..}}` |
-//! | `/progmo/reaction`  | `progmo.Reaction`   | `{"t", "reaction": {v name: ..}}`; only if `Layout::reactions` |
+//! | `/progmo/reaction`  | `progmo.Reaction`   | `{"t", "reaction": {v name: ..}}`; only if `SampleLayout::reactions` |
 //! | `/progmo/tf` (opt.) | `foxglove.FrameTransform` | see [`McapSink::frame_transform`]              |
 //!
 //! One message per sample on each of the first three (four) channels. In Foxglove, plot e.g.
-//! `/progmo/state.q.theta` or `/progmo/residual.residual["speed"]`. Further channels can be added
+//! `/progmo/state.q.theta` or `/progmo/residual.residual.speed`. Further channels can be added
 //! with [`McapSink::add_json_channel`].
 //!
 //! # JSON summary ([`write_summary`])
@@ -81,23 +86,30 @@
 //! - `success`: `true` iff the code is `success`.
 //! - `code`: the [`ReturnCode`](crate::solve::ReturnCode) as an object: `"code"` holds its machine
 //!   name (as in `code_name`), the other keys its fields, e.g.
-//!   `{"code": "drift_exceeded", "t": 1.5, "row": "speed", "residual": 2e-6}`.
-//! - `code_name`: the machine name (`success`, `step_too_small`, `singular_programme`,
-//!   `singular_system`, `drift_exceeded`, `non_finite`, `max_steps`, `inconsistent_initial_state`,
-//!   `projection_failed`).
+//!   `{"code": "drift_exceeded", "t": 1.5, "row": "speed", "residual": 2e-6}`. Per code:
+//!   `success` {}; `step_too_small` {`t`, `h`}; `singular_programme` {`t`, `rows` (array of row
+//!   names), `rcond`}; `singular_system` {`t`, `rcond`}; `drift_exceeded` {`t`, `row`,
+//!   `residual`}; `non_finite` {`t`}; `max_steps` {`t`}; `inconsistent_initial_state` {`row`,
+//!   `residual`}; `projection_failed` {`t`, `row`, `residual`}.
+//! - `code_name`: the machine name, one of the codes above.
 //! - `t_end`: last time reached.
 //! - `max_residual`: largest |residual| over all rows and accepted steps (0 when there is no row).
 //! - `max_residual_rate`: largest |dg/dt| over all position rows and accepted steps.
 //! - `rows`: array, one object per constraint row in solver order:
 //!   `{"name", "max_residual", "max_residual_rate"}`.
 //! - `statistics`: the [`Statistics`](crate::solve::Statistics) as serialized by serde (fields
-//!   `integrator` {`steps`, `rejected`, ...}, `factorizations`, `projections`,
+//!   `integrator` {`steps`, `rejected`, `rhs_evals`, `jacobian_evals`, `lu_decompositions`,
+//!   `newton_iterations`}, `factorizations`, `projections`,
 //!   `projection_iterations`, `max_position_correction`, `max_velocity_correction`, `max_du`,
 //!   `min_b_rcond`).
 //! - `initial_correction`: `null`, or `{"position", "velocity"}` when the initial state was
 //!   assembled.
-//! - `settings`: the [`Settings`](crate::solve::Settings) as serialized by serde (an infinite
-//!   `h_max` appears as `null`).
+//! - `settings`: the [`Settings`](crate::solve::Settings) as serialized by serde, e.g. the
+//!   default: `{"formulation": "null_space", "integrator": "dop853", "rtol": 1e-10,
+//!   "atol": 1e-12, "h_max": null, "max_steps": 10000000, "drift": {"kind": "projection",
+//!   "tol": 1e-12, "max_iter": 8}, "rank_dependent": 1e-10, "rank_vanishing": 1e-12,
+//!   "output": "steps", "max_drift": null, "consistency_tol": 1e-10, "assemble": false}`
+//!   (`h_max: null` is the unlimited default; `output` is `"steps"` or `{"every": dt}`).
 //! - `wall_seconds`: wall-clock duration of the run, as measured by the caller.
 //! - `versions`: `{"progmo": crate version, "git_revision": string or null}`.
 //! - `command_line`: array of strings, the arguments to rerun (program first).
@@ -119,7 +131,7 @@ pub use sinks::{Every, Tee};
 pub use summary::{summary_json, write_summary, write_summary_to_path, SummaryInput};
 
 use crate::model::Model;
-use crate::programme::{Constraints, Role};
+use crate::programme::{Constraints, Role, RowSpec};
 use crate::solve::{Problem, SampleSink, Trajectory};
 
 /// A sink whose output must be completed: `finish` flushes everything (and for wrappers, finishes
@@ -137,7 +149,7 @@ impl OutputSink for Trajectory {
 
 /// Names of the sampled quantities, and whether reactions are written.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct Layout {
+pub struct SampleLayout {
     /// Names of q.
     pub q_names: Vec<String>,
     /// Names of v (also of dv/dt, u and reactions).
@@ -148,21 +160,29 @@ pub struct Layout {
     pub reactions: bool,
 }
 
-impl Layout {
-    /// Names from a problem; `reactions` is true iff it has system-constraint rows.
-    pub fn from_problem<M: Model, C: Constraints>(problem: &Problem<M, C>) -> Self {
-        let rows = problem.constraints.rows();
-        Layout {
-            q_names: problem.model.q_names(),
-            v_names: problem.model.v_names(),
+impl SampleLayout {
+    /// Names of q, v and of the rows; `reactions` is true iff some row is a system constraint.
+    pub fn new(q_names: Vec<String>, v_names: Vec<String>, rows: &[RowSpec]) -> Self {
+        SampleLayout {
+            q_names,
+            v_names,
             row_names: rows.iter().map(|r| r.name.clone()).collect(),
             reactions: rows.iter().any(|r| r.role == Role::System),
         }
     }
 
+    /// Names from a problem; `reactions` is true iff it has system-constraint rows.
+    pub fn from_problem<M: Model, C: Constraints>(problem: &Problem<M, C>) -> Self {
+        Self::new(
+            problem.model.q_names(),
+            problem.model.v_names(),
+            problem.constraints.rows(),
+        )
+    }
+
     /// Names of a trajectory; `reactions` is true iff some reaction is non-zero.
     pub fn from_trajectory(traj: &Trajectory) -> Self {
-        Layout {
+        SampleLayout {
             q_names: traj.q_names.clone(),
             v_names: traj.v_names.clone(),
             row_names: traj.row_names.clone(),
@@ -268,12 +288,12 @@ impl OwnedSample {
 
 #[cfg(test)]
 pub(crate) mod testutil {
-    use super::Layout;
+    use super::SampleLayout;
     use crate::solve::{Sample, SampleSink};
 
     /// A layout with awkward names (a comma, a quote, a colon) and reactions.
-    pub fn layout() -> Layout {
-        Layout {
+    pub fn layout() -> SampleLayout {
+        SampleLayout {
             q_names: vec!["x".into(), "th,eta".into()],
             v_names: vec!["vx".into(), "w\"z".into()],
             row_names: vec!["speed".into(), "pos:1".into(), "sys".into()],
@@ -282,7 +302,7 @@ pub(crate) mod testutil {
     }
 
     /// Feed `n` samples with values that exercise full precision, at times `k * dt`.
-    pub fn feed(sink: &mut dyn SampleSink, layout: &Layout, n: usize, dt: f64) {
+    pub fn feed(sink: &mut dyn SampleSink, layout: &SampleLayout, n: usize, dt: f64) {
         for k in 0..n {
             let o = sample_values(layout, k);
             let t = k as f64 * dt;
@@ -301,7 +321,7 @@ pub(crate) mod testutil {
     }
 
     /// Values of sample k: q, v, a, u, reactions, lambda, residual, residual_rate.
-    pub fn sample_values(layout: &Layout, k: usize) -> [Vec<f64>; 8] {
+    pub fn sample_values(layout: &SampleLayout, k: usize) -> [Vec<f64>; 8] {
         let nq = layout.q_names.len();
         let nv = layout.v_names.len();
         let ns = layout.row_names.len();

@@ -15,14 +15,17 @@ const INTERVAL: Duration = Duration::from_millis(100);
 
 /// Wraps a sink and shows a progress bar on stderr over [t0, t1], keyed on the sample time, with
 /// the message `<scene> t=<t> max|res|=<largest |residual| so far>`. Silent (no bar, no
-/// bookkeeping beyond forwarding) when stderr is not a terminal or when disabled; the bar is
-/// updated at most 10 times per second.
+/// bookkeeping beyond forwarding) when stderr is not a terminal or when disabled; the bar appears
+/// at the first sample and is updated at most 10 times per second.
 pub struct Progress<S> {
     inner: S,
+    /// Show a bar: stderr is a terminal and the bar is not disabled.
+    show: bool,
     bar: Option<ProgressBar>,
     scene: String,
     t0: f64,
     t1: f64,
+    last_t: f64,
     max_residual: f64,
     last_update: Option<Instant>,
 }
@@ -30,31 +33,23 @@ pub struct Progress<S> {
 impl<S: SampleSink> Progress<S> {
     /// A bar for `scene` over [t0, t1] if stderr is a terminal.
     pub fn new(inner: S, scene: &str, t0: f64, t1: f64) -> Self {
-        let bar = std::io::stderr().is_terminal().then(|| {
-            let bar =
-                ProgressBar::with_draw_target(Some(TICKS), ProgressDrawTarget::stderr_with_hz(10));
-            if let Ok(style) =
-                ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {percent:>3}% {msg}")
-            {
-                bar.set_style(style.progress_chars("=> "));
-            }
-            bar.set_message(scene.to_string());
-            bar
-        });
         Progress {
             inner,
-            bar,
+            show: std::io::stderr().is_terminal(),
+            bar: None,
             scene: scene.to_string(),
             t0,
             t1,
+            last_t: t0,
             max_residual: 0.0,
             last_update: None,
         }
     }
 
-    /// Enable or disable the bar (disabling removes it; enabling only works on a terminal).
+    /// Enable or disable the bar (it is never shown when stderr is not a terminal).
     pub fn enabled(mut self, enabled: bool) -> Self {
-        if !enabled {
+        self.show &= enabled;
+        if !self.show {
             if let Some(b) = self.bar.take() {
                 b.finish_and_clear();
             }
@@ -62,9 +57,9 @@ impl<S: SampleSink> Progress<S> {
         self
     }
 
-    /// True when a bar is shown.
+    /// True when a bar is (to be) shown.
     pub fn is_active(&self) -> bool {
-        self.bar.is_some()
+        self.show
     }
 
     /// Largest |residual| seen so far (tracked only while the bar is active).
@@ -109,11 +104,22 @@ impl<S: SampleSink> Progress<S> {
 impl<S: SampleSink> SampleSink for Progress<S> {
     fn sample(&mut self, s: &Sample<'_>) {
         self.inner.sample(s);
-        if self.bar.is_none() {
+        if !self.show {
             return;
         }
+        if self.bar.is_none() {
+            let bar =
+                ProgressBar::with_draw_target(Some(TICKS), ProgressDrawTarget::stderr_with_hz(10));
+            if let Ok(style) =
+                ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {percent:>3}% {msg}")
+            {
+                bar.set_style(style.progress_chars("=> "));
+            }
+            self.bar = Some(bar);
+        }
+        self.last_t = s.t;
         for r in s.residual {
-            // NaN propagates: a non-finite residual should show.
+            // NaN sticks: a non-finite residual should show.
             let a = r.abs();
             if a.is_nan() || a > self.max_residual {
                 self.max_residual = a;
@@ -134,9 +140,11 @@ impl<S: OutputSink> OutputSink for Progress<S> {
     /// Finishes the wrapped sink, then leaves the bar at its final state.
     fn finish(&mut self) -> Result<(), OutputError> {
         let r = self.inner.finish();
+        self.update(self.last_t);
         if let Some(bar) = self.bar.take() {
             bar.finish();
         }
+        self.show = false;
         r
     }
 }
@@ -156,6 +164,26 @@ mod tests {
         let mut expect = l.trajectory();
         feed(&mut expect, &l, 50, 0.02);
         assert_eq!(p.inner(), &expect);
+    }
+
+    #[test]
+    fn progress_tracks_the_max_residual_when_active() {
+        // Active only when stderr is a terminal; forwarding holds either way.
+        let l = layout();
+        let mut p = Progress::new(l.trajectory(), "scene", 0.0, 1.0);
+        feed(&mut p, &l, 200, 0.005);
+        if p.is_active() {
+            let mut all = l.trajectory();
+            feed(&mut all, &l, 200, 0.005);
+            assert_eq!(
+                p.max_residual(),
+                all.residual.iter().fold(0.0, |m, r| r.abs().max(m))
+            );
+        } else {
+            assert_eq!(p.max_residual(), 0.0);
+        }
+        p.finish().unwrap();
+        assert_eq!(p.into_inner().len(), 200);
     }
 
     #[test]
