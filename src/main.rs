@@ -11,7 +11,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use progmo::formulation::Formulation;
 use progmo::integrate::Method;
 use progmo::output::{
-    write_summary_to_path, CsvSink, Layout, McapSink, OutputSink, Progress, SummaryInput, Tee,
+    write_summary_to_path, CsvSink, McapSink, OutputSink, Progress, SampleLayout, SummaryInput, Tee,
 };
 use progmo::scene::{Scene, SceneError};
 use progmo::solve::{DriftControl, Output, ReturnCode, Settings};
@@ -265,7 +265,7 @@ fn solve(a: SolveArgs) -> ExitCode {
         eprintln!("progmo solve: error: cannot create {}: {e}", out.display());
         return ExitCode::from(3);
     }
-    let layout = progmo::with_problem!(&scene.system, p => Layout::from_problem(p));
+    let layout = progmo::with_problem!(&scene.system, p => SampleLayout::from_problem(p));
     let (t0, t1) = scene.span();
     let csv_path = out.join("trajectory.csv");
     let csv = match CsvSink::create(&csv_path, &layout) {

@@ -359,3 +359,33 @@ fn integrators_converge_at_their_order_on_euclidean_and_lie_group_problems() {
         assert!((o2 - n).abs() < 0.2, "{m:?} heavy top order {o2}");
     }
 }
+
+/// Regression snapshot of the solver statistics (numbers observed when this test was written, not
+/// derived: any change in step control, projection or formulation shows up here and must be
+/// explained, then the snapshot updated).
+#[test]
+fn statistics_snapshot() {
+    let sol = run(&particle::example_2_1(), &settings());
+    let st = &sol.stats;
+    let got = (
+        st.integrator.steps,
+        st.integrator.rejected,
+        st.integrator.rhs_evals,
+        st.projections,
+        st.projection_iterations,
+    );
+    eprintln!("example_2_1 statistics: {got:?}");
+    assert_eq!(got, SNAPSHOT_2_1);
+    let sol = run(&rigid_body::heavy_top(), &settings());
+    let st = &sol.stats;
+    let got = (
+        st.integrator.steps,
+        st.integrator.rejected,
+        st.integrator.rhs_evals,
+    );
+    eprintln!("heavy_top statistics: {got:?}");
+    assert_eq!(got, SNAPSHOT_TOP);
+}
+
+const SNAPSHOT_2_1: (usize, usize, usize, usize, usize) = (40, 3, 637, 2, 2);
+const SNAPSHOT_TOP: (usize, usize, usize) = (122, 7, 1969);

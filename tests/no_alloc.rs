@@ -1,0 +1,85 @@
+//! The right-hand side allocates nothing (issue requirement; Pinocchio's "hot paths must not
+//! allocate"): a counting global allocator around repeated evaluations of every formulation, on a
+//! Euclidean, a quaternion, an expression-based tree scene and a system with system constraints.
+
+use progmo::formulation::{Formulation, RankTolerances};
+use progmo::model::Model;
+use progmo::problems::{particle, pendulum, rigid_body};
+use progmo::programme::Constraints;
+use progmo::solve::{Evaluator, Problem};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+struct Counting;
+
+thread_local! {
+    // Per thread, so that tests running in parallel do not see each other's allocations.
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
+}
+
+fn count() -> usize {
+    ALLOCATIONS.with(|c| c.get())
+}
+
+fn bump() {
+    let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        bump();
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        unsafe { System.dealloc(p, l) }
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
+        bump();
+        unsafe { System.realloc(p, l, n) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn allocations_per_evaluation<M: Model, C: Constraints>(p: &Problem<M, C>) -> usize {
+    let mut worst = 0;
+    for f in Formulation::ALL {
+        let mut ev = Evaluator::<M, C, f64>::new(&p.model, &p.constraints);
+        let tol = RankTolerances::default();
+        ev.evaluate(f, &tol, None, p.t0, &p.q0, &p.v0).unwrap(); // warm-up
+        let before = count();
+        for k in 0..10 {
+            ev.evaluate(f, &tol, None, p.t0 + 0.01 * k as f64, &p.q0, &p.v0)
+                .unwrap();
+        }
+        let n = count() - before;
+        if n > 0 {
+            eprintln!("{f:?}: {n} allocations in 10 evaluations");
+        }
+        worst = worst.max(n);
+    }
+    worst
+}
+
+#[test]
+fn right_hand_side_does_not_allocate() {
+    assert_eq!(allocations_per_evaluation(&particle::example_2_1()), 0);
+    assert_eq!(allocations_per_evaluation(&rigid_body::heavy_top()), 0);
+    assert_eq!(allocations_per_evaluation(&pendulum::rod_and_swing()), 0);
+    let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("references/scenes");
+    for name in ["heavy_top", "double_pendulum", "example_2_1"] {
+        let scene = progmo::scene::Scene::load(&dir.join(format!("{name}.toml"))).unwrap();
+        let n = progmo::with_problem!(&scene.system, p => allocations_per_evaluation(p));
+        assert_eq!(n, 0, "{name}");
+    }
+}
+
+#[test]
+fn the_counter_counts() {
+    // Negative control: an allocating call is seen.
+    let before = count();
+    let v = std::hint::black_box(vec![1u8; 100]);
+    assert!(count() > before);
+    drop(v);
+}
