@@ -1,0 +1,348 @@
+//! URDF writer (for Pinocchio 4.1).
+
+use super::{
+    attractor_forces, check_options, children, esc, num, nums, Conversion, CoordMap, ExportError,
+    ExportOptions, ExportReport, Format, HarnessForce, RootJoint,
+};
+use crate::tree::{JointType, Model};
+use nalgebra::{Matrix3, Vector3};
+use std::collections::{HashMap, HashSet};
+use std::fmt::Write;
+
+/// Same report type for both formats.
+pub type UrdfReport = ExportReport;
+
+/// Joint limits written on revolute/prismatic joints: wide open. `continuous` is not used because
+/// Pinocchio maps it to `JointModelRevoluteUnbounded` (nq = 2: cos, sin).
+const OPEN: f64 = 1e10;
+
+type ChildJoints = HashMap<String, Vec<(String, String, Option<usize>)>>;
+
+/// Depth-first joint order from link `l` (reached by our joint `j`), child joints by name.
+fn dfs(l: String, j: Option<usize>, map: &mut ChildJoints, order: &mut Vec<usize>) {
+    order.extend(j);
+    let mut cj = map.remove(&l).unwrap_or_default();
+    cj.sort_by(|a, b| a.0.as_bytes().cmp(b.0.as_bytes()));
+    for (_, c, cj) in cj {
+        dfs(c, cj, map, order);
+    }
+}
+
+/// Fixed-axis roll, pitch, yaw of `r` (URDF: `R = Rz(yaw) Ry(pitch) Rx(roll)`).
+pub(crate) fn rpy(r: &Matrix3<f64>) -> [f64; 3] {
+    let c = (r[(0, 0)] * r[(0, 0)] + r[(1, 0)] * r[(1, 0)]).sqrt();
+    let pitch = (-r[(2, 0)]).atan2(c);
+    if c > 1e-9 {
+        [
+            r[(2, 1)].atan2(r[(2, 2)]),
+            pitch,
+            r[(1, 0)].atan2(r[(0, 0)]),
+        ]
+    } else {
+        // gimbal lock: roll = 0, yaw from the upper-left block
+        [0.0, pitch, (-r[(0, 1)]).atan2(r[(1, 1)])]
+    }
+}
+
+/// URDF document for Pinocchio and its [`ExportReport`] (see the module doc for the policies:
+/// chains of massless links, ball joints, free joints, gravity).
+///
+/// Pinocchio numbers the joints depth-first from the root link, the child joints of a link in
+/// byte order of their names (urdfdom keeps joints in a name-sorted map); fixed joints add no
+/// coordinates. The maps in the report follow that order and reorder quaternions to Pinocchio's
+/// (x, y, z, w). Springs and dampers are not part of URDF dynamics: they are listed as
+/// [`HarnessForce`]s.
+pub fn urdf(tree: &Model, options: &ExportOptions) -> Result<(String, UrdfReport), ExportError> {
+    check_options(options)?;
+    let bodies = tree.bodies();
+    let joints = tree.joints();
+    let n = bodies.len();
+    let ch = children(tree);
+    let unsupported = |what: String| ExportError::Unsupported {
+        format: Format::Urdf,
+        what,
+    };
+
+    // Ball joints: only as the root joint (first joint of the only child of the world, centred at
+    // the world origin, body unrotated) since Pinocchio places a root joint at the identity.
+    let mut root_ball: Option<usize> = None;
+    for (j, jt) in joints.iter().enumerate() {
+        if jt.joint_type() != JointType::Ball {
+            continue;
+        }
+        let b = &bodies[jt.body];
+        let first = b.joints.start == j;
+        let only = b.parent.is_none() && ch[n].len() == 1;
+        let centre = b.pos + b.rot * jt.anchor;
+        let unrotated =
+            (b.quat[0] - 1.0).abs() <= 1e-15 && b.quat[1..].iter().all(|c| c.abs() <= 1e-15);
+        if first && only && centre.norm() <= 1e-15 && unrotated {
+            root_ball = Some(j);
+        } else {
+            return Err(unsupported(format!(
+                "ball joint '{}' of body '{}': URDF has no spherical joint; only a ball joint \
+                 that is the first joint of the only child of the world, centred at the origin \
+                 (pos + R anchor = 0) with an unrotated body, can be exported (as Pinocchio root \
+                 joint JointModelSpherical)",
+                jt.name, b.name
+            )));
+        }
+    }
+
+    // Effective anchor of a joint: hinge/ball rotate about it, slides/free have none.
+    let anchor = |j: usize| -> Vector3<f64> {
+        match joints[j].joint_type() {
+            JointType::Hinge { .. } | JointType::Ball => joints[j].anchor,
+            _ => Vector3::zeros(),
+        }
+    };
+    // Link frame of a body = body frame translated by the anchor of its last joint.
+    let off = |b: usize| -> Vector3<f64> {
+        let r = bodies[b].joints.clone();
+        if r.is_empty() {
+            Vector3::zeros()
+        } else {
+            anchor(r.end - 1)
+        }
+    };
+
+    // Names: links and joints must be unique.
+    let mut link_names = HashSet::new();
+    let mut joint_names = HashSet::new();
+    let collide = |name: &str| ExportError::NameCollision {
+        format: Format::Urdf,
+        name: name.to_string(),
+    };
+    if root_ball.is_none() {
+        link_names.insert("world".to_string());
+    }
+    let link_of = |b: usize, k: usize| -> String {
+        let body = &bodies[b];
+        if body.joints.is_empty() || k + 1 == body.joints.len() {
+            body.name.clone()
+        } else {
+            format!("{}__{}", body.name, joints[body.joints.start + k].name)
+        }
+    };
+
+    // Elements in our body order (URDF elements are unordered).
+    let mut links = String::new();
+    let mut ujoints = String::new();
+    // URDF child joints per link name: (joint name, child link, Some(our joint) or None if fixed)
+    let mut child_joints: ChildJoints = HashMap::new();
+    let mut harness_forces = attractor_forces(tree);
+    for (b, body) in bodies.iter().enumerate() {
+        let nj = body.joints.len();
+        let nlinks = nj.max(1);
+        for k in 0..nlinks {
+            let lname = link_of(b, k);
+            if !link_names.insert(lname.clone()) {
+                return Err(collide(&lname));
+            }
+            let _ = write!(links, "  <link name=\"{}\">", esc(&lname));
+            if k + 1 == nlinks && !body.massless {
+                let i = &body.inertia;
+                let c = body.com - off(b);
+                let _ = write!(
+                    links,
+                    "\n    <inertial>\n      <origin xyz=\"{}\" rpy=\"0 0 0\"/>\n      \
+                     <mass value=\"{}\"/>\n      <inertia ixx=\"{}\" ixy=\"{}\" ixz=\"{}\" \
+                     iyy=\"{}\" iyz=\"{}\" izz=\"{}\"/>\n    </inertial>\n  ",
+                    nums(c.as_slice()),
+                    num(body.mass),
+                    num(i[(0, 0)]),
+                    num(i[(0, 1)]),
+                    num(i[(0, 2)]),
+                    num(i[(1, 1)]),
+                    num(i[(1, 2)]),
+                    num(i[(2, 2)])
+                );
+            }
+            let _ = writeln!(links, "</link>");
+        }
+        let (parent_link, parent_off) = match body.parent {
+            None => ("world".to_string(), Vector3::zeros()),
+            Some(p) => (bodies[p].name.clone(), off(p)),
+        };
+        for k in 0..nlinks {
+            let j = body.joints.start + k;
+            if Some(j) == root_ball {
+                continue; // the root joint, passed by the harness
+            }
+            let plink = if k == 0 {
+                parent_link.clone()
+            } else {
+                link_of(b, k - 1)
+            };
+            let clink = link_of(b, k);
+            // origin = T(-off_parent) P T(a_0) for the first joint, T(a_k - a_{k-1}) after.
+            let (xyz, rot) = if nj == 0 {
+                (body.pos - parent_off, body.rot)
+            } else if k == 0 {
+                if joints[j].joint_type() == JointType::Free {
+                    // q of a free joint is the world pose of the body: identity placement
+                    (-parent_off, Matrix3::identity())
+                } else {
+                    (body.pos + body.rot * anchor(j) - parent_off, body.rot)
+                }
+            } else {
+                (anchor(j) - anchor(j - 1), Matrix3::identity())
+            };
+            let jname = if nj == 0 {
+                format!("{}__fixed", body.name)
+            } else {
+                joints[j].name.clone()
+            };
+            if !joint_names.insert(jname.clone()) {
+                return Err(collide(&jname));
+            }
+            let (ty, extra) = if nj == 0 {
+                ("fixed", String::new())
+            } else {
+                let lim = format!(
+                    "\n    <limit lower=\"{}\" upper=\"{}\" effort=\"{}\" velocity=\"{}\"/>",
+                    num(-OPEN),
+                    num(OPEN),
+                    num(OPEN),
+                    num(OPEN)
+                );
+                match joints[j].joint_type() {
+                    JointType::Hinge { axis } => (
+                        "revolute",
+                        format!("\n    <axis xyz=\"{}\"/>{lim}", nums(&axis)),
+                    ),
+                    JointType::Slide { axis } => (
+                        "prismatic",
+                        format!("\n    <axis xyz=\"{}\"/>{lim}", nums(&axis)),
+                    ),
+                    JointType::Free => ("floating", String::new()),
+                    JointType::Ball => unreachable!("checked above"),
+                }
+            };
+            let _ = writeln!(
+                ujoints,
+                "  <joint name=\"{}\" type=\"{ty}\">\n    <parent link=\"{}\"/>\n    \
+                 <child link=\"{}\"/>\n    <origin xyz=\"{}\" rpy=\"{}\"/>{extra}\n  </joint>",
+                esc(&jname),
+                esc(&plink),
+                esc(&clink),
+                nums(xyz.as_slice()),
+                nums(&rpy(&rot))
+            );
+            child_joints
+                .entry(plink)
+                .or_default()
+                .push((jname, clink, (nj > 0).then_some(j)));
+        }
+    }
+
+    // Pinocchio's joint order: DFS from the root link, child joints sorted by name.
+    let root_link = match root_ball {
+        Some(j) => link_of(joints[j].body, 0),
+        None => "world".to_string(),
+    };
+    let mut order: Vec<usize> = root_ball.into_iter().collect();
+    dfs(root_link, None, &mut child_joints, &mut order);
+
+    let mut qmap: Vec<Option<CoordMap>> = vec![None; tree.nq()];
+    let mut vmap: Vec<Option<CoordMap>> = vec![None; tree.nv()];
+    let (mut sq, mut sv) = (0usize, 0usize);
+    for &j in &order {
+        let jt = &joints[j];
+        // (our offset, simulator offset, conversion) per q and v entry
+        let (qperm, vconv): (Vec<usize>, Vec<Conversion>) = match jt.joint_type() {
+            JointType::Hinge { .. } | JointType::Slide { .. } => (vec![0], vec![Conversion::Same]),
+            // ours (w, x, y, z) -> Pinocchio (x, y, z, w)
+            JointType::Ball => (vec![3, 0, 1, 2], vec![Conversion::Same; 3]),
+            // ours (x, y, z, w, qx, qy, qz) -> Pinocchio (x, y, z, qx, qy, qz, w); linear velocity
+            // world-frame (ours) vs local (JointModelFreeFlyer)
+            JointType::Free => (
+                vec![0, 1, 2, 6, 3, 4, 5],
+                [[Conversion::BodyFrame; 3], [Conversion::Same; 3]].concat(),
+            ),
+        };
+        for (k, &s) in qperm.iter().enumerate() {
+            qmap[jt.iq + k] = Some(CoordMap {
+                index: jt.iq + k,
+                name: tree.q_names()[jt.iq + k].clone(),
+                sim_index: sq + s,
+                sim_joint: jt.name.clone(),
+                conversion: Conversion::Same,
+            });
+        }
+        for (k, c) in vconv.iter().enumerate() {
+            vmap[jt.iv + k] = Some(CoordMap {
+                index: jt.iv + k,
+                name: tree.v_names()[jt.iv + k].clone(),
+                sim_index: sv + k,
+                sim_joint: jt.name.clone(),
+                conversion: *c,
+            });
+        }
+        if jt.stiffness != 0.0 {
+            harness_forces.push(HarnessForce::Spring {
+                joint: jt.name.clone(),
+                stiffness: jt.stiffness,
+                spring_ref: jt.spring_ref,
+                sim_q: sq,
+                sim_v: sv,
+            });
+        }
+        if jt.damping != 0.0 {
+            harness_forces.push(HarnessForce::Damper {
+                joint: jt.name.clone(),
+                damping: jt.damping,
+                sim_v: sv,
+                nv: jt.nv,
+            });
+        }
+        sq += jt.nq;
+        sv += jt.nv;
+    }
+
+    let mut x = String::new();
+    let _ = writeln!(x, "<?xml version=\"1.0\"?>");
+    let _ = writeln!(x, "<robot name=\"{}\">", esc(&options.name));
+    if root_ball.is_none() {
+        let _ = writeln!(x, "  <link name=\"world\"/>");
+    }
+    x.push_str(&links);
+    x.push_str(&ujoints);
+    let _ = writeln!(x, "</robot>");
+
+    let mut notes = vec![
+        "gravity is not part of URDF: set model.gravity.linear = report.gravity".to_string(),
+        "quaternions in Pinocchio qpos are (x, y, z, w); the q map reorders them".to_string(),
+        "massless intermediate links {body}__{joint} carry the joints of multi-joint bodies"
+            .to_string(),
+    ];
+    if joints.iter().any(|j| j.joint_type() == JointType::Free) {
+        notes.push(
+            "free joint: Pinocchio's linear velocity/force are body-frame (R^T v_world)".into(),
+        );
+    }
+    let root_joint = root_ball.map(|j| {
+        notes.push("load with pin.buildModel(urdf, root_joint.python, root_joint.name)".into());
+        RootJoint {
+            python: "pin.JointModelSpherical()".into(),
+            name: joints[j].name.clone(),
+        }
+    });
+    let report = ExportReport {
+        format: Format::Urdf,
+        mass_changes: vec![],
+        harness_forces,
+        q_map: qmap
+            .into_iter()
+            .map(|m| m.expect("every joint is mapped"))
+            .collect(),
+        v_map: vmap
+            .into_iter()
+            .map(|m| m.expect("every joint is mapped"))
+            .collect(),
+        gravity: tree.fields().gravity,
+        root_joint,
+        notes,
+    };
+    Ok((x, report))
+}
