@@ -172,7 +172,7 @@ pub struct InitialFile {
 pub struct TimeFile {
     #[serde(default)]
     pub t0: f64,
-    pub t1: f64,
+    pub t1: Spanned<f64>,
     /// Output sample spacing; absent: one sample per accepted step.
     #[serde(default)]
     pub output_dt: Option<f64>,

@@ -131,7 +131,8 @@ pub(super) fn load(src: Source) -> R<Scene> {
             ))
         }
     };
-    crate::with_problem!(&system, p => check_acceleration_rows(&src, p, &spans)?);
+    let n_system = file.constraints.len();
+    crate::with_problem!(&system, p => check_acceleration_rows(&src, p, &spans, n_system)?);
     let settings = solver(&src, &file)?;
     let tolerances = tolerances(&src, &file)?;
     Ok(Scene {
@@ -331,18 +332,21 @@ fn lagrangian(
                     if let Some(bad) = sym.outside(&e, &q_only) {
                         return Err(src.error(s.span(), &field, format!("the mass matrix may depend on the coordinates only, not on `{bad}`")));
                     }
-                    // The lower triangle must be the same expression text or value (checked at q0).
+                    // The lower triangle must be the same expression text, or agree in value at
+                    // a few probe points (two different texts used to pass unchecked unless both
+                    // were constants).
                     let sl = &rows[j].get_ref()[i];
                     let fl = format!("model.mass_matrix[{j}][{i}]");
                     let el = sym.compile(src, sl, &fl)?;
-                    if el.source().trim() != e.source().trim() && el.constant() != e.constant() {
-                        let probe: Vec<f64> = (0..sym.total_slots())
-                            .map(|k| 0.3 + 0.1 * k as f64)
-                            .collect();
-                        if (el.value(&probe) - e.value(&probe)).abs()
-                            > 1e-12 * e.value(&probe).abs().max(1.0)
-                        {
-                            return Err(src.error(sl.span(), &fl, format!("the mass matrix must be symmetric: differs from entry [{i}][{j}]")));
+                    if el.source().trim() != e.source().trim() {
+                        for p in 0..3 {
+                            let probe: Vec<f64> = (0..sym.total_slots())
+                                .map(|k| 0.3 + 0.1 * k as f64 + 0.37 * (p * (k % 3)) as f64)
+                                .collect();
+                            let (x, y) = (e.value(&probe), el.value(&probe));
+                            if !((x - y).abs() <= 1e-12 * x.abs().max(1.0)) {
+                                return Err(src.error(sl.span(), &fl, format!("the mass matrix must be symmetric: differs from entry [{i}][{j}]")));
+                            }
                         }
                     }
                     if e.constant() != Some(0.0) {
@@ -513,6 +517,11 @@ fn tree_scene(
         };
         let idx = body.and_then(|b| m.bodies.iter().position(|x| x.get_ref().name == b));
         match idx {
+            // Inertia problems point at the inertia itself.
+            Some(i) if msg.contains("inertia") && m.bodies[i].get_ref().inertia.is_some() => {
+                let span = m.bodies[i].get_ref().inertia.as_ref().unwrap().span();
+                src.error(span, &format!("model.bodies[{i}].inertia"), msg)
+            }
             Some(i) => src.error(m.bodies[i].span(), &format!("model.bodies[{i}]"), msg),
             None => src.error(m.kind.span(), "model", msg),
         }
@@ -674,10 +683,18 @@ fn rows(
     }
     let nv = sym.layout.nv;
     if specs.len() > nv {
-        return Err(src.general(
-            "programme",
+        // Point at the first row beyond the number of degrees of freedom.
+        let nc = file.constraints.len();
+        let (row, field) = if nv < nc {
+            (&file.constraints[nv], format!("constraints[{nv}]"))
+        } else {
+            (&file.programme[nv - nc], format!("programme[{}]", nv - nc))
+        };
+        return Err(src.error(
+            row.name.span(),
+            &field,
             format!(
-                "{} rows (constraints + programme) for {nv} degrees of freedom: at most {nv}",
+                "too many rows: {} (constraints + programme) for {nv} degrees of freedom, at most {nv}",
                 specs.len()
             ),
         ));
@@ -799,11 +816,12 @@ fn initial(
 
 fn span(src: &Source, file: &SceneFile) -> R<(f64, f64)> {
     let t = file.time.get_ref();
-    if !(t.t1 > t.t0) || !t.t0.is_finite() || !t.t1.is_finite() {
+    let (t0, t1) = (t.t0, *t.t1.get_ref());
+    if !(t1 > t0) || !t0.is_finite() || !t1.is_finite() {
         return Err(src.error(
-            file.time.span(),
+            t.t1.span(),
             "time.t1",
-            format!("t1 = {} must be after t0 = {}", t.t1, t.t0),
+            format!("t1 = {t1} must be after t0 = {t0}"),
         ));
     }
     if let Some(dt) = t.output_dt {
@@ -815,7 +833,7 @@ fn span(src: &Source, file: &SceneFile) -> R<(f64, f64)> {
             ));
         }
     }
-    Ok((t.t0, t.t1))
+    Ok((t0, t1))
 }
 
 fn choose<T: Copy>(
@@ -963,9 +981,16 @@ fn check_mass<M: Model, C: Constraints>(
     let bad =
         a.iter().any(|x| !x.is_finite()) || crate::linalg::cholesky(&mut a.clone(), n).is_err();
     if bad {
+        // Lagrangian models point at the matrix they give; tree models at the model.
+        let m = file.model.get_ref();
+        let (span, field) = match (&m.mass_matrix, &m.mass_diagonal) {
+            (Some(a), _) => (a.span(), "model.mass_matrix"),
+            (None, Some(d)) => (d.span(), "model.mass_diagonal"),
+            _ => (file.model.span(), "model"),
+        };
         return Err(src.error(
-            file.model.span(),
-            "model",
+            span,
+            field,
             "the mass matrix is not positive definite (or not finite) at the initial configuration",
         ));
     }
@@ -977,6 +1002,7 @@ fn check_acceleration_rows<M: Model, C: Constraints>(
     src: &Source,
     p: &Problem<M, C>,
     spans: &[Range<usize>],
+    n_system: usize,
 ) -> R<()> {
     let rows = p.constraints.rows();
     if !rows.iter().any(|r| r.level == Level::Acceleration) {
@@ -1001,9 +1027,14 @@ fn check_acceleration_rows<M: Model, C: Constraints>(
             }
             let scale = h0[i].abs().max(h1[i].abs()).max(h2[i].abs()).max(1.0);
             if (h2[i] - 2.0 * h1[i] + h0[i]).abs() > 1e-9 * scale {
+                let field = if i < n_system {
+                    format!("constraints[{i}].expr")
+                } else {
+                    format!("programme[{}].expr", i - n_system)
+                };
                 return Err(src.error(
                     spans[i].clone(),
-                    &format!("row {}", r.name),
+                    &field,
                     "an acceleration-level row must be linear in the accelerations",
                 ));
             }
