@@ -564,3 +564,36 @@ fn planar_arm_tip_moves_along_its_line() {
     }
     assert!(worst < 1e-9, "tip off its line by {worst:e}");
 }
+
+/// The annotated example of FORMAT.md loads and solves within its tolerance (the page cannot
+/// drift from the loader unnoticed).
+#[test]
+fn the_annotated_example_of_format_md_solves() {
+    let page = std::fs::read_to_string(root().join("src/scene/FORMAT.md")).unwrap();
+    let section = page
+        .split_once("## A complete annotated example")
+        .expect("section")
+        .1;
+    let block = section
+        .split_once("```toml\n")
+        .unwrap()
+        .1
+        .split_once("```")
+        .unwrap()
+        .0;
+    let s = Scene::from_text(Path::new("FORMAT.md"), block).unwrap_or_else(|e| panic!("{e}"));
+    let sol = s.solve(&s.settings);
+    assert!(sol.code.is_success(), "{:?}", sol.code);
+    let worst = sol.max_residual.iter().cloned().fold(0.0, f64::max);
+    assert!(worst <= s.tolerance("programme_residual").unwrap());
+    let mut errors = vec![];
+    let sch = schema();
+    check(
+        &sch,
+        &sch,
+        &toml::from_str(block).unwrap(),
+        "FORMAT.md",
+        &mut errors,
+    );
+    assert!(errors.is_empty(), "{errors:?}");
+}

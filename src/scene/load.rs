@@ -242,11 +242,12 @@ fn lagrangian(
         || !m.sites.is_empty()
         || m.gravity.is_some()
         || !m.point_forces.is_empty()
+        || !m.attractors.is_empty()
     {
         return Err(src.error(
             m.kind.span(),
             "model",
-            "bodies, sites, gravity and point_forces belong to `tree` models",
+            "bodies, sites, gravity, attractors and point_forces belong to `tree` models",
         ));
     }
     if m.coordinates.is_empty() {
