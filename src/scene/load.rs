@@ -825,10 +825,11 @@ fn span(src: &Source, file: &SceneFile) -> R<(f64, f64)> {
             format!("t1 = {t1} must be after t0 = {t0}"),
         ));
     }
-    if let Some(dt) = t.output_dt {
+    if let Some(s) = &t.output_dt {
+        let dt = *s.get_ref();
         if !(dt > 0.0) || !dt.is_finite() {
             return Err(src.error(
-                file.time.span(),
+                s.span(),
                 "time.output_dt",
                 format!("must be positive, got {dt}"),
             ));
@@ -880,7 +881,27 @@ fn solver(src: &Source, file: &SceneFile) -> R<Settings> {
         ],
         s.formulation,
     )?;
-    let step = f.step.unwrap_or(0.0);
+    let num = |x: &Option<Spanned<f64>>| x.as_ref().map(|x| *x.get_ref());
+    for (name, x) in [
+        ("step", &f.step),
+        ("rtol", &f.rtol),
+        ("atol", &f.atol),
+        ("max_step", &f.max_step),
+        ("projection_tol", &f.projection_tol),
+        ("max_drift", &f.max_drift),
+    ] {
+        if let Some(x) = x {
+            let v = *x.get_ref();
+            if !(v > 0.0) || !v.is_finite() {
+                return Err(src.error(
+                    x.span(),
+                    &format!("solver.{name}"),
+                    format!("must be positive, got {v}"),
+                ));
+            }
+        }
+    }
+    let step = num(&f.step).unwrap_or(0.0);
     s.integrator = choose(
         src,
         &f.integrator,
@@ -899,26 +920,10 @@ fn solver(src: &Source, file: &SceneFile) -> R<Settings> {
             return Err(src.error(span, "solver.step", "rk4 needs a positive fixed `step`"));
         }
     }
-    for (name, x) in [
-        ("rtol", f.rtol),
-        ("atol", f.atol),
-        ("max_step", f.max_step),
-        ("projection_tol", f.projection_tol),
-        ("max_drift", f.max_drift),
-    ] {
-        if let Some(x) = x {
-            if !(x > 0.0) || !x.is_finite() {
-                return Err(src.general(
-                    &format!("solver.{name}"),
-                    format!("must be positive, got {x}"),
-                ));
-            }
-        }
-    }
-    s.rtol = f.rtol.unwrap_or(s.rtol);
-    s.atol = f.atol.unwrap_or(s.atol);
-    s.h_max = f.max_step.unwrap_or(s.h_max);
-    s.max_drift = f.max_drift;
+    s.rtol = num(&f.rtol).unwrap_or(s.rtol);
+    s.atol = num(&f.atol).unwrap_or(s.atol);
+    s.h_max = num(&f.max_step).unwrap_or(s.h_max);
+    s.max_drift = num(&f.max_drift);
     let drift = choose(
         src,
         &f.drift,
@@ -928,17 +933,17 @@ fn solver(src: &Source, file: &SceneFile) -> R<Settings> {
     )?;
     s.drift = match drift {
         0 => DriftControl::Projection {
-            tol: f.projection_tol.unwrap_or(1e-12),
+            tol: num(&f.projection_tol).unwrap_or(1e-12),
             max_iter: 8,
         },
         1 => DriftControl::Baumgarte {
-            alpha: f.baumgarte_alpha.unwrap_or(1.0),
-            beta: f.baumgarte_beta.unwrap_or(1.0),
+            alpha: num(&f.baumgarte_alpha).unwrap_or(1.0),
+            beta: num(&f.baumgarte_beta).unwrap_or(1.0),
         },
         _ => DriftControl::None,
     };
-    s.output = match file.time.get_ref().output_dt {
-        Some(dt) => Output::Every(dt),
+    s.output = match &file.time.get_ref().output_dt {
+        Some(dt) => Output::Every(*dt.get_ref()),
         None => Output::Steps,
     };
     s.assemble = file.initial.get_ref().assemble;
