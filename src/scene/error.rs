@@ -128,12 +128,67 @@ impl Source {
         }
     }
 
-    /// A TOML syntax or type error.
+    /// A TOML syntax or type error. The field is reconstructed from the text: the table header in
+    /// force at the error (array-of-tables entries counted, `[[model.bodies]]` -> `model.bodies[1]`)
+    /// and the key on the error's line (best effort: empty for syntax errors outside a key/value).
     pub fn toml_error(&self, e: &toml::de::Error) -> SceneError {
         let msg = e.message().trim().to_string();
         match e.span() {
-            Some(span) => self.error(span, "", msg),
+            Some(span) => {
+                let field = self.field_at(span.start);
+                self.error(span, &field, msg)
+            }
             None => self.general("", msg),
+        }
+    }
+
+    /// Dotted field path at a byte offset, from the table headers above it and the key of its line.
+    fn field_at(&self, offset: usize) -> String {
+        let offset = offset.min(self.text.len());
+        let mut table = String::new();
+        let mut counts: std::collections::HashMap<String, usize> = Default::default();
+        let mut line_start = 0;
+        for line in self.text.split_inclusive('\n') {
+            if line_start + line.len() > offset {
+                break;
+            }
+            line_start += line.len();
+            let l = line.trim();
+            if let Some(name) = l.strip_prefix("[[").and_then(|r| r.split("]]").next()) {
+                let name = name.trim().to_string();
+                let k = counts.entry(name.clone()).or_insert(0);
+                table = format!("{name}[{k}]");
+                *k += 1;
+                // Entries of a nested array restart when their parent gets a new entry.
+                counts.retain(|n, _| !n.starts_with(&format!("{name}.")));
+            } else if let Some(name) = l.strip_prefix('[').and_then(|r| r.split(']').next()) {
+                table = name.trim().to_string();
+            }
+        }
+        let key_line = &self.text[line_start..offset];
+        let key = key_line
+            .split_once('=')
+            .map(|(k, _)| k)
+            .unwrap_or(key_line)
+            .trim()
+            .trim_matches('"');
+        let key_ok = !key.is_empty()
+            && key
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '.' || c == '-');
+        let key = if key_ok {
+            key.to_string()
+        } else {
+            // The offset is at the key itself (unknown field): take the word there.
+            self.text[offset..]
+                .chars()
+                .take_while(|c| c.is_ascii_alphanumeric() || *c == '_' || *c == '-')
+                .collect()
+        };
+        match (table.is_empty(), key.is_empty()) {
+            (_, true) => table,
+            (true, false) => key,
+            (false, false) => format!("{table}.{key}"),
         }
     }
 }

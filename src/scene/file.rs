@@ -172,10 +172,10 @@ pub struct InitialFile {
 pub struct TimeFile {
     #[serde(default)]
     pub t0: f64,
-    pub t1: f64,
+    pub t1: Spanned<f64>,
     /// Output sample spacing; absent: one sample per accepted step.
     #[serde(default)]
-    pub output_dt: Option<f64>,
+    pub output_dt: Option<Spanned<f64>>,
 }
 
 #[derive(Clone, Debug, Default, Deserialize)]
@@ -184,16 +184,16 @@ pub struct SolverFile {
     pub formulation: Option<Spanned<String>>,
     pub integrator: Option<Spanned<String>>,
     /// Fixed step of rk4.
-    pub step: Option<f64>,
-    pub rtol: Option<f64>,
-    pub atol: Option<f64>,
-    pub max_step: Option<f64>,
+    pub step: Option<Spanned<f64>>,
+    pub rtol: Option<Spanned<f64>>,
+    pub atol: Option<Spanned<f64>>,
+    pub max_step: Option<Spanned<f64>>,
     /// "projection", "baumgarte" or "none".
     pub drift: Option<Spanned<String>>,
-    pub projection_tol: Option<f64>,
-    pub baumgarte_alpha: Option<f64>,
-    pub baumgarte_beta: Option<f64>,
-    pub max_drift: Option<f64>,
+    pub projection_tol: Option<Spanned<f64>>,
+    pub baumgarte_alpha: Option<Spanned<f64>>,
+    pub baumgarte_beta: Option<Spanned<f64>>,
+    pub max_drift: Option<Spanned<f64>>,
 }
 
 #[derive(Clone, Debug, Deserialize)]

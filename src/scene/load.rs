@@ -131,7 +131,8 @@ pub(super) fn load(src: Source) -> R<Scene> {
             ))
         }
     };
-    crate::with_problem!(&system, p => check_acceleration_rows(&src, p, &spans)?);
+    let n_system = file.constraints.len();
+    crate::with_problem!(&system, p => check_acceleration_rows(&src, p, &spans, n_system)?);
     let settings = solver(&src, &file)?;
     let tolerances = tolerances(&src, &file)?;
     Ok(Scene {
@@ -241,11 +242,12 @@ fn lagrangian(
         || !m.sites.is_empty()
         || m.gravity.is_some()
         || !m.point_forces.is_empty()
+        || !m.attractors.is_empty()
     {
         return Err(src.error(
             m.kind.span(),
             "model",
-            "bodies, sites, gravity and point_forces belong to `tree` models",
+            "bodies, sites, gravity, attractors and point_forces belong to `tree` models",
         ));
     }
     if m.coordinates.is_empty() {
@@ -331,18 +333,21 @@ fn lagrangian(
                     if let Some(bad) = sym.outside(&e, &q_only) {
                         return Err(src.error(s.span(), &field, format!("the mass matrix may depend on the coordinates only, not on `{bad}`")));
                     }
-                    // The lower triangle must be the same expression text or value (checked at q0).
+                    // The lower triangle must be the same expression text, or agree in value at
+                    // a few probe points (two different texts used to pass unchecked unless both
+                    // were constants).
                     let sl = &rows[j].get_ref()[i];
                     let fl = format!("model.mass_matrix[{j}][{i}]");
                     let el = sym.compile(src, sl, &fl)?;
-                    if el.source().trim() != e.source().trim() && el.constant() != e.constant() {
-                        let probe: Vec<f64> = (0..sym.total_slots())
-                            .map(|k| 0.3 + 0.1 * k as f64)
-                            .collect();
-                        if (el.value(&probe) - e.value(&probe)).abs()
-                            > 1e-12 * e.value(&probe).abs().max(1.0)
-                        {
-                            return Err(src.error(sl.span(), &fl, format!("the mass matrix must be symmetric: differs from entry [{i}][{j}]")));
+                    if el.source().trim() != e.source().trim() {
+                        for p in 0..3 {
+                            let probe: Vec<f64> = (0..sym.total_slots())
+                                .map(|k| 0.3 + 0.1 * k as f64 + 0.37 * (p * (k % 3)) as f64)
+                                .collect();
+                            let (x, y) = (e.value(&probe), el.value(&probe));
+                            if !((x - y).abs() <= 1e-12 * x.abs().max(1.0)) {
+                                return Err(src.error(sl.span(), &fl, format!("the mass matrix must be symmetric: differs from entry [{i}][{j}]")));
+                            }
                         }
                     }
                     if e.constant() != Some(0.0) {
@@ -513,6 +518,11 @@ fn tree_scene(
         };
         let idx = body.and_then(|b| m.bodies.iter().position(|x| x.get_ref().name == b));
         match idx {
+            // Inertia problems point at the inertia itself.
+            Some(i) if msg.contains("inertia") && m.bodies[i].get_ref().inertia.is_some() => {
+                let span = m.bodies[i].get_ref().inertia.as_ref().unwrap().span();
+                src.error(span, &format!("model.bodies[{i}].inertia"), msg)
+            }
             Some(i) => src.error(m.bodies[i].span(), &format!("model.bodies[{i}]"), msg),
             None => src.error(m.kind.span(), "model", msg),
         }
@@ -674,10 +684,18 @@ fn rows(
     }
     let nv = sym.layout.nv;
     if specs.len() > nv {
-        return Err(src.general(
-            "programme",
+        // Point at the first row beyond the number of degrees of freedom.
+        let nc = file.constraints.len();
+        let (row, field) = if nv < nc {
+            (&file.constraints[nv], format!("constraints[{nv}]"))
+        } else {
+            (&file.programme[nv - nc], format!("programme[{}]", nv - nc))
+        };
+        return Err(src.error(
+            row.name.span(),
+            &field,
             format!(
-                "{} rows (constraints + programme) for {nv} degrees of freedom: at most {nv}",
+                "too many rows: {} (constraints + programme) for {nv} degrees of freedom, at most {nv}",
                 specs.len()
             ),
         ));
@@ -799,23 +817,25 @@ fn initial(
 
 fn span(src: &Source, file: &SceneFile) -> R<(f64, f64)> {
     let t = file.time.get_ref();
-    if !(t.t1 > t.t0) || !t.t0.is_finite() || !t.t1.is_finite() {
+    let (t0, t1) = (t.t0, *t.t1.get_ref());
+    if !(t1 > t0) || !t0.is_finite() || !t1.is_finite() {
         return Err(src.error(
-            file.time.span(),
+            t.t1.span(),
             "time.t1",
-            format!("t1 = {} must be after t0 = {}", t.t1, t.t0),
+            format!("t1 = {t1} must be after t0 = {t0}"),
         ));
     }
-    if let Some(dt) = t.output_dt {
+    if let Some(s) = &t.output_dt {
+        let dt = *s.get_ref();
         if !(dt > 0.0) || !dt.is_finite() {
             return Err(src.error(
-                file.time.span(),
+                s.span(),
                 "time.output_dt",
                 format!("must be positive, got {dt}"),
             ));
         }
     }
-    Ok((t.t0, t.t1))
+    Ok((t0, t1))
 }
 
 fn choose<T: Copy>(
@@ -861,7 +881,27 @@ fn solver(src: &Source, file: &SceneFile) -> R<Settings> {
         ],
         s.formulation,
     )?;
-    let step = f.step.unwrap_or(0.0);
+    let num = |x: &Option<Spanned<f64>>| x.as_ref().map(|x| *x.get_ref());
+    for (name, x) in [
+        ("step", &f.step),
+        ("rtol", &f.rtol),
+        ("atol", &f.atol),
+        ("max_step", &f.max_step),
+        ("projection_tol", &f.projection_tol),
+        ("max_drift", &f.max_drift),
+    ] {
+        if let Some(x) = x {
+            let v = *x.get_ref();
+            if !(v > 0.0) || !v.is_finite() {
+                return Err(src.error(
+                    x.span(),
+                    &format!("solver.{name}"),
+                    format!("must be positive, got {v}"),
+                ));
+            }
+        }
+    }
+    let step = num(&f.step).unwrap_or(0.0);
     s.integrator = choose(
         src,
         &f.integrator,
@@ -880,26 +920,10 @@ fn solver(src: &Source, file: &SceneFile) -> R<Settings> {
             return Err(src.error(span, "solver.step", "rk4 needs a positive fixed `step`"));
         }
     }
-    for (name, x) in [
-        ("rtol", f.rtol),
-        ("atol", f.atol),
-        ("max_step", f.max_step),
-        ("projection_tol", f.projection_tol),
-        ("max_drift", f.max_drift),
-    ] {
-        if let Some(x) = x {
-            if !(x > 0.0) || !x.is_finite() {
-                return Err(src.general(
-                    &format!("solver.{name}"),
-                    format!("must be positive, got {x}"),
-                ));
-            }
-        }
-    }
-    s.rtol = f.rtol.unwrap_or(s.rtol);
-    s.atol = f.atol.unwrap_or(s.atol);
-    s.h_max = f.max_step.unwrap_or(s.h_max);
-    s.max_drift = f.max_drift;
+    s.rtol = num(&f.rtol).unwrap_or(s.rtol);
+    s.atol = num(&f.atol).unwrap_or(s.atol);
+    s.h_max = num(&f.max_step).unwrap_or(s.h_max);
+    s.max_drift = num(&f.max_drift);
     let drift = choose(
         src,
         &f.drift,
@@ -909,17 +933,17 @@ fn solver(src: &Source, file: &SceneFile) -> R<Settings> {
     )?;
     s.drift = match drift {
         0 => DriftControl::Projection {
-            tol: f.projection_tol.unwrap_or(1e-12),
+            tol: num(&f.projection_tol).unwrap_or(1e-12),
             max_iter: 8,
         },
         1 => DriftControl::Baumgarte {
-            alpha: f.baumgarte_alpha.unwrap_or(1.0),
-            beta: f.baumgarte_beta.unwrap_or(1.0),
+            alpha: num(&f.baumgarte_alpha).unwrap_or(1.0),
+            beta: num(&f.baumgarte_beta).unwrap_or(1.0),
         },
         _ => DriftControl::None,
     };
-    s.output = match file.time.get_ref().output_dt {
-        Some(dt) => Output::Every(dt),
+    s.output = match &file.time.get_ref().output_dt {
+        Some(dt) => Output::Every(*dt.get_ref()),
         None => Output::Steps,
     };
     s.assemble = file.initial.get_ref().assemble;
@@ -963,9 +987,16 @@ fn check_mass<M: Model, C: Constraints>(
     let bad =
         a.iter().any(|x| !x.is_finite()) || crate::linalg::cholesky(&mut a.clone(), n).is_err();
     if bad {
+        // Lagrangian models point at the matrix they give; tree models at the model.
+        let m = file.model.get_ref();
+        let (span, field) = match (&m.mass_matrix, &m.mass_diagonal) {
+            (Some(a), _) => (a.span(), "model.mass_matrix"),
+            (None, Some(d)) => (d.span(), "model.mass_diagonal"),
+            _ => (file.model.span(), "model"),
+        };
         return Err(src.error(
-            file.model.span(),
-            "model",
+            span,
+            field,
             "the mass matrix is not positive definite (or not finite) at the initial configuration",
         ));
     }
@@ -977,6 +1008,7 @@ fn check_acceleration_rows<M: Model, C: Constraints>(
     src: &Source,
     p: &Problem<M, C>,
     spans: &[Range<usize>],
+    n_system: usize,
 ) -> R<()> {
     let rows = p.constraints.rows();
     if !rows.iter().any(|r| r.level == Level::Acceleration) {
@@ -1001,9 +1033,14 @@ fn check_acceleration_rows<M: Model, C: Constraints>(
             }
             let scale = h0[i].abs().max(h1[i].abs()).max(h2[i].abs()).max(1.0);
             if (h2[i] - 2.0 * h1[i] + h0[i]).abs() > 1e-9 * scale {
+                let field = if i < n_system {
+                    format!("constraints[{i}].expr")
+                } else {
+                    format!("programme[{}].expr", i - n_system)
+                };
                 return Err(src.error(
                     spans[i].clone(),
-                    &format!("row {}", r.name),
+                    &field,
                     "an acceleration-level row must be linear in the accelerations",
                 ));
             }
