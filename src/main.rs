@@ -44,6 +44,18 @@ enum Command {
         #[arg(required = true)]
         scenes: Vec<PathBuf>,
     },
+    /// Export a tree scene's model to MJCF (MuJoCo) or URDF (Pinocchio), with a JSON report of what
+    /// the simulator must be told besides (mass floors, forces the harness applies, q/v maps).
+    Export {
+        /// Scene file (TOML).
+        scene: PathBuf,
+        /// Target format.
+        #[arg(long, value_enum)]
+        format: FormatArg,
+        /// Output file [default: standard output]; the report goes to <out>.report.json.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// The nightly cross-simulator check (Python harness): replay u(t) in MuJoCo and Pinocchio,
     /// judge against the scenes' budgets and baselines, write the report. `progmo check --help`.
     #[command(disable_help_flag = true)]
@@ -76,6 +88,12 @@ enum IntegratorArg {
     Dopri5,
     Radau5,
     Rk4,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum FormatArg {
+    Mjcf,
+    Urdf,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -129,6 +147,7 @@ fn main() -> ExitCode {
     match cli.command {
         Command::Solve(a) => solve(a),
         Command::Validate { scenes } => validate(&scenes),
+        Command::Export { scene, format, out } => export(&scene, format, out.as_deref()),
         Command::Check { args } => harness("check", &args),
         Command::Debug { args } => harness("debug", &args),
     }
@@ -418,4 +437,54 @@ fn validate(scenes: &[PathBuf]) -> ExitCode {
     } else {
         ExitCode::SUCCESS
     }
+}
+
+fn export(path: &Path, format: FormatArg, out: Option<&Path>) -> ExitCode {
+    let scene = match load(path) {
+        Ok(s) => s,
+        Err(c) => return c,
+    };
+    let progmo::scene::SceneSystem::Tree(p) = &scene.system else {
+        eprintln!(
+            "{}: error: `{}` is a lagrangian scene; only tree scenes can be exported to MJCF/URDF",
+            path.display(),
+            scene.name
+        );
+        return ExitCode::from(2);
+    };
+    let options = progmo::export::ExportOptions {
+        name: scene.name.clone(),
+        ..Default::default()
+    };
+    let result = match format {
+        FormatArg::Mjcf => progmo::export::mjcf(p.model.tree(), &options),
+        FormatArg::Urdf => progmo::export::urdf(p.model.tree(), &options),
+    };
+    let (doc, report) = match result {
+        Ok(x) => x,
+        Err(e) => {
+            eprintln!(
+                "{}: error: cannot export `{}`: {e}",
+                path.display(),
+                scene.name
+            );
+            return ExitCode::from(2);
+        }
+    };
+    let report_json = serde_json::to_string_pretty(&report).expect("report serializes");
+    match out {
+        None => {
+            print!("{doc}");
+            eprintln!("{report_json}");
+        }
+        Some(o) => {
+            let rp = PathBuf::from(format!("{}.report.json", o.display()));
+            if let Err(e) = std::fs::write(o, &doc).and_then(|_| std::fs::write(&rp, report_json)) {
+                eprintln!("progmo export: error: cannot write {}: {e}", o.display());
+                return ExitCode::from(3);
+            }
+            eprintln!("wrote {} and {}", o.display(), rp.display());
+        }
+    }
+    ExitCode::SUCCESS
 }

@@ -173,3 +173,41 @@ fn help_on_every_subcommand() {
         assert!(String::from_utf8_lossy(&o.stdout).contains("Usage"));
     }
 }
+
+#[test]
+fn export_writes_mjcf_urdf_and_report() {
+    let dir = tmp("export");
+    for (fmt, tag) in [("mjcf", "<mujoco"), ("urdf", "<robot")] {
+        let out = dir.join(format!("heavy_top.{fmt}"));
+        let o = progmo()
+            .args([
+                "export",
+                scene("heavy_top").to_str().unwrap(),
+                "--format",
+                fmt,
+                "--out",
+            ])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(std::fs::read_to_string(&out).unwrap().contains(tag));
+        let report: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(format!("{}.report.json", out.display())).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(report["gravity"][2], -9.81);
+    }
+    // A lagrangian scene cannot be exported: clear error, exit 2.
+    let o = progmo()
+        .args([
+            "export",
+            scene("slider_crank").to_str().unwrap(),
+            "--format",
+            "mjcf",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("lagrangian"));
+}

@@ -328,6 +328,42 @@ impl PyScene {
         Ok(d)
     }
 
+    /// Export a tree scene's model: `format` "mjcf" or "urdf". Returns (document, report dict) —
+    /// the report lists mass floors applied, forces the harness must apply itself (attractors;
+    /// springs/dampers in URDF), gravity, the root joint to pass to Pinocchio, and q/v maps.
+    #[pyo3(signature = (format, *, timestep=1e-3))]
+    fn export<'py>(
+        &self,
+        py: Python<'py>,
+        format: &str,
+        timestep: f64,
+    ) -> PyResult<(String, Bound<'py, PyAny>)> {
+        let SceneSystem::Tree(p) = &self.scene.system else {
+            return Err(PyValueError::new_err(format!(
+                "{} is a lagrangian scene: nothing to export",
+                self.scene.name
+            )));
+        };
+        let options = progmo::export::ExportOptions {
+            name: self.scene.name.clone(),
+            timestep,
+            ..Default::default()
+        };
+        let r = match format {
+            "mjcf" => progmo::export::mjcf(p.model.tree(), &options),
+            "urdf" => progmo::export::urdf(p.model.tree(), &options),
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "unknown export format {other:?} (mjcf, urdf)"
+                )))
+            }
+        };
+        let (doc, report) = r.map_err(|e| {
+            PyValueError::new_err(format!("cannot export {}: {e}", self.scene.name))
+        })?;
+        Ok((doc, json_to_py(py, &report)?))
+    }
+
     fn __repr__(&self) -> String {
         format!(
             "<progmo Scene {:?} ({}) from {}>",
