@@ -537,6 +537,42 @@ fn slider_crank_follows_its_kinematics() {
     }
     assert!(worst < 1e-9, "slider crank kinematics off by {worst:e}");
     assert_eq!(tr.t.last().copied(), Some(0.1));
+    // Power balance: the closure reactions do no work, so the drive's control force alone
+    // changes the kinetic energy: u . v = dT/dt = v^T A a + 1/2 v^T (dA/dt) v.
+    let (m2, m3, j1, j2) = (
+        param(&s, "M2"),
+        param(&s, "M3"),
+        param(&s, "J1"),
+        param(&s, "J2"),
+    );
+    let c = 0.5 * l1 * l2 * m2;
+    let (mut worst, mut scale): (f64, f64) = (0.0, 0.0);
+    for k in 0..tr.len() {
+        let (q, v, a, u) = (tr.q_at(k), tr.v_at(k), tr.a_at(k), tr.u_at(k));
+        let d = q[0] - q[1];
+        let am = [
+            [j1 + m2 * l1 * l1, c * d.cos(), 0.0],
+            [c * d.cos(), j2, 0.0],
+            [0.0, 0.0, m3],
+        ];
+        let mut va = 0.0;
+        for i in 0..3 {
+            for j in 0..3 {
+                va += v[i] * am[i][j] * a[j];
+            }
+        }
+        let adot12 = -c * d.sin() * (v[0] - v[1]);
+        let dt = va + adot12 * v[0] * v[1];
+        let power: f64 = u.iter().zip(v).map(|(x, y)| x * y).sum();
+        let reaction_power: f64 = tr.reactions_at(k).iter().zip(v).map(|(x, y)| x * y).sum();
+        worst = worst.max((power - dt).abs()).max(reaction_power.abs());
+        scale = scale.max(dt.abs());
+    }
+    assert!(scale > 1.0, "the drive does work");
+    assert!(
+        worst < 1e-8 * scale,
+        "power balance off by {worst:e} (scale {scale:e})"
+    );
 }
 
 /// Planar arm: the tip stays on its line and moves at speed V; the self-motion is free.

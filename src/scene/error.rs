@@ -146,23 +146,66 @@ impl Source {
     fn field_at(&self, offset: usize) -> String {
         let offset = offset.min(self.text.len());
         let mut table = String::new();
+        // Entries seen per array of tables, and the index of the current entry.
         let mut counts: std::collections::HashMap<String, usize> = Default::default();
+        let mut current: std::collections::HashMap<String, usize> = Default::default();
+        let header_name = |inner: &str| {
+            let name = inner.trim();
+            let ok = !name.is_empty()
+                && name
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || "_-. \"".contains(c));
+            ok.then(|| name.replace([' ', '"'], ""))
+        };
+        // `model.bodies.joints` -> `model.bodies[2].joints` (indices of the enclosing entries).
+        let qualify = |name: &str, current: &std::collections::HashMap<String, usize>| {
+            let mut out = String::new();
+            let mut prefix = String::new();
+            for (i, seg) in name.split('.').enumerate() {
+                if i > 0 {
+                    prefix.push('.');
+                    out.push('.');
+                }
+                prefix.push_str(seg);
+                out.push_str(seg);
+                if prefix != name {
+                    if let Some(k) = current.get(&prefix) {
+                        out.push_str(&format!("[{k}]"));
+                    }
+                }
+            }
+            out
+        };
         let mut line_start = 0;
+        let mut body_start = 0;
         for line in self.text.split_inclusive('\n') {
             if line_start + line.len() > offset {
                 break;
             }
             line_start += line.len();
-            let l = line.trim();
-            if let Some(name) = l.strip_prefix("[[").and_then(|r| r.split("]]").next()) {
-                let name = name.trim().to_string();
+            let l = line.split('#').next().unwrap_or("").trim();
+            if let Some(name) = l
+                .strip_prefix("[[")
+                .and_then(|r| r.strip_suffix("]]"))
+                .and_then(header_name)
+            {
                 let k = counts.entry(name.clone()).or_insert(0);
-                table = format!("{name}[{k}]");
+                let idx = *k;
                 *k += 1;
                 // Entries of a nested array restart when their parent gets a new entry.
-                counts.retain(|n, _| !n.starts_with(&format!("{name}.")));
-            } else if let Some(name) = l.strip_prefix('[').and_then(|r| r.split(']').next()) {
-                table = name.trim().to_string();
+                let child = format!("{name}.");
+                counts.retain(|n, _| !n.starts_with(&child));
+                current.retain(|n, _| !n.starts_with(&child));
+                current.insert(name.clone(), idx);
+                table = format!("{}[{idx}]", qualify(&name, &current));
+                body_start = line_start;
+            } else if let Some(name) = l
+                .strip_prefix('[')
+                .and_then(|r| r.strip_suffix(']'))
+                .and_then(header_name)
+            {
+                table = qualify(&name, &current);
+                body_start = line_start;
             }
         }
         let key_line = &self.text[line_start..offset];
@@ -178,12 +221,26 @@ impl Source {
                 .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '.' || c == '-');
         let key = if key_ok {
             key.to_string()
-        } else {
+        } else if key_line.trim().is_empty() {
             // The offset is at the key itself (unknown field): take the word there.
             self.text[offset..]
                 .chars()
                 .take_while(|c| c.is_ascii_alphanumeric() || *c == '_' || *c == '-')
                 .collect()
+        } else {
+            // Inside a value spanning lines (a multi-line array): the last `key =` above.
+            self.text[body_start..line_start]
+                .lines()
+                .rev()
+                .filter_map(|l| l.split_once('='))
+                .map(|(k, _)| k.trim().trim_matches('"'))
+                .find(|k| {
+                    !k.is_empty()
+                        && k.chars()
+                            .all(|c| c.is_ascii_alphanumeric() || "_-.".contains(c))
+                })
+                .unwrap_or("")
+                .to_string()
         };
         match (table.is_empty(), key.is_empty()) {
             (_, true) => table,

@@ -345,7 +345,8 @@ fn lagrangian(
                                 .map(|k| 0.3 + 0.1 * k as f64 + 0.37 * (p * (k % 3)) as f64)
                                 .collect();
                             let (x, y) = (e.value(&probe), el.value(&probe));
-                            if !((x - y).abs() <= 1e-12 * x.abs().max(1.0)) {
+                            let close = (x - y).abs() <= 1e-12 * x.abs().max(1.0); // false for NaN
+                            if !close {
                                 return Err(src.error(sl.span(), &fl, format!("the mass matrix must be symmetric: differs from entry [{i}][{j}]")));
                             }
                         }
