@@ -63,10 +63,27 @@ def to_sim(report, q, v):
     return qs, P @ np.asarray(v), P, Pdv
 
 
+def attractor_force(m, d, report):
+    """Generalized attractor forces from MuJoCo's own state, as the report prescribes."""
+    f = np.zeros(m.nv)
+    jac = np.zeros((3, m.nv))
+    for h in report["harness_forces"]:
+        if h["kind"] != "attractor":
+            continue
+        for body, mass in h["bodies"]:
+            bid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, body)
+            r = d.xipos[bid] - np.array(h["point"])
+            force = -h["mu"] * mass * r / np.linalg.norm(r) ** 3
+            mujoco.mj_jacBodyCom(m, d, jac, None, bid)
+            f += jac.T @ force
+    return f
+
+
 def mujoco_parity(xml, report, states):
+    """max |dM|, |dbias|, |dpassive| (springs, dampers), |dattractor|."""
     m = mujoco.MjModel.from_xml_path(xml)
     d = mujoco.MjData(m)
-    dm = db = 0.0
+    dm = db = dp = da = 0.0
     for s in states:
         qs, vs, P, Pdv = to_sim(report, s["q"], s["v"])
         d.qpos[:], d.qvel[:] = qs, vs
@@ -77,7 +94,10 @@ def mujoco_parity(xml, report, states):
         bo = P.T @ (d.qfrc_bias + M @ Pdv)
         dm = max(dm, np.abs(Mo - np.array(s["M"])).max())
         db = max(db, np.abs(bo - np.array(s["bias"])).max())
-    return dm, db
+        dp = max(dp, np.abs(P.T @ d.qfrc_passive - np.array(s["passive"])).max())
+        fa = attractor_force(m, d, report)
+        da = max(da, np.abs(P.T @ fa - np.array(s["attractor"])).max())
+    return dm, db, dp, da
 
 
 def pinocchio_parity(urdf, report, states):
@@ -116,10 +136,10 @@ def main():
     fx = json.load(open(js))
     states = fx["states"]
     scale = max(1.0, max(np.abs(np.array(s["bias"])).max() for s in states))
-    dm, db = mujoco_parity(xml, fx["mjcf"], states)
+    dm, db, dp, da = mujoco_parity(xml, fx["mjcf"], states)
     floor = ", ".join(f'{c["body"]} +m {c["delta_mass"]:.0e} +I {c["delta_inertia"]:.0e}'
                       for c in fx["mjcf"]["mass_changes"]) or "none"
-    print(f'{fx["name"]:28s} MuJoCo    max|dM| {dm:.1e}  max|dbias| {db:.1e}  (|bias| <= {scale:.1f}; floor: {floor})')
+    print(f'{fx["name"]:28s} MuJoCo    max|dM| {dm:.1e}  max|dbias| {db:.1e}  |dpassive| {dp:.1e}  |dattractor| {da:.1e}  (|bias| <= {scale:.1f}; floor: {floor})')
     if fx.get("urdf") is not None and os.path.exists(urdf):
         dm, db = pinocchio_parity(urdf, fx["urdf"], states)
         print(f'{fx["name"]:28s} Pinocchio max|dM| {dm:.1e}  max|dbias| {db:.1e}')
