@@ -925,7 +925,8 @@ fn bundled_tree_scenes_export() {
 }
 
 /// Writes, for every bundled tree scene, `<name>.xml`, `<name>.urdf` and `<name>.json` (both
-/// reports and sample states with our M(q) and bias(q, v) = C v + g) to `$PROGMO_EXPORT_DIR`, for
+/// reports and sample states with our M(q), bias(q, v) = C v + g, spring + damper forces `passive`
+/// and attractor forces `attractor`) to `$PROGMO_EXPORT_DIR`, for
 /// `harness/tools/export_parity.py`. Does nothing unless the variable is set.
 #[test]
 fn write_parity_fixtures() {
@@ -960,10 +961,22 @@ fn write_parity_fixtures() {
             tree::mass_matrix(&t, &mut data, &q, &mut mm);
             let mut b = nalgebra::DVector::zeros(t.nv());
             tree::bias(&t, &mut data, &q, &v, &g, &mut b);
+            // springs + dampers, and attractor forces, from our model with the other fields off
+            let mut passive = nalgebra::DVector::zeros(t.nv());
+            let mut bare = (*t).clone();
+            bare.fields = Fields::default();
+            tree::applied_forces(&bare, &mut data, 0.0, &q, &v, &mut passive);
+            let mut attr = nalgebra::DVector::zeros(t.nv());
+            bare.fields.attractors = t.fields().attractors.clone();
+            tree::applied_forces(&bare, &mut data, 0.0, &q, &v, &mut attr);
+            attr -= &passive;
             let rows: Vec<Vec<f64>> = (0..t.nv())
                 .map(|i| mm.row(i).iter().copied().collect())
                 .collect();
-            states.push(serde_json::json!({"q": q, "v": v, "M": rows, "bias": b.as_slice()}));
+            states.push(
+                serde_json::json!({"q": q, "v": v, "M": rows, "bias": b.as_slice(),
+                "passive": passive.as_slice(), "attractor": attr.as_slice()}),
+            );
         }
         let js = serde_json::json!({"name": name, "mjcf": rm, "urdf": ru, "states": states});
         std::fs::write(

@@ -322,7 +322,9 @@ pub fn urdf(tree: &Model, options: &ExportOptions) -> Result<(String, UrdfReport
         );
     }
     let root_joint = root_ball.map(|j| {
-        notes.push("load with pin.buildModel(urdf, root_joint.python, root_joint.name)".into());
+        notes.push(
+            "load with pin.buildModelFromUrdf(path, root_joint.python, root_joint.name)".into(),
+        );
         RootJoint {
             python: "pin.JointModelSpherical()".into(),
             name: joints[j].name.clone(),
