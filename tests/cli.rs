@@ -211,3 +211,37 @@ fn export_writes_mjcf_urdf_and_report() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("lagrangian"));
 }
+
+/// Done criterion of the scenes issue: every bundled scene solves from the command line.
+#[test]
+fn every_bundled_scene_solves_from_the_command_line() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("references/scenes");
+    let out = tmp("catalog");
+    let mut n = 0;
+    for e in std::fs::read_dir(&dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().is_none_or(|x| x != "toml") {
+            continue;
+        }
+        let o = progmo()
+            .args([
+                "solve",
+                p.to_str().unwrap(),
+                "--no-mcap",
+                "--quiet",
+                "--out",
+            ])
+            .arg(out.join(p.file_stem().unwrap()))
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{}: {}",
+            p.display(),
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(String::from_utf8_lossy(&o.stdout).contains("success"));
+        n += 1;
+    }
+    assert!(n >= 10, "{n} scenes");
+}
