@@ -86,6 +86,8 @@ def parser() -> argparse.ArgumentParser:
                    help="replay horizon in seconds (default: the scene's whole time span)")
     c.add_argument("--samples", type=int, default=8, metavar="N",
                    help="sample states of the parity and instantaneous checks (default: 8)")
+    c.add_argument("--no-plots", action="store_true",
+                   help="leave the plots out of report.html (faster; tables and verdicts unchanged)")
     sub.add_parser("debug", help="debugging run of one scene (progmo_harness.debug; its own --help)", add_help=False)
     r = sub.add_parser("report", help="re-render the report of a saved run from its results.json and run.json")
     r.add_argument("dir", metavar="DIR", help="output folder of a check run (default layout: out/check)")
@@ -186,7 +188,8 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
     prov = rp.provenance(root, rerun_command(argv, Path.cwd(), root))
     prov["jobs"] = jobs
     prov["baselines"] = _rel(base_dir, root)
-    run = rp.Run(results=results, simulators=sims, provenance=prov, scenes=scenes, notes=notes)
+    run = rp.Run(results=results, simulators=sims, provenance=prov, scenes=scenes, notes=notes,
+                 plots=not ns.no_plots)
 
     order = {(t.scene, t.simulator): i for i, t in enumerate(tasks)}
     interrupted = False

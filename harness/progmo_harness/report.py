@@ -46,6 +46,8 @@ class Run:
     notes: list[str] = field(default_factory=list)
     #: (scene, simulator) pairs whose baseline this run accepted (--accept).
     accepted: list[tuple[str, str]] = field(default_factory=list)
+    #: Draw the series (the slow part of the report: about 0.5 s per result).
+    plots: bool = True
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -57,6 +59,7 @@ class Run:
             "scenes": self.scenes,
             "notes": self.notes,
             "accepted": [list(p) for p in self.accepted],
+            "plots": self.plots,
         }
 
     @staticmethod
@@ -69,6 +72,7 @@ class Run:
             scenes=d.get("scenes", {}),
             notes=d.get("notes", []),
             accepted=[tuple(p) for p in d.get("accepted", [])],
+            plots=d.get("plots", True),
         )
 
     # --- derived views -------------------------------------------------------------------------
@@ -241,8 +245,12 @@ def plot(r: CheckResult) -> str | None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(3.9 * len(groups), 2.7), dpi=90, layout="constrained")
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullLocator
+
+    fig = Figure(figsize=(3.9 * len(groups), 2.7), dpi=90)
     FigureCanvasAgg(fig)
+    # Fixed margins and plain tick labels: constrained layout and mathtext cost ~1 s per figure.
+    fig.subplots_adjust(left=0.07 if len(groups) > 1 else 0.14, right=0.985, bottom=0.17, top=0.9, wspace=0.28)
     axes = fig.subplots(1, len(groups), squeeze=False)[0]
     for ax, (title, series, log) in zip(axes, groups):
         for s in series[:12]:
@@ -262,6 +270,9 @@ def plot(r: CheckResult) -> str | None:
             ax.plot(t, y, lw=1.1, label=label)
         if log:
             ax.set_yscale("log")
+            ax.yaxis.set_major_locator(LogLocator(numticks=6))
+            ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:.0e}"))
+            ax.yaxis.set_minor_locator(NullLocator())
             key = "residual" if "residual" in title else "deviation"
             for b in r.budgets:
                 if key in b.metric:
@@ -273,7 +284,7 @@ def plot(r: CheckResult) -> str | None:
         ax.tick_params(labelsize=7)
         ax.grid(True, which="major", alpha=0.3)
         if len(series) <= 8:
-            ax.legend(fontsize=6.5, loc="best", frameon=False)
+            ax.legend(fontsize=6.5, loc="lower right" if log else "upper right", frameon=False)
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
@@ -288,7 +299,7 @@ main{max-width:1180px;margin:0 auto;padding:20px 28px 40px}
 h1{font-size:22px;margin:0 0 4px} h2{font-size:18px;margin:28px 0 10px;border-bottom:1px solid #ddd;padding-bottom:4px}
 h3{font-size:15px;margin:16px 0 6px}
 .banner{padding:12px 16px;border-radius:6px;color:#fff;font-weight:600;margin:12px 0;font-size:16px}
-.banner.ok{background:var(--pass)} .banner.bad{background:var(--fail)}
+.banner.b-ok{background:var(--pass)} .banner.b-bad{background:var(--fail)}
 .sub{color:#555;margin:0}
 table{border-collapse:collapse;background:#fff;margin:6px 0 12px;font-size:13px}
 th,td{border:1px solid #ddd;padding:4px 8px;text-align:left;vertical-align:top}
@@ -303,7 +314,7 @@ td.c-fail,td.c-error{background:#fdecea} td.c-regression{background:#fdf0e6} td.
 .reason.skip{background:#f5f5f5;border-color:var(--skip)}
 .bad{color:var(--fail);font-weight:600} .warn{color:var(--reg);font-weight:600} .good{color:var(--pass)}
 .bar{display:inline-block;height:8px;background:#e5e5e5;width:60px;border-radius:4px;vertical-align:middle;margin-right:6px;overflow:hidden}
-.bar>i{display:block;height:100%;background:var(--pass)} .bar>i.hot{background:var(--fail)}
+.bar>i{display:block;height:100%;background:var(--pass)} .bar>i.warm{background:#e6a100} .bar>i.hot{background:var(--fail)}
 section.scene{background:#fff;border:1px solid #e2e2e2;border-radius:6px;padding:6px 16px 12px;margin:14px 0}
 section.scene.attn{border-left:5px solid var(--fail)}
 .sim{border-top:1px dashed #e2e2e2;padding-top:6px;margin-top:8px}
@@ -323,8 +334,8 @@ def _bar(use: float | None) -> str:
     if use is None:
         return ""
     w = 100 if not math.isfinite(use) else max(2, min(100, 100 * use))
-    hot = " hot" if not (use <= 1) else ""
-    return f'<span class="bar"><i class="{hot.strip()}" style="width:{w:.0f}%"></i></span>'
+    cls = "hot" if not (use <= 1) else ("warm" if use > 0.5 else "")
+    return f'<span class="bar"><i class="{cls}" style="width:{w:.0f}%"></i></span>'
 
 
 def _use_text(use: float | None) -> str:
@@ -370,7 +381,7 @@ def render_html(run: Run) -> str:
     a(f"<p class='sub'>Open-loop replay of the control forces u in {', '.join(_e(m) for m in run.simulators)}; "
       f"{_e(p.get('date', ''))}, revision <code>{_e(str(p.get('git_revision', 'unknown'))[:12])}</code>.</p>")
     counts = ", ".join(f"{n} {k}" for k, n in tot.items() if n)
-    a(f"<div class='banner {'ok' if ok else 'bad'}' id='overall'>{'PASS' if ok else 'FAIL'}: {_e(counts) or 'nothing checked'}</div>")
+    a(f"<div class='banner {'b-ok' if ok else 'b-bad'}' id='overall'>{'PASS' if ok else 'FAIL'}: {_e(counts) or 'nothing checked'}</div>")
     if run.notes:
         a("<ul class='notes'>" + "".join(f"<li>{_e(n)}</li>" for n in run.notes) + "</ul>")
 
@@ -486,7 +497,7 @@ def _sim_block(run: Run, s: str, m: str) -> str:
     if r.notes:
         h.append("<ul class='notes'>" + "".join(f"<li>{_e(n)}</li>" for n in r.notes) + "</ul>")
     try:
-        img = plot(r)
+        img = plot(r) if run.plots else None
     except Exception as e:  # noqa: BLE001 - a bad series must not lose the report
         img = None
         h.append(f"<div class='reason'>plot failed: {_e(type(e).__name__)}: {_e(e)}</div>")
