@@ -95,8 +95,7 @@ class Run:
         return r.status
 
     def scene_names(self) -> list[str]:
-        names = list(self.scenes)
-        names += [r.scene for r in self.results if r.scene not in names]
+        names = list(dict.fromkeys([*self.scenes, *(r.scene for r in self.results)]))
         return sorted(names, key=lambda s: (min(RANK[self.verdict(self.result(s, m))] for m in self.simulators), s))
 
     def totals(self) -> dict[str, int]:
@@ -343,7 +342,7 @@ def _use_text(use: float | None) -> str:
         return ""
     if not math.isfinite(use):
         return "NaN"
-    return f"{100 * use:.3g}%"
+    return f"{use:.3g}&times;" if use >= 10 else f"{100 * use:.3g}%"
 
 
 def _attention(run: Run) -> list[tuple[str, str, str, str]]:
