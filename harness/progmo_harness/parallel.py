@@ -103,8 +103,11 @@ def run_all(tasks: list[Task], options, jobs: int) -> Iterator[tuple[Task, Check
                 except Exception as e:  # noqa: BLE001
                     r = error_result(t, f"check raised {last_line(e)}")
                 yield t, r
+        pool.shutdown(wait=True)
     finally:
+        # Interrupted (or the consumer stopped early): do not wait for running checks.
         pool.shutdown(wait=False, cancel_futures=True)
+        _terminate(pool)
     # A dead worker breaks the whole pool; rerun each affected check alone to find the culprit.
     for t in broken:
         solo = ProcessPoolExecutor(max_workers=1, mp_context=ctx)
@@ -115,3 +118,11 @@ def run_all(tasks: list[Task], options, jobs: int) -> Iterator[tuple[Task, Check
         finally:
             solo.shutdown(wait=False, cancel_futures=True)
         yield t, r
+
+
+def _terminate(pool: ProcessPoolExecutor) -> None:
+    """Stop the pool's worker processes still running (after an interrupt); no-op otherwise."""
+    procs = getattr(pool, "_processes", None) or {}
+    for p in list(procs.values()):
+        if p.is_alive():
+            p.terminate()

@@ -1,7 +1,8 @@
 """A fake ``run_check`` for the orchestration and report tests: no simulator, instant, and a
 verdict chosen per (scene, simulator) by the JSON plan in $FAKE_CHECKS_PLAN (read at call time,
 so it also reaches spawned worker processes). Plan values: "pass", "fail", "skipped", "error",
-"raise", "interrupt", "regress" (a pass whose residual is 1000x the usual), default "pass"."""
+"raise", "interrupt", "die", "sleep:SECONDS", "regress" (a pass whose residual is 20x the usual),
+default "pass"."""
 
 from __future__ import annotations
 
@@ -59,4 +60,11 @@ def run_check(scene_path, simulator, options=None):
         raise RuntimeError(f"simulated crash in {scene} <{simulator}>")
     if kind == "interrupt":
         raise KeyboardInterrupt
+    if kind == "die":  # the worker process dies (segfault, out of memory)
+        os._exit(3)
+    if kind.startswith("sleep"):  # "sleep:5": a slow check (manual interruption tests)
+        import time
+
+        time.sleep(float(kind.partition(":")[2] or 5))
+        kind = "pass"
     return make_result(scene, simulator, kind)

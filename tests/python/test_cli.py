@@ -162,6 +162,15 @@ def test_process_pool_with_a_fake_module(env, monkeypatch):
     assert list(st) == [(s, m) for s in TWO for m in ("mujoco", "pinocchio")]
 
 
+def test_a_dying_worker_is_an_error_of_its_check_only(env, monkeypatch):
+    monkeypatch.setenv(parallel.RUNNER_ENV, "fake_checks:run_check")
+    assert env(*TWO, plan={"heavy_top/mujoco": "die"}, jobs="2") == 1
+    res = {(r["scene"], r["simulator"]): r for r in json.loads((env.out / "results.json").read_text())}
+    assert res[("heavy_top", "mujoco")]["status"] == "error"
+    assert "worker process running this check died" in res[("heavy_top", "mujoco")]["reason"]
+    assert [r["status"] for k, r in res.items() if k != ("heavy_top", "mujoco")] == ["pass"] * 3
+
+
 def test_rerun_command_is_exact_without_accept(env):
     assert env("--accept", "-s", "mujoco", "heavy_top") == 0
     cmd = json.loads((env.out / "run.json").read_text())["provenance"]["command"]
