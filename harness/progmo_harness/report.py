@@ -3,6 +3,11 @@ plots as inline base64 PNG, no network), ``summary.md`` and ``summary.csv``.
 
 Everything is rebuilt from plain data (:class:`Run`), which ``run.json`` stores next to
 ``results.json``, so ``python -m progmo_harness.cli report OUT_DIR`` re-renders a saved run.
+
+Plots group a result's ``series`` by name: names containing ``residual`` (programme residual, log
+scale), ``deviation``/``error``/``drift`` (deviation from the solver, log scale), names starting
+with ``u`` or containing ``control``/``force``/``torque`` (control forces, linear), anything else
+in an "other" panel. Budgets whose metric contains ``residual``/``deviation`` are drawn dashed.
 """
 
 from __future__ import annotations

@@ -134,7 +134,7 @@ def test_report_renders_in_headless_chromium(tmp_path, written):
     shot = tmp_path / "report.png"
     # One browser start for both the DOM and the screenshot.
     dom = subprocess.run([browser, *flags, "--dump-dom", f"--screenshot={shot}", "--window-size=1200,2000", url],
-                         capture_output=True, text=True, timeout=120).stdout
+                         capture_output=True, text=True, timeout=60).stdout
     assert '<table id="verdicts">' in dom
     assert dom.count('<span class="v v-') > 10 and 'id="provenance"' in dom
     assert "progmo check --jobs 2 calm broken" in dom
