@@ -1,6 +1,334 @@
-"""Command line of the harness (`progmo-harness`); filled by the harness modules."""
+"""Command line of the harness: ``python -m progmo_harness.cli check|debug|report ...``.
+
+The Rust ``progmo`` command forwards ``progmo check ...`` and ``progmo debug ...`` here, so the
+help speaks of ``progmo``. Exit codes of ``check`` (stable; the nightly job branches on them):
+
+* 0: every check passed or was skipped, and no metric regressed against its baseline;
+* 1: a check failed (a metric beyond its budget), errored, did not run, or regressed;
+* 2: bad usage, an unknown scene or simulator, a scene file that does not load, or an unreadable
+  baseline (the other scenes still run; 2 wins over 1);
+* 130: interrupted (the results so far and the report are still written).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import os
+import shlex
+import signal
+import sys
+import time
+from pathlib import Path
+
+from . import baselines as bl
+from . import report as rp
+from .parallel import Task, default_jobs, error_result, last_line, run_all
+from .results import CheckResult, save
+
+EXIT_OK, EXIT_FAIL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+EPILOG = """\
+exit codes: 0 all pass/skipped and no regression; 1 a fail, error or regression;
+2 bad usage or a scene that does not load (the rest still runs); 130 interrupted.
+Outputs in --out: results.json (every CheckResult), run.json, report.html (self-contained),
+summary.md, summary.csv; written even when the run fails or is interrupted.
+Baselines: references/baselines/<scene>.<simulator>.json, see references/baselines/README.md."""
 
 
-def main() -> int:
-    print("progmo-harness: no command yet")
-    return 0
+def repo_root() -> Path:
+    """The repository root: $PROGMO_ROOT, else the checkout this package lives in, else the first
+    parent of the working directory holding references/scenes."""
+    env = os.environ.get("PROGMO_ROOT")
+    if env:
+        return Path(env).resolve()
+    here = Path(__file__).resolve().parents[2]
+    if (here / "references" / "scenes").is_dir():
+        return here
+    for d in [Path.cwd(), *Path.cwd().parents]:
+        if (d / "references" / "scenes").is_dir():
+            return d
+    return Path.cwd()
+
+
+def parser() -> argparse.ArgumentParser:
+    from .checks import SIMULATORS
+
+    p = argparse.ArgumentParser(
+        prog="progmo",
+        description="Cross-simulator checks of progmo (also: python -m progmo_harness.cli).",
+    )
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    c = sub.add_parser(
+        "check",
+        help="replay the control forces of scenes open-loop in MuJoCo and Pinocchio; write a report",
+        description="Check scenes in simulators, in parallel: each (scene, simulator) pair proves that "
+        "the control forces u computed by progmo keep the simulated motion on the programme. Compares "
+        "metrics with their budgets (scene [tolerances]) and accepted baselines; writes the report.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    c.add_argument("scenes", nargs="*", metavar="SCENE",
+                   help="scene files (TOML), folders of them, or names of bundled scenes "
+                   "(default: every references/scenes/*.toml)")
+    c.add_argument("-s", "--simulator", action="append", choices=SIMULATORS, metavar="NAME",
+                   help=f"simulator to check in, repeatable: {', '.join(SIMULATORS)} (default: all)")
+    c.add_argument("-j", "--jobs", type=int, default=None, metavar="N",
+                   help="checks run at once, one process each (default: number of CPUs; 1 runs in this process)")
+    c.add_argument("-o", "--out", default="out/check", metavar="DIR", help="output folder (default: out/check)")
+    c.add_argument("--accept", action="store_true",
+                   help="write the metrics of every passing check as its new baseline (prints what changed)")
+    c.add_argument("--baselines", metavar="DIR", default=None,
+                   help="baseline folder (default: references/baselines of the repository)")
+    c.add_argument("--step", type=float, default=None, metavar="H",
+                   help="replay step (default: the scene's replay_step tolerance, else a convergence check)")
+    c.add_argument("--horizon", type=float, default=None, metavar="T",
+                   help="replay horizon in seconds (default: the scene's whole time span)")
+    c.add_argument("--samples", type=int, default=8, metavar="N",
+                   help="sample states of the parity and instantaneous checks (default: 8)")
+    c.add_argument("--no-plots", action="store_true",
+                   help="leave the plots out of report.html (faster; tables and verdicts unchanged)")
+    sub.add_parser("debug", help="debugging run of one scene (progmo_harness.debug; its own --help)", add_help=False)
+    r = sub.add_parser("report", help="re-render the report of a saved run from its results.json and run.json")
+    r.add_argument("dir", metavar="DIR", help="output folder of a check run (default layout: out/check)")
+    return p
+
+
+# --- check ---------------------------------------------------------------------------------------
+def _scene_files(args: list[str], root: Path) -> tuple[list[Path], list[str]]:
+    """Scene files named by the arguments (files, folders, bundled names) and the problems."""
+    scenes_dir = root / "references" / "scenes"
+    if not args:
+        return sorted(scenes_dir.glob("*.toml")), ([] if scenes_dir.is_dir() else [f"no bundled scenes in {scenes_dir}"])
+    files, problems = [], []
+    for a in args:
+        p = Path(a)
+        if p.is_file():
+            files.append(p)
+        elif p.is_dir():
+            found = sorted(p.glob("*.toml"))
+            files += found
+            if not found:
+                problems.append(f"{a}: folder holds no *.toml scene")
+        elif (scenes_dir / f"{a}.toml").is_file():
+            files.append(scenes_dir / f"{a}.toml")
+        else:
+            problems.append(f"{a}: no such scene file or bundled scene")
+    return files, problems
+
+
+def rerun_command(argv: list[str], cwd: Path, root: Path) -> str:
+    """The command that reruns this check (without --accept: rerunning must not re-accept)."""
+    args = shlex.join(a for a in argv if a != "--accept")
+    lines = [f"progmo check {args}".rstrip()]
+    lines.append(f"# on a fresh machine: bash harness/nightly.sh {args}".rstrip())
+    lines.append(f"# without the Rust CLI: .venv/bin/python -m progmo_harness.cli check {args}".rstrip())
+    if cwd.resolve() != root.resolve():
+        lines.insert(0, f"cd {shlex.quote(str(cwd))}")
+    return "\n".join(lines)
+
+
+def _save_atomic(results: list[CheckResult], path: Path) -> None:
+    tmp = path.with_suffix(".json.tmp")
+    save(results, str(tmp))
+    os.replace(tmp, path)
+
+
+def _say(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
+    from . import Scene
+    from .checks import SIMULATORS, CheckOptions
+
+    t_start = time.perf_counter()
+    root = repo_root()
+    sims = list(dict.fromkeys(ns.simulator or SIMULATORS))
+    jobs = ns.jobs if ns.jobs is not None else default_jobs()
+    if jobs < 1 or ns.samples < 1 or (ns.step is not None and not ns.step > 0) or (ns.horizon is not None and not ns.horizon > 0):
+        _say("progmo check: error: --jobs and --samples must be >= 1, --step and --horizon > 0")
+        return EXIT_USAGE
+    out = Path(ns.out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        _say(f"progmo check: error: cannot create output folder {out}: {e}")
+        return EXIT_USAGE
+    base_dir = Path(ns.baselines) if ns.baselines else root / "references" / "baselines"
+
+    usage_problem = False
+    notes: list[str] = []
+    results: list[CheckResult] = []
+    files, problems = _scene_files(ns.scenes, root)
+    for pr in problems:
+        _say(f"progmo check: error: {pr}")
+        notes.append(pr)
+        usage_problem = True
+    tasks: list[Task] = []
+    scenes: dict[str, dict[str, str]] = {}
+    for f in files:
+        try:
+            sc = Scene(str(f))
+            name = sc.name
+            if name in scenes:
+                raise ValueError(f"scene name {name!r} already used by {scenes[name]['path']}")
+            scenes[name] = {"path": _rel(f, root), "description": sc.description, "purpose": sc.purpose}
+            tasks += [Task(str(f), name, m) for m in sims]
+        except Exception as e:  # noqa: BLE001 - SceneError or worse: report it, run the rest
+            msg = f"scene does not load: {last_line(e)}"
+            _say(f"progmo check: error: {f}: {msg}")
+            notes.append(f"{_rel(f, root)}: {msg}")
+            usage_problem = True
+            name = f.stem if f.stem not in scenes else f"{f.stem} ({f})"
+            scenes[name] = {"path": _rel(f, root)}
+            results += [error_result(Task(str(f), name, m), msg) for m in sims]
+
+    options = CheckOptions(step=ns.step, horizon=ns.horizon, samples=ns.samples)
+    prov = rp.provenance(root, rerun_command(argv, Path.cwd(), root))
+    prov["jobs"] = jobs
+    prov["baselines"] = _rel(base_dir, root)
+    run = rp.Run(results=results, simulators=sims, provenance=prov, scenes=scenes, notes=notes,
+                 plots=not ns.no_plots)
+
+    order = {(t.scene, t.simulator): i for i, t in enumerate(tasks)}
+    interrupted = False
+    n_total = len(tasks)
+    old_term = signal.getsignal(signal.SIGTERM)
+    if _main_thread():
+        signal.signal(signal.SIGTERM, _raise_interrupt)
+    _say(f"progmo check: {len(scenes)} scene(s) x {len(sims)} simulator(s) = {n_total} check(s), {jobs} job(s)")
+    done = 0
+    try:
+        for task, r in run_all(tasks, options, jobs):
+            done += 1
+            if (r.scene, r.simulator) != (task.scene, task.simulator):
+                r.notes.append(f"run_check named this result {r.scene} / {r.simulator}")
+                r.scene, r.simulator = task.scene, task.simulator
+            results.append(r)
+            try:
+                run.comparisons[(r.scene, r.simulator)] = rp.comparisons_as_dicts(
+                    bl.compare(r, bl.load(base_dir, r.scene, r.simulator)))
+            except ValueError as e:
+                notes.append(str(e))
+                usage_problem = True
+            _save_atomic(results, out / "results.json")
+            _say(_progress(done, n_total, r, run))
+    except KeyboardInterrupt:
+        interrupted = True
+        notes.insert(0, f"INTERRUPTED after {done} of {n_total} checks; the others did not run")
+        _say(f"progmo check: interrupted after {done} of {n_total} checks; writing what was done")
+    finally:
+        if _main_thread():
+            signal.signal(signal.SIGTERM, old_term)
+        results.sort(key=lambda r: order.get((r.scene, r.simulator), -1))
+        _save_atomic(results, out / "results.json")
+        if ns.accept:
+            _accept(run, base_dir, prov)
+        prov["wall_seconds"] = round(time.perf_counter() - t_start, 1)
+        report_ok = True
+        try:
+            paths = rp.write(run, out)
+        except Exception as e:  # noqa: BLE001 - keep results.json; say what broke
+            report_ok = False
+            _say(f"progmo check: error: writing the report failed: {last_line(e)}")
+    tot = run.totals()
+    summary = ", ".join(f"{n} {k}" for k, n in tot.items() if n) or "nothing checked"
+    print(f"progmo check: {'PASS' if run.ok() else 'FAIL'}: {summary}")
+    if report_ok:
+        print(f"report: {paths['html']}  (summary: {paths['md']}, {paths['csv']}; results: {out / 'results.json'})")
+    if interrupted:
+        return EXIT_INTERRUPTED
+    if usage_problem:
+        return EXIT_USAGE
+    return EXIT_OK if run.ok() and report_ok else EXIT_FAIL
+
+
+def _accept(run: rp.Run, base_dir: Path, prov: dict) -> None:
+    """Write baselines of every passing result; print what changed."""
+    keep = {k: prov[k] for k in ("date", "git_revision", "progmo", "mujoco", "pinocchio", "numpy", "python", "platform")}
+    for r in run.results:
+        if r.status != "pass":
+            if r.status in ("fail", "error"):
+                print(f"accept: {r.scene} / {r.simulator}: {r.status}, baseline not updated")
+            continue
+        path, changes = bl.accept(base_dir, r, keep)
+        run.accepted.append((r.scene, r.simulator))
+        print(f"accept: {r.scene} / {r.simulator} -> {path}: " + ("; ".join(changes) if changes else "unchanged"))
+    if run.accepted:
+        run.notes.append(f"--accept: baselines written for {len(run.accepted)} passing check(s)")
+
+
+def _progress(i: int, n: int, r: CheckResult, run: rp.Run) -> str:
+    v = run.verdict(r)
+    line = f"[{i}/{n}] {r.scene} / {r.simulator}: {v} ({r.wall_seconds:.1f} s)"
+    why = r.reason or "; ".join(f"{b.metric} {rp.fmt(b.value)} > {rp.fmt(b.budget)}" for b in r.breaches)
+    if v == "regression":
+        why = "; ".join(f"{c['metric']} {rp.fmt(c['value'])} > {rp.fmt(c['threshold'])}" for c in run.regressed(r))
+    if why and v != "pass":
+        line += f": {why[:200]}"
+    return line
+
+
+def _rel(p: Path, root: Path) -> str:
+    try:
+        return str(Path(p).resolve().relative_to(root.resolve()))
+    except ValueError:
+        return str(p)
+
+
+def _main_thread() -> bool:
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
+
+
+def _raise_interrupt(signum, frame):  # noqa: ARG001
+    raise KeyboardInterrupt
+
+
+# --- debug, report -------------------------------------------------------------------------------
+def cmd_debug(args: list[str]) -> int:
+    if importlib.util.find_spec("progmo_harness.debug") is None:
+        _say("progmo debug: not available in this build (progmo_harness.debug is missing)")
+        return EXIT_USAGE
+    from . import debug  # type: ignore[attr-defined]
+
+    rc = debug.main(args)
+    return int(rc or 0)
+
+
+def cmd_report(ns: argparse.Namespace) -> int:
+    import json
+
+    from .results import load
+
+    d = Path(ns.dir)
+    try:
+        results = load(str(d / "results.json"))
+        meta = json.loads((d / "run.json").read_text()) if (d / "run.json").is_file() else {}
+    except (OSError, ValueError, TypeError) as e:
+        _say(f"progmo report: error: {last_line(e)}")
+        return EXIT_USAGE
+    run = rp.Run.from_json(meta, results)
+    if not run.simulators:
+        run.simulators = list(dict.fromkeys(r.simulator for r in results))
+    paths = rp.write(run, d)
+    print(f"report: {paths['html']}")
+    return EXIT_OK if run.ok() else EXIT_FAIL
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "debug":  # everything after `debug` belongs to the debug command
+        return cmd_debug(argv[1:])
+    ns = parser().parse_args(argv)  # exits 2 on bad usage
+    if ns.command == "check":
+        return cmd_check(ns, argv[1:])
+    if ns.command == "report":
+        return cmd_report(ns)
+    return EXIT_USAGE  # pragma: no cover
+
+
+if __name__ == "__main__":
+    sys.exit(main())

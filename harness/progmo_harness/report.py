@@ -1,0 +1,618 @@
+"""The tolerance report of a check run: ``report.html`` (one self-contained page: inline CSS,
+plots as inline base64 PNG, no network), ``summary.md`` and ``summary.csv``.
+
+Everything is rebuilt from plain data (:class:`Run`), which ``run.json`` stores next to
+``results.json``, so ``python -m progmo_harness.cli report OUT_DIR`` re-renders a saved run.
+
+Plots group a result's ``series`` by name: names containing ``residual`` (programme residual, log
+scale), ``deviation``/``error``/``drift`` (deviation from the solver, log scale), names starting
+with ``u`` or containing ``control``/``force``/``torque`` (control forces, linear), anything else
+in an "other" panel. Budgets whose metric contains ``residual``/``deviation`` are drawn dashed.
+"""
+
+from __future__ import annotations
+
+import base64
+import csv
+import datetime as _dt
+import html
+import io
+import json
+import math
+import os
+import platform
+import re
+import subprocess
+import sys
+from dataclasses import asdict, dataclass, field
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from . import baselines as bl
+from .results import CheckResult
+
+#: Order of attention: the first problems first.
+RANK = {"error": 0, "fail": 1, "regression": 2, "not run": 3, "pass": 4, "skipped": 5}
+
+
+@dataclass
+class Run:
+    """Everything the report shows besides the results themselves."""
+
+    results: list[CheckResult]
+    simulators: list[str]
+    provenance: dict[str, Any]
+    #: (scene, simulator) -> comparisons against the baseline, as dicts (``baselines.Comparison``).
+    comparisons: dict[tuple[str, str], list[dict[str, Any]]] = field(default_factory=dict)
+    #: scene -> {"path", "description", "purpose"} of the scenes asked for (also the unrun ones).
+    scenes: dict[str, dict[str, str]] = field(default_factory=dict)
+    #: Facts about the run as a whole (interrupted, load errors, accepted baselines ...).
+    notes: list[str] = field(default_factory=list)
+    #: (scene, simulator) pairs whose baseline this run accepted (--accept).
+    accepted: list[tuple[str, str]] = field(default_factory=list)
+    #: Draw the series (the slow part of the report: about 0.5 s per result).
+    plots: bool = True
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "simulators": self.simulators,
+            "provenance": self.provenance,
+            "comparisons": [
+                {"scene": s, "simulator": m, "metrics": c} for (s, m), c in self.comparisons.items()
+            ],
+            "scenes": self.scenes,
+            "notes": self.notes,
+            "accepted": [list(p) for p in self.accepted],
+            "plots": self.plots,
+        }
+
+    @staticmethod
+    def from_json(d: dict[str, Any], results: list[CheckResult]) -> "Run":
+        return Run(
+            results=results,
+            simulators=d.get("simulators", []),
+            provenance=d.get("provenance", {}),
+            comparisons={(c["scene"], c["simulator"]): c["metrics"] for c in d.get("comparisons", [])},
+            scenes=d.get("scenes", {}),
+            notes=d.get("notes", []),
+            accepted=[tuple(p) for p in d.get("accepted", [])],
+            plots=d.get("plots", True),
+        )
+
+    # --- derived views -------------------------------------------------------------------------
+    def result(self, scene: str, sim: str) -> CheckResult | None:
+        for r in self.results:
+            if r.scene == scene and r.simulator == sim:
+                return r
+        return None
+
+    def regressed(self, r: CheckResult) -> list[dict[str, Any]]:
+        return [c for c in self.comparisons.get((r.scene, r.simulator), []) if c["state"] == "regression"]
+
+    def verdict(self, r: CheckResult | None) -> str:
+        """The cell's verdict: status, or ``regression`` for a pass that regressed (unless
+        accepted), or ``not run``."""
+        if r is None:
+            return "not run"
+        if r.status == "pass" and self.regressed(r) and (r.scene, r.simulator) not in self.accepted:
+            return "regression"
+        return r.status
+
+    def scene_names(self) -> list[str]:
+        names = list(dict.fromkeys([*self.scenes, *(r.scene for r in self.results)]))
+        return sorted(names, key=lambda s: (min(RANK[self.verdict(self.result(s, m))] for m in self.simulators), s))
+
+    def totals(self) -> dict[str, int]:
+        t = {k: 0 for k in RANK}
+        for s in self.scene_names():
+            for m in self.simulators:
+                t[self.verdict(self.result(s, m))] += 1
+        return t
+
+    def ok(self) -> bool:
+        t = self.totals()
+        checked = sum(t.values()) > 0  # a run that checked nothing proves nothing
+        return checked and t["error"] == t["fail"] == t["regression"] == t["not run"] == 0
+
+
+# --- provenance ----------------------------------------------------------------------------------
+def _git(root: Path, *args: str) -> str | None:
+    try:
+        p = subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True, timeout=10)
+        return p.stdout.strip() if p.returncode == 0 else None
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def _version(dist: str) -> str:
+    try:
+        return metadata.version(dist)
+    except metadata.PackageNotFoundError:
+        return "not installed"
+
+
+def provenance(root: Path, command: str) -> dict[str, Any]:
+    """What produced this run: revision, versions, host, date and the command that reruns it."""
+    rev = _git(root, "rev-parse", "HEAD") or os.environ.get("GITHUB_SHA") or "unknown"
+    dirty = _git(root, "status", "--porcelain", "--untracked-files=no")
+    try:
+        from . import version as progmo_version
+
+        progmo = progmo_version()
+    except Exception as e:  # noqa: BLE001 - the extension may be missing; say so
+        progmo = f"unavailable ({type(e).__name__})"
+    return {
+        "date": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC"),
+        "git_revision": rev + (" (with uncommitted changes)" if dirty else ""),
+        "progmo": progmo,
+        "mujoco": _version("mujoco"),
+        "pinocchio": _version("pin"),
+        "numpy": _version("numpy"),
+        "matplotlib": _version("matplotlib"),
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+        "cpu_count": os.cpu_count(),
+        "command": command,
+    }
+
+
+# --- formatting ----------------------------------------------------------------------------------
+def fmt(v: Any) -> str:
+    if v is None:
+        return "NaN"
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "NaN"
+        return f"{v:.3g}" if v != 0 else "0"
+    return str(v)
+
+
+def _e(s: Any) -> str:
+    return html.escape(str(s), quote=True)
+
+
+def _anchor(scene: str) -> str:
+    return "scene-" + re.sub(r"[^A-Za-z0-9_-]", "_", scene)
+
+
+def rows_of(run: Run, r: CheckResult) -> list[dict[str, Any]]:
+    """One row per metric: value, budget (+reason, verdict), baseline (+threshold, state)."""
+    budgets = {b.metric: b for b in r.budgets}
+    breaches = {b.metric for b in r.breaches}
+    comps = {c["metric"]: c for c in run.comparisons.get((r.scene, r.simulator), [])}
+    names = list(r.metrics) + [m for m in budgets if m not in r.metrics]
+    names += [m for m in comps if m not in names]
+    out = []
+    for m in names:
+        b, c = budgets.get(m), comps.get(m, {})
+        v = r.metrics.get(m)
+        out.append(
+            {
+                "metric": m,
+                "value": v,
+                "budget": b.value if b else None,
+                "budget_reason": b.reason if b else "",
+                "use": (v / b.value) if (b and v is not None and b.value > 0 and math.isfinite(v)) else None,
+                "within_budget": (None if b is None else m not in breaches),
+                "baseline": c.get("baseline"),
+                "threshold": c.get("threshold"),
+                "baseline_state": c.get("state", ""),
+            }
+        )
+    return out
+
+
+def max_residual(r: CheckResult) -> float | None:
+    vals = [v for k, v in r.metrics.items() if "residual" in k and v is not None and math.isfinite(v)]
+    return max(vals) if vals else None
+
+
+def budget_use(r: CheckResult) -> float | None:
+    """Largest value/budget over the budgets (1 = at the budget); inf for a NaN metric."""
+    uses = []
+    for b in r.budgets:
+        v = r.metrics.get(b.metric)
+        if v is None or not math.isfinite(v):
+            uses.append(math.inf)
+        elif b.value > 0:
+            uses.append(v / b.value)
+    return max(uses) if uses else None
+
+
+# --- plots ---------------------------------------------------------------------------------------
+GROUPS = [
+    ("programme residual", re.compile(r"residual", re.I), True),
+    ("deviation from the solver", re.compile(r"deviation|error|drift", re.I), True),
+    ("control forces u", re.compile(r"^u\b|^u[_\[(\d]|control|force|torque", re.I), False),
+    ("other", re.compile(r""), False),
+]
+MAX_POINTS = 2000
+
+
+def _groups(r: CheckResult):
+    out: dict[str, list] = {}
+    for s in r.series:
+        for title, pat, _ in GROUPS:
+            if pat.search(s.name):
+                out.setdefault(title, []).append(s)
+                break
+    return [(t, out[t], log) for t, _, log in GROUPS if t in out]
+
+
+def plot(r: CheckResult) -> str | None:
+    """The result's series as one PNG (data URI): residual and deviation on log scales with their
+    budgets dashed, control forces on a linear scale. None when there are no series."""
+    groups = _groups(r)
+    if not groups:
+        return None
+    import numpy as np
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullLocator
+
+    fig = Figure(figsize=(3.9 * len(groups), 2.7), dpi=90)
+    FigureCanvasAgg(fig)
+    # Fixed margins and plain tick labels: constrained layout and mathtext cost ~1 s per figure.
+    fig.subplots_adjust(left=0.07 if len(groups) > 1 else 0.14, right=0.985, bottom=0.17, top=0.9, wspace=0.28)
+    axes = fig.subplots(1, len(groups), squeeze=False)[0]
+    for ax, (title, series, log) in zip(axes, groups):
+        for s in series[:12]:
+            t = np.asarray([math.nan if x is None else x for x in s.t], dtype=float)
+            y = np.asarray([math.nan if x is None else x for x in s.values], dtype=float)
+            n = min(len(t), len(y))
+            t, y = t[:n], y[:n]
+            if n > MAX_POINTS:
+                idx = np.linspace(0, n - 1, MAX_POINTS).astype(int)
+                if log:  # keep the peaks visible: max over each window
+                    y = np.maximum.reduceat(np.abs(y), idx)
+                t, y = t[idx], y[idx] if not log else y
+            if log:
+                y = np.abs(y)
+                y[~(y > 0)] = np.nan
+            label = s.name + (f" [{s.unit}]" if s.unit else "")
+            ax.plot(t, y, lw=1.1, label=label)
+        if log:
+            ax.set_yscale("log")
+            ax.yaxis.set_major_locator(LogLocator(numticks=6))
+            ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:.0e}"))
+            ax.yaxis.set_minor_locator(NullLocator())
+            key = "residual" if "residual" in title else "deviation"
+            for b in r.budgets:
+                if key in b.metric:
+                    ax.axhline(b.value, color="#c0392b", ls="--", lw=1)
+                    ax.annotate(f"budget {b.metric}", (0.01, b.value), xycoords=("axes fraction", "data"),
+                                fontsize=7, color="#c0392b", va="bottom")
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel("t [s]", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(True, which="major", alpha=0.3)
+        if len(series) <= 8:
+            ax.legend(fontsize=6.5, loc="lower right" if log else "upper right", frameon=False)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+# --- HTML ----------------------------------------------------------------------------------------
+CSS = """
+:root{--pass:#1e8449;--fail:#c0392b;--error:#8e1b5c;--skip:#7f8c8d;--reg:#d35400;--bg:#fafafa}
+*{box-sizing:border-box}
+body{font:14px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,Helvetica,Arial,sans-serif;margin:0;background:var(--bg);color:#222}
+main{max-width:1180px;margin:0 auto;padding:20px 28px 40px}
+h1{font-size:22px;margin:0 0 4px} h2{font-size:18px;margin:28px 0 10px;border-bottom:1px solid #ddd;padding-bottom:4px}
+h3{font-size:15px;margin:16px 0 6px}
+.banner{padding:12px 16px;border-radius:6px;color:#fff;font-weight:600;margin:12px 0;font-size:16px}
+.banner.b-ok{background:var(--pass)} .banner.b-bad{background:var(--fail)}
+.sub{color:#555;margin:0}
+table{border-collapse:collapse;background:#fff;margin:6px 0 12px;font-size:13px}
+th,td{border:1px solid #ddd;padding:4px 8px;text-align:left;vertical-align:top}
+th{background:#f0f0f0;font-weight:600}
+td.num{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}
+.v{display:inline-block;min-width:64px;text-align:center;border-radius:4px;padding:1px 8px;color:#fff;font-weight:600;font-size:12px}
+.v-pass{background:var(--pass)} .v-fail{background:var(--fail)} .v-error{background:var(--error)}
+.v-skipped{background:var(--skip)} .v-regression{background:var(--reg)} .v-not-run{background:#bbb}
+td.c-fail,td.c-error{background:#fdecea} td.c-regression{background:#fdf0e6} td.c-skipped{background:#f4f4f4}
+.small{font-size:12px;color:#555}
+.reason{font-family:ui-monospace,SFMono-Regular,Menlo,Consolas,monospace;font-size:12px;background:#fff6f5;border-left:3px solid var(--fail);padding:4px 8px;white-space:pre-wrap;word-break:break-word}
+.reason.skip{background:#f5f5f5;border-color:var(--skip)}
+.bad{color:var(--fail);font-weight:600} .warn{color:var(--reg);font-weight:600} .good{color:var(--pass)}
+.bar{display:inline-block;height:8px;background:#e5e5e5;width:60px;border-radius:4px;vertical-align:middle;margin-right:6px;overflow:hidden}
+.bar>i{display:block;height:100%;background:var(--pass)} .bar>i.warm{background:#e6a100} .bar>i.hot{background:var(--fail)}
+section.scene{background:#fff;border:1px solid #e2e2e2;border-radius:6px;padding:6px 16px 12px;margin:14px 0}
+section.scene.attn{border-left:5px solid var(--fail)}
+.sim{border-top:1px dashed #e2e2e2;padding-top:6px;margin-top:8px}
+img.plot{max-width:100%;display:block;margin:4px 0}
+ul.notes{margin:4px 0 8px 18px;padding:0;font-size:12px;color:#444}
+pre{background:#272822;color:#f8f8f2;padding:10px 12px;border-radius:5px;overflow-x:auto;font-size:12.5px}
+footer{margin-top:30px;border-top:2px solid #ccc;padding-top:8px}
+a{color:#1a5fa8;text-decoration:none} a:hover{text-decoration:underline}
+"""
+
+
+def _badge(verdict: str) -> str:
+    return f'<span class="v v-{verdict.replace(" ", "-")}">{_e(verdict)}</span>'
+
+
+def _bar(use: float | None) -> str:
+    if use is None:
+        return ""
+    w = 100 if not math.isfinite(use) else max(2, min(100, 100 * use))
+    cls = "hot" if not (use <= 1) else ("warm" if use > 0.5 else "")
+    return f'<span class="bar"><i class="{cls}" style="width:{w:.0f}%"></i></span>'
+
+
+def _use_text(use: float | None) -> str:
+    if use is None:
+        return ""
+    if not math.isfinite(use):
+        return "NaN"
+    return f"{use:.3g}&times;" if use >= 10 else f"{100 * use:.3g}%"
+
+
+def _attention(run: Run) -> list[tuple[str, str, str, str]]:
+    """(scene, simulator, verdict, one-line reason) of every cell that fails the job."""
+    out = []
+    for s in run.scene_names():
+        for m in run.simulators:
+            r = run.result(s, m)
+            v = run.verdict(r)
+            if v in ("pass", "skipped"):
+                continue
+            if r is None:
+                why = "this check did not run (interrupted or cancelled)"
+            elif v == "regression":
+                why = "; ".join(f"{c['metric']} {fmt(c['value'])} > {fmt(c['threshold'])} (baseline {fmt(c['baseline'])})" for c in run.regressed(r))
+            elif v == "fail":
+                why = "; ".join(f"{b.metric} {fmt(b.value)} > budget {fmt(b.budget)}" + (f" first at t = {b.first_time:.4g}" if b.first_time is not None else "") for b in r.breaches) or r.reason
+            else:
+                why = r.reason
+            out.append((s, m, v, why))
+    return out
+
+
+def render_html(run: Run) -> str:
+    p = run.provenance
+    tot = run.totals()
+    ok = run.ok()
+    h: list[str] = []
+    a = h.append
+    a("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>")
+    a("<meta name='viewport' content='width=device-width,initial-scale=1'>")
+    a(f"<title>progmo check: {'pass' if ok else 'FAIL'} ({_e(p.get('date', ''))})</title>")
+    a(f"<style>{CSS}</style></head><body><main>")
+    a("<h1>progmo cross-simulator check</h1>")
+    a(f"<p class='sub'>Open-loop replay of the control forces u in {', '.join(_e(m) for m in run.simulators)}; "
+      f"{_e(p.get('date', ''))}, revision <code>{_e(str(p.get('git_revision', 'unknown'))[:12])}</code>.</p>")
+    counts = ", ".join(f"{n} {k}" for k, n in tot.items() if n)
+    a(f"<div class='banner {'b-ok' if ok else 'b-bad'}' id='overall'>{'PASS' if ok else 'FAIL'}: {_e(counts) or 'nothing checked'}</div>")
+    if run.notes:
+        a("<ul class='notes'>" + "".join(f"<li>{_e(n)}</li>" for n in run.notes) + "</ul>")
+
+    # Summary matrix.
+    a("<h2>Verdicts</h2>")
+    a("<table id='verdicts'><thead><tr><th>scene</th>")
+    for m in run.simulators:
+        a(f"<th>{_e(m)}</th>")
+    a("<th>max residual</th><th>worst budget use</th></tr></thead><tbody>")
+    for s in run.scene_names():
+        a(f"<tr><td><a href='#{_anchor(s)}'>{_e(s)}</a></td>")
+        res, use = [], []
+        for m in run.simulators:
+            r = run.result(s, m)
+            v = run.verdict(r)
+            a(f"<td class='c-{v.replace(' ', '-')}'>{_badge(v)}</td>")
+            if r is not None:
+                if max_residual(r) is not None:
+                    res.append(max_residual(r))
+                if budget_use(r) is not None:
+                    use.append(budget_use(r))
+        a(f"<td class='num'>{fmt(max(res)) if res else ''}</td>")
+        u = max(use) if use else None
+        a(f"<td class='num'>{_bar(u)}{_use_text(u)}</td></tr>")
+    a("</tbody><tfoot><tr><th>total</th>")
+    for m in run.simulators:
+        c: dict[str, int] = {}
+        for s in run.scene_names():
+            v = run.verdict(run.result(s, m))
+            c[v] = c.get(v, 0) + 1
+        a("<td class='small'>" + _e(", ".join(f"{n} {k}" for k, n in sorted(c.items(), key=lambda kv: RANK[kv[0]]))) + "</td>")
+    a("<td></td><td></td></tr></tfoot></table>")
+
+    att = _attention(run)
+    if att:
+        a("<h2 id='attention'>Needs attention</h2><table><tr><th>scene</th><th>simulator</th><th>verdict</th><th>why</th></tr>")
+        for s, m, v, why in att:
+            a(f"<tr><td><a href='#{_anchor(s)}'>{_e(s)}</a></td><td>{_e(m)}</td><td>{_badge(v)}</td><td class='small'>{_e(why)}</td></tr>")
+        a("</table>")
+
+    # Per scene.
+    a("<h2>Scenes</h2>")
+    for s in run.scene_names():
+        worst = min(RANK[run.verdict(run.result(s, m))] for m in run.simulators)
+        info = run.scenes.get(s, {})
+        a(f"<section class='scene{' attn' if worst <= RANK['not run'] else ''}' id='{_anchor(s)}'>")
+        a(f"<h3>{_e(s)} " + " ".join(_badge(run.verdict(run.result(s, m))) for m in run.simulators) + "</h3>")
+        if info.get("description"):
+            a(f"<p class='small'>{_e(info['description'])}</p>")
+        if info.get("path"):
+            a(f"<p class='small'>scene file: <code>{_e(info['path'])}</code></p>")
+        for m in run.simulators:
+            a(_sim_block(run, s, m))
+        a("</section>")
+
+    # Provenance.
+    a("<footer id='provenance'><h2>Provenance and how to rerun</h2>")
+    a("<p>Rerun this check (from the repository root):</p>")
+    a(f"<pre id='rerun'><code>{_e(p.get('command', ''))}</code></pre>")
+    a("<table>")
+    labels = [("date", "date"), ("git_revision", "git revision"), ("progmo", "progmo"), ("mujoco", "MuJoCo"),
+              ("pinocchio", "Pinocchio"), ("numpy", "numpy"), ("matplotlib", "matplotlib"), ("python", "Python"),
+              ("platform", "platform"), ("cpu_count", "host CPUs"), ("jobs", "parallel jobs"),
+              ("wall_seconds", "wall time [s]"), ("baselines", "baselines")]
+    for k, label in labels:
+        if k in p:
+            a(f"<tr><th>{_e(label)}</th><td><code>{_e(p[k])}</code></td></tr>")
+    a("</table>")
+    a("<p class='small'>Budgets come from each scene's <code>[tolerances]</code> (with their reasons); "
+      f"a regression is a value above max({bl.FACTOR:g} &times; baseline, baseline + floor), floor "
+      + ", ".join(f"{_e(n)} {f:g}" for n, _, f in bl.CLASSES if f is not None)
+      + " (references/baselines/README.md).</p>")
+    a("</footer></main></body></html>")
+    return "\n".join(h)
+
+
+def _sim_block(run: Run, s: str, m: str) -> str:
+    r = run.result(s, m)
+    v = run.verdict(r)
+    h = [f"<div class='sim'><b>{_e(m)}</b> {_badge(v)}"]
+    if r is None:
+        h.append(" <span class='small'>not run</span></div>")
+        return "".join(h)
+    h.append(f" <span class='small'>{r.wall_seconds:.2f} s</span>")
+    if (s, m) in run.accepted:
+        h.append(" <span class='small good'>baseline accepted by this run</span>")
+    if r.reason:
+        h.append(f"<div class='reason{' skip' if r.status == 'skipped' else ''}'>{_e(r.reason)}</div>")
+    rows = rows_of(run, r)
+    if rows:
+        h.append("<table class='metrics'><tr><th>metric</th><th>value</th><th>budget</th><th>use</th>"
+                 "<th>budget reason</th><th>baseline</th><th>regression above</th><th>vs baseline</th></tr>")
+        for row in rows:
+            wb = row["within_budget"]
+            vcls = "bad" if wb is False else ""
+            st = row["baseline_state"]
+            scls = {"regression": "warn", "improved": "good"}.get(st, "small")
+            if st == "regression" and (s, m) in run.accepted:
+                st = "regression (accepted)"
+            h.append(
+                f"<tr><td>{_e(row['metric'])}</td><td class='num {vcls}'>{fmt(row['value'])}</td>"
+                f"<td class='num'>{fmt(row['budget']) if row['budget'] is not None else ''}</td>"
+                f"<td class='num'>{_bar(row['use'])}{_use_text(row['use'])}</td>"
+                f"<td class='small'>{_e(row['budget_reason'])}</td>"
+                f"<td class='num'>{fmt(row['baseline']) if row['baseline'] is not None else ''}</td>"
+                f"<td class='num'>{fmt(row['threshold']) if row['threshold'] is not None else ''}</td>"
+                f"<td class='{scls}'>{_e(st)}</td></tr>"
+            )
+        h.append("</table>")
+    for b in r.breaches:
+        when = f" first at t = {b.first_time:.6g} s" if b.first_time is not None else ""
+        h.append(f"<div class='reason'>{_e(b.metric)} = {fmt(b.value)} exceeds its budget {fmt(b.budget)}{_e(when)}</div>")
+    if r.notes:
+        h.append("<ul class='notes'>" + "".join(f"<li>{_e(n)}</li>" for n in r.notes) + "</ul>")
+    try:
+        img = plot(r) if run.plots else None
+    except Exception as e:  # noqa: BLE001 - a bad series must not lose the report
+        img = None
+        h.append(f"<div class='reason'>plot failed: {_e(type(e).__name__)}: {_e(e)}</div>")
+    if img:
+        h.append(f"<img class='plot' alt='{_e(s)} / {_e(m)} series' src='{img}'>")
+    h.append("</div>")
+    return "".join(h)
+
+
+# --- Markdown and CSV ----------------------------------------------------------------------------
+def _md(s: Any) -> str:
+    return str(s).replace("\\", "\\\\").replace("|", "\\|").replace("\n", " ")
+
+
+def render_markdown(run: Run) -> str:
+    p = run.provenance
+    tot = run.totals()
+    lines = [f"# progmo check: {'PASS' if run.ok() else 'FAIL'}", ""]
+    lines.append(", ".join(f"{n} {k}" for k, n in tot.items() if n) or "nothing checked")
+    lines.append("")
+    for n in run.notes:
+        lines.append(f"- {_md(n)}")
+    if run.notes:
+        lines.append("")
+    lines.append("| scene | " + " | ".join(_md(m) for m in run.simulators) + " | max residual |")
+    lines.append("|---|" + "---|" * len(run.simulators) + "---:|")
+    icons = {"pass": "✅", "fail": "❌", "error": "💥", "skipped": "⏭️", "regression": "📈", "not run": "⬜"}
+    for s in run.scene_names():
+        cells, res = [], []
+        for m in run.simulators:
+            r = run.result(s, m)
+            v = run.verdict(r)
+            cells.append(f"{icons[v]} {v}")
+            if r is not None and max_residual(r) is not None:
+                res.append(max_residual(r))
+        lines.append(f"| {_md(s)} | " + " | ".join(cells) + f" | {fmt(max(res)) if res else ''} |")
+    att = _attention(run)
+    if att:
+        lines += ["", "## Needs attention", ""]
+        lines += [f"- **{_md(s)} / {_md(m)}**: {v}: {_md(why)}" for s, m, v, why in att]
+    lines += ["", "## Rerun", "", "```", str(p.get("command", "")), "```", "", "## Provenance", ""]
+    for k in ("date", "git_revision", "progmo", "mujoco", "pinocchio", "numpy", "python", "platform", "cpu_count", "jobs"):
+        if k in p:
+            lines.append(f"- {k}: `{_md(p[k])}`")
+    return "\n".join(lines) + "\n"
+
+
+CSV_FIELDS = ["scene", "simulator", "verdict", "status", "metric", "value", "budget", "within_budget",
+              "baseline", "regression_above", "vs_baseline", "reason", "wall_seconds"]
+
+
+def write_csv(run: Run, path: Path) -> None:
+    """One row per (scene, simulator, metric); a result without metrics gets one row."""
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(CSV_FIELDS)
+        for s in run.scene_names():
+            for m in run.simulators:
+                r = run.result(s, m)
+                v = run.verdict(r)
+                if r is None:
+                    w.writerow([s, m, v, "", "", "", "", "", "", "", "", "not run", ""])
+                    continue
+                base = [s, m, v, r.status]
+                tail = [r.reason, f"{r.wall_seconds:.3f}"]
+                rows = rows_of(run, r)
+                if not rows:
+                    w.writerow(base + [""] * 7 + tail)
+                for row in rows:
+                    w.writerow(base + [
+                        row["metric"], _csvnum(row["value"]), _csvnum(row["budget"]),
+                        "" if row["within_budget"] is None else str(row["within_budget"]).lower(),
+                        _csvnum(row["baseline"]), _csvnum(row["threshold"]), row["baseline_state"],
+                    ] + tail)
+
+
+def _csvnum(v: Any) -> str:
+    return "" if v is None else repr(float(v))
+
+
+def write(run: Run, out_dir: str | os.PathLike) -> dict[str, Path]:
+    """Write report.html, summary.md, summary.csv and run.json into ``out_dir``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {
+        "html": out / "report.html",
+        "md": out / "summary.md",
+        "csv": out / "summary.csv",
+        "run": out / "run.json",
+    }
+    paths["run"].write_text(json.dumps(_jsonable(run.to_json()), indent=1) + "\n")
+    paths["md"].write_text(render_markdown(run))
+    write_csv(run, paths["csv"])
+    paths["html"].write_text(render_html(run))
+    return paths
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, float):
+        return x if math.isfinite(x) else None
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    return x
+
+
+def comparisons_as_dicts(comps: list[bl.Comparison]) -> list[dict[str, Any]]:
+    return [asdict(c) for c in comps]
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit("use: python -m progmo_harness.cli report OUT_DIR")

@@ -1,0 +1,153 @@
+"""The tolerance report: content for a mix of verdicts, provenance and rerun command, HTML
+escaping, self-containment, Markdown and CSV, and a render in a real headless Chromium."""
+
+import csv
+import pathlib
+import re
+import shutil
+import subprocess
+
+import pytest
+
+from fake_checks import make_result
+from progmo_harness import baselines as bl
+from progmo_harness import report as rp
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+EVIL = "<script>alert('x')</script>"
+
+
+def mixed_run(plots=True) -> rp.Run:
+    results = [
+        make_result("calm", "mujoco"),
+        make_result("calm", "pinocchio"),
+        make_result("broken", "mujoco", "fail"),
+        make_result("broken", "pinocchio", "skipped"),
+        make_result("drifting", "mujoco", "regress"),
+        make_result(EVIL, "pinocchio", "error"),
+    ]
+    results[-1].reason = f"crashed near {EVIL} & friends"
+    run = rp.Run(
+        results=results,
+        simulators=["mujoco", "pinocchio"],
+        provenance=rp.provenance(ROOT, "progmo check --jobs 2 calm broken"),
+        scenes={"calm": {"path": "references/scenes/calm.toml", "description": "a quiet scene"}},
+        notes=["a note about <this> run"],
+        plots=plots,
+    )
+    base = {"metrics": {"replay_residual": 3.3e-11, "replay_deviation": 1e-10, "parity_mass": 2e-15}}
+    for r in results:
+        run.comparisons[(r.scene, r.simulator)] = rp.comparisons_as_dicts(bl.compare(r, base))
+    return run
+
+
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+    """The mixed run written once, with plots (0.5 s each): shared by the tests that need them."""
+    d = tmp_path_factory.mktemp("report")
+    return rp.write(mixed_run(), d)
+
+
+def test_verdicts_and_failures_first():
+    run = mixed_run(plots=False)
+    assert run.verdict(run.result("drifting", "mujoco")) == "regression"
+    assert run.verdict(run.result("drifting", "pinocchio")) == "not run"
+    assert run.scene_names() == [EVIL, "broken", "drifting", "calm"]
+    assert not run.ok()
+    t = run.totals()
+    assert (t["pass"], t["fail"], t["error"], t["skipped"], t["regression"], t["not run"]) == (2, 1, 1, 1, 1, 2)
+
+
+def test_html_content_escaping_and_self_containment(written):
+    html = written["html"].read_text()
+    assert "<table id='verdicts'>" in html and "id='attention'" in html
+    for v in ("pass", "fail", "error", "skipped", "regression", "not-run"):
+        assert f"v-{v}" in html, v
+    # Escaped, never raw.
+    assert EVIL not in html and "&lt;script&gt;alert(&#x27;x&#x27;)&lt;/script&gt;" in html
+    assert "a note about &lt;this&gt; run" in html and "&amp; friends" in html
+    # Budget reasons and baselines are shown with the values.
+    assert "RK4 at h = 1e-3 with per-stage u" in html and "regression above" in html
+    # Failures first: the failing scene's section comes before the passing one.
+    assert html.index("id='scene-broken'") < html.index("id='scene-calm'")
+    # Plots are inline PNG; nothing is fetched from the network.
+    assert html.count("data:image/png;base64,") == 4
+    assert not re.search(r"""(src|href)\s*=\s*['"](https?:)?//""", html)
+    assert "@import" not in html and "url(" not in html
+    # Provenance footer and rerun command.
+    foot = html[html.index("<footer id='provenance'>"):]
+    assert "progmo check --jobs 2 calm broken" in foot
+    for label in ("git revision", "progmo", "MuJoCo", "Pinocchio", "numpy", "Python", "host CPUs", "date"):
+        assert f"<th>{label}</th>" in foot, label
+
+
+def test_a_passing_run_says_pass():
+    run = rp.Run([make_result("calm", "mujoco")], ["mujoco"], {"command": "progmo check calm"}, plots=False)
+    assert run.ok() and "PASS: 1 pass" in rp.render_html(run)
+    assert rp.render_markdown(run).startswith("# progmo check: PASS")
+
+
+def test_markdown_and_csv(tmp_path):
+    run = mixed_run(plots=False)
+    paths = rp.write(run, tmp_path)
+    md = paths["md"].read_text()
+    assert md.startswith("# progmo check: FAIL")
+    assert "| broken | ❌ fail | ⏭️ skipped |" in md and "progmo check --jobs 2 calm broken" in md
+    assert "<script>alert('x')</script>" in md  # Markdown escaping is about | and newlines only
+    rows = list(csv.DictReader(paths["csv"].open()))
+    assert list(rows[0]) == rp.CSV_FIELDS
+    by = {(r["scene"], r["simulator"], r["metric"]): r for r in rows}
+    assert by[("broken", "mujoco", "replay_residual")]["within_budget"] == "false"
+    assert by[("drifting", "mujoco", "replay_residual")]["vs_baseline"] == "regression"
+    assert by[("broken", "pinocchio", "")]["reason"].startswith("the simulator cannot represent")
+    assert by[("drifting", "pinocchio", "")]["verdict"] == "not run"
+
+
+def test_plot_handles_zeros_nans_and_long_series():
+    r = make_result("calm", "mujoco")
+    r.series[0].values[:10] = [0.0] * 5 + [None] * 5
+    r.series[0].t = list(r.series[0].t) * 10
+    r.series[0].values = list(r.series[0].values) * 10  # 5010 points: downsampled
+    assert rp.plot(r).startswith("data:image/png;base64,")
+    r.series = []
+    assert rp.plot(r) is None
+
+
+def _browser():
+    for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable"):
+        if shutil.which(name):
+            return shutil.which(name)
+    subprocess.run(["bash", str(ROOT / "harness" / "install_chromium.sh")], capture_output=True, timeout=600)
+    for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable"):
+        if shutil.which(name):
+            return shutil.which(name)
+    return None
+
+
+def test_report_renders_in_headless_chromium(tmp_path, written):
+    browser = _browser()
+    if browser is None:
+        pytest.skip("SKIPPED: no Chromium and harness/install_chromium.sh could not install one; "
+                    "the browser render of report.html was NOT checked")
+    url = written["html"].resolve().as_uri()
+    flags = ["--headless", "--disable-gpu", "--no-sandbox", "--hide-scrollbars", f"--user-data-dir={tmp_path / 'profile'}"]
+    shot = tmp_path / "report.png"
+    # One browser start for both the DOM and the screenshot.
+    dom = subprocess.run([browser, *flags, "--dump-dom", f"--screenshot={shot}", "--window-size=1200,2000", url],
+                         capture_output=True, text=True, timeout=60).stdout
+    assert '<table id="verdicts">' in dom
+    assert dom.count('<span class="v v-') > 10 and 'id="provenance"' in dom
+    assert "progmo check --jobs 2 calm broken" in dom
+    assert shot.is_file() and shot.stat().st_size > 30_000
+    import numpy as np
+    from PIL import Image
+
+    px = np.asarray(Image.open(shot).convert("RGB")).astype(int)
+    assert px.shape == (2000, 1200, 3)
+    packed = (px[..., 0] << 16) | (px[..., 1] << 8) | px[..., 2]
+    assert len(np.unique(packed)) > 200, "screenshot is (nearly) blank"
+    assert (np.abs(px - px[5, 5]).sum(axis=2) > 30).mean() > 0.05, "screenshot is mostly background"
+    # The red FAIL banner and the green pass badges are painted.
+    r, g, b = px[..., 0], px[..., 1], px[..., 2]
+    assert ((r > 170) & (g < 80) & (b < 70)).sum() > 20_000  # #c0392b banner (~1100 x 45 px)
+    assert ((g > 110) & (r < 60) & (b < 100)).sum() > 500  # #1e8449 pass badges
