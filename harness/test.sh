@@ -7,5 +7,7 @@ cd "$root"
 bash harness/setup.sh
 echo "== cargo test (Rust core, pure Rust) ==" >&2
 cargo test --release
+echo "== headless Chromium for the report test ==" >&2
+bash harness/install_chromium.sh || echo "warning: no headless Chromium: the report browser test will be skipped (and say so)" >&2
 echo "== pytest (harness) ==" >&2
 .venv/bin/python -m pytest -q tests/python
