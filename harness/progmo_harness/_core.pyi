@@ -1,0 +1,100 @@
+"""Type stubs of the private extension module `progmo_harness._core` (Rust, pyo3).
+
+Shapes: n = number of samples, nq / nv = sizes of q / v, s = number of constraint rows.
+"""
+
+from typing import Any, Literal, TypedDict
+
+import numpy as np
+import numpy.typing as npt
+
+F64 = npt.NDArray[np.float64]
+
+class SceneError(ValueError):
+    """A scene file is invalid; the message names file, line, column and field."""
+
+class Row(TypedDict):
+    name: str
+    level: Literal["position", "velocity", "acceleration"]
+    role: Literal["programme", "system"]
+
+class SolveResult(TypedDict):
+    success: bool
+    code_name: str  # success, step_too_small, singular_programme, ...
+    code: dict[str, Any]  # {"code": name, ...fields}
+    t_end: float
+    t: F64  # (n,)
+    q: F64  # (n, nq)
+    v: F64  # (n, nv)
+    a: F64  # (n, nv) accelerations dv/dt
+    u: F64  # (n, nv) control forces of the programme rows (paper eq. 2.12)
+    reactions: F64  # (n, nv) reactions of the system's own constraints
+    # "lambda": F64 (n, s) multipliers -- a keyword, so listed here as a comment
+    residual: F64  # (n, s)
+    residual_rate: F64  # (n, s) dg/dt of position rows
+    max_residual: F64  # (s,) over every accepted step
+    max_residual_rate: F64  # (s,)
+    stats: dict[str, Any]
+    settings: dict[str, Any]
+    q_names: list[str]
+    v_names: list[str]
+    row_names: list[str]
+
+class Dynamics(TypedDict):
+    mass: F64  # (nv, nv) A(q)
+    velocity_terms: F64  # (nv,) G(q, v)
+    applied_forces: F64  # (nv,) Q(t, q, v); A dv/dt - G = Q
+    B: F64  # (s, nv) constraint Jacobian
+    gamma: F64  # (s,) B dv/dt = gamma
+
+class Scene:
+    """A loaded, validated scene file."""
+
+    def __init__(self, path: str) -> None: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def description(self) -> str: ...
+    @property
+    def purpose(self) -> str: ...
+    @property
+    def path(self) -> str: ...
+    @property
+    def kind(self) -> Literal["tree", "lagrangian"]: ...
+    @property
+    def q_names(self) -> list[str]: ...
+    @property
+    def v_names(self) -> list[str]: ...
+    @property
+    def rows(self) -> list[Row]: ...
+    @property
+    def tolerances(self) -> dict[str, tuple[float, str]]: ...
+    @property
+    def parameters(self) -> list[tuple[str, float]]: ...
+    @property
+    def t0(self) -> float: ...
+    @property
+    def t1(self) -> float: ...
+    @property
+    def q0(self) -> F64: ...
+    @property
+    def v0(self) -> F64: ...
+    @property
+    def settings(self) -> dict[str, Any]: ...
+    def solve(
+        self,
+        *,
+        output_dt: float | None = None,
+        t1: float | None = None,
+        rtol: float | None = None,
+        atol: float | None = None,
+        integrator: Literal["dop853", "dopri5", "radau5", "rk4"] | None = None,
+        step: float | None = None,
+        formulation: Literal["null_space", "kkt", "range_space", "udwadia_kalaba"] | None = None,
+        drift: Literal["projection", "baumgarte", "none"] | None = None,
+    ) -> SolveResult: ...
+    def residuals(self, t: F64, q: F64, v: F64, a: F64 | None = None) -> F64: ...
+    def dynamics(self, t: float, q: F64, v: F64) -> Dynamics: ...
+    def export(self, format: Literal["mjcf", "urdf"], *, timestep: float = 1e-3) -> tuple[str, dict[str, Any]]: ...
+
+def version() -> str: ...
