@@ -64,6 +64,14 @@ enum Command {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
         args: Vec<String>,
     },
+    /// Speed against error (Python harness): work-precision diagrams, the scipy + Pinocchio pipeline,
+    /// the paper's conditioning claim, right-hand-side scaling. `progmo bench --help`.
+    #[command(disable_help_flag = true)]
+    Bench {
+        /// Arguments for the harness.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<String>,
+    },
     /// A debugging run of one scene (Python harness): MCAP with solver and simulator channels, CSV,
     /// the first tolerance breach. `progmo debug --help`.
     #[command(disable_help_flag = true)]
@@ -148,8 +156,9 @@ fn main() -> ExitCode {
         Command::Solve(a) => solve(a),
         Command::Validate { scenes } => validate(&scenes),
         Command::Export { scene, format, out } => export(&scene, format, out.as_deref()),
-        Command::Check { args } => harness("check", &args),
-        Command::Debug { args } => harness("debug", &args),
+        Command::Check { args } => harness("check", &["-m", "progmo_harness.cli", "check"], &args),
+        Command::Debug { args } => harness("debug", &["-m", "progmo_harness.cli", "debug"], &args),
+        Command::Bench { args } => harness("bench", &["-m", "progmo_harness.bench.main"], &args),
     }
 }
 
@@ -174,7 +183,7 @@ fn harness_python() -> Option<PathBuf> {
     candidates.into_iter().find(|p| p.exists())
 }
 
-fn harness(sub: &str, args: &[String]) -> ExitCode {
+fn harness(sub: &str, module: &[&str], args: &[String]) -> ExitCode {
     let Some(python) = harness_python() else {
         eprintln!(
             "progmo {sub}: error: the Python harness is not set up (no .venv found); run `bash harness/setup.sh` once, or set PROGMO_PYTHON"
@@ -182,7 +191,7 @@ fn harness(sub: &str, args: &[String]) -> ExitCode {
         return ExitCode::from(2);
     };
     let status = std::process::Command::new(&python)
-        .args(["-m", "progmo_harness.cli", sub])
+        .args(module)
         .args(args)
         .status();
     match status {
