@@ -196,3 +196,115 @@ def test_free_joint(tmp_path, sim):
     r = run_check(str(p), sim)
     assert r.status == "pass", (r.reason, r.metrics)
     assert r.metrics["parity_bias"] < 1e-14 and r.metrics["instant_u"] < 1e-13
+
+
+SPRINGS = """name = "spring_chain"
+description = "Two links with joint springs and dampers, a ball joint below the root."
+purpose = "test"
+
+[model]
+kind = "tree"
+gravity = [0.0, 0.0, -9.81]
+
+[[model.bodies]]
+name = "a"
+mass = 1.0
+com = [0.0, 0.0, -0.5]
+inertia = [0.02, 0.02, 0.01]
+joints = [{ name = "q1", type = "hinge", axis = [0.0, 1.0, 0.0], stiffness = 5.0, spring_ref = 0.2, damping = 0.3 }]
+
+[[model.bodies]]
+name = "b"
+parent = "a"
+pos = [0.0, 0.0, -1.0]
+mass = 1.0
+com = [0.0, 0.0, -0.5]
+inertia = [0.02, 0.02, 0.01]
+joints = [{ name = "q2", type = "slide", axis = [0.0, 0.0, 1.0], stiffness = 20.0, spring_ref = -0.1, damping = 0.5 }]
+
+[[programme]]
+name = "elbow"
+expr = "q2 - 0.1*sin(t)"
+
+[initial]
+q = { q1 = 0.3, q2 = 0.0 }
+v = { q1 = 0.0, q2 = 0.1 }
+
+[time]
+t1 = 2.0
+output_dt = 0.01
+
+[tolerances]
+programme_residual = { value = 1e-10, reason = "test" }
+replay_step = { value = 1e-3, reason = "test" }
+parity_mass = { value = 1e-12, reason = "test" }
+parity_bias = { value = 1e-12, reason = "test" }
+instant_u = { value = 1e-10, reason = "test" }
+replay_residual = { value = 1e-11, reason = "test" }
+replay_deviation = { value = 1e-10, reason = "test" }
+"""
+
+BALL_BELOW_ROOT = """name = "spring_chain"
+description = "Two links with joint springs and dampers, a ball joint below the root."
+purpose = "test"
+
+[model]
+kind = "tree"
+gravity = [0.0, 0.0, -9.81]
+
+[[model.bodies]]
+name = "a"
+mass = 1.0
+com = [0.0, 0.0, -0.5]
+inertia = [0.02, 0.02, 0.01]
+joints = [{ name = "q1", type = "hinge", axis = [0.0, 1.0, 0.0] }]
+
+[[model.bodies]]
+name = "b"
+parent = "a"
+pos = [0.0, 0.0, -1.0]
+mass = 1.0
+com = [0.0, 0.0, -0.5]
+inertia = [0.02, 0.02, 0.01]
+joints = [{ name = "ball", type = "ball" }]
+
+[[programme]]
+name = "elbow"
+expr = "ball.wz - 0.1"
+
+[initial]
+q = { q1 = 0.3 }
+v = { ball = [0.1, 0.0, 0.1] }
+
+[time]
+t1 = 2.0
+output_dt = 0.01
+
+[tolerances]
+programme_residual = { value = 1e-10, reason = "test" }
+replay_step = { value = 1e-3, reason = "test" }
+parity_mass = { value = 1e-12, reason = "test" }
+parity_bias = { value = 1e-12, reason = "test" }
+instant_u = { value = 1e-10, reason = "test" }
+replay_residual = { value = 1e-10, reason = "test" }
+replay_deviation = { value = 1e-10, reason = "test" }
+"""
+
+
+@pytest.mark.parametrize("sim", BOTH)
+def test_springs_and_dampers(tmp_path, sim):
+    """Joint springs/dampers: in the MJCF (qfrc_passive) for MuJoCo, applied by the harness from the
+    report for Pinocchio (URDF has none)."""
+    p = tmp_path / "springs.toml"
+    p.write_text(SPRINGS)
+    r = run_check(str(p), sim)
+    assert r.status == "pass", (r.reason, r.metrics)
+    assert r.metrics["parity_bias"] < 1e-14  # measured 1.2e-16: springs and dampers included
+
+
+def test_ball_below_root_skipped_in_pinocchio(tmp_path):
+    p = tmp_path / "ball.toml"
+    p.write_text(BALL_BELOW_ROOT)
+    r = run_check(str(p), "pinocchio")
+    assert r.status == "skipped" and "URDF" in r.reason and "ball" in r.reason
+    assert run_check(str(p), "mujoco").status in ("pass", "fail")  # MuJoCo can represent it
