@@ -292,7 +292,9 @@ def _check(res, scene_path, simulator, options, corrupt_u, frame_every, record):
         res.metrics["replay_growth_rate"] = g
         if math.isfinite(g) and g * horizon > math.log(100):
             res.notes.append(f"open-loop deviation grows like exp({g:.3g} t): x{math.exp(g * horizon):.2g} "
-                             f"over {horizon:g} s (unstable programme; budgets are for this horizon)")
+                             f"over the replayed {horizon:g} s (unstable programme"
+                             + (f"; the scene's budgets are stated for {tol['replay_horizon'][0]:g} s)"
+                                if "replay_horizon" in tol else ")"))
         first.update({"replay_residual": (rp.t, rabs), "replay_deviation": (rp.t, dev)})
 
         sel = downsample(len(rp.t))
