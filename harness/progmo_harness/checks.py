@@ -225,23 +225,19 @@ def _check(res, scene_path, simulator, options, corrupt_u, frame_every, record):
         ns = max(1, options.samples)
         idx = np.unique(np.linspace(0, 2 * ref.steps, ns).round().astype(int))
         times = ref.t[idx]
-        dM = dR = 0.0
         sM = sR = 0.0
-        dmt = drt = []
-        dU = []
+        dmt, drt, dU = [], [], []
         sU = max(float(np.abs(ref.u).max()), 1e-300)
-        Us = []
         for k in idx:
             tk, qk, vk, ak = ref.t[k], ref.q[k], ref.v[k], ref.a[k]
             dyn = scene.dynamics(tk, qk, vk)
             A = np.asarray(dyn["mass"])
             rhs = np.asarray(dyn["velocity_terms"]) + np.asarray(dyn["applied_forces"])
             Ms, rs = be.model_terms(tk, qk, vk)
-            dmt = dmt + [float(np.abs(Ms - A).max())]
-            drt = drt + [float(np.abs(rs - rhs).max())]
+            dmt.append(float(np.abs(Ms - A).max()))
+            drt.append(float(np.abs(rs - rhs).max()))
             sM, sR = max(sM, float(np.abs(A).max())), max(sR, float(np.abs(rhs).max()))
             us = be.instant_u(tk, qk, vk, ak, np.asarray(dyn["B"]), np.asarray(dyn["gamma"]))
-            Us.append(us)
             dU.append(float(np.abs(us - ref.u[k]).max()))
         sR = sR if sR > 0 else 1.0
         pm = np.array(dmt) / max(sM, 1e-300)

@@ -190,6 +190,11 @@ def main(argv: list[str] | None = None) -> int:
     if (a.step is not None and not a.step > 0) or (a.horizon is not None and not a.horizon > 0):
         print("progmo debug: error: --step and --horizon must be positive", file=sys.stderr)
         return 2
+    try:
+        import mcap.writer  # noqa: F401
+    except ImportError as e:
+        print(f"progmo debug: error: the mcap package is not importable: {e}", file=sys.stderr)
+        return 1
     sims = list(SIMULATORS) if a.simulator == "both" else [a.simulator]
     os.makedirs(a.out, exist_ok=True)
     corrupt = None
