@@ -1,0 +1,255 @@
+"""``progmo debug SCENE [--simulator mujoco|pinocchio|both] [--out DIR]``: run the check with full
+recording and write what a person needs to see where a replay leaves the programme:
+
+* ``DIR/<scene>.mcap`` (JSON messages, jsonschema schemas; open in Foxglove):
+  ``/solver/state``, ``/solver/u``, ``/solver/residual`` (the core's trajectory at the replay's
+  sample times), ``/<sim>/state``, ``/<sim>/residual``, ``/<sim>/deviation`` (the replay), one
+  ``foxglove.FrameTransform`` per body per recorded sample on ``/<sim>/tf`` (world -> ``<sim>/<body>``
+  from the simulator's own kinematics: MuJoCo ``xpos``/``xquat``, Pinocchio ``oMf``), and the
+  breaches on ``/<sim>/breach``;
+* ``DIR/<scene>_<sim>.csv``: replay vs solver per sample (q, v, residual rows, deviation);
+* on stdout: where and when the first tolerance breach happened (metric, time, value vs budget), or
+  that none did.
+
+Exit status: 0 no breach, 1 a breach or an error of the check, 2 bad input.
+``--corrupt-u-scale F`` multiplies the replayed u by F (a negative control: the run must breach).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import sys
+
+import numpy as np
+
+from .checks import SIMULATORS, CheckOptions, Recording, _run
+
+STATE_SCHEMA = {
+    "type": "object",
+    "properties": {
+        "t": {"type": "number"},
+        "q": {"type": "object", "additionalProperties": {"type": "number"}},
+        "v": {"type": "object", "additionalProperties": {"type": "number"}},
+    },
+}
+VECTOR_SCHEMA = {
+    "type": "object",
+    "properties": {"t": {"type": "number"},
+                   "values": {"type": "object", "additionalProperties": {"type": "number"}}},
+}
+SCALAR_SCHEMA = {"type": "object", "properties": {"t": {"type": "number"}, "value": {"type": "number"}}}
+BREACH_SCHEMA = {
+    "type": "object",
+    "properties": {"metric": {"type": "string"}, "first_time": {"type": ["number", "null"]},
+                   "value": {"type": "number"}, "budget": {"type": "number"}},
+}
+TIME_SCHEMA = {"type": "object", "title": "time",
+               "properties": {"sec": {"type": "integer", "minimum": 0},
+                              "nsec": {"type": "integer", "minimum": 0}}}
+FRAME_TRANSFORM_SCHEMA = {
+    "title": "foxglove.FrameTransform",
+    "description": "A transform between two reference frames in 3D space",
+    "type": "object",
+    "properties": {
+        "timestamp": TIME_SCHEMA,
+        "parent_frame_id": {"type": "string"},
+        "child_frame_id": {"type": "string"},
+        "translation": {"type": "object", "properties": {k: {"type": "number"} for k in "xyz"}},
+        "rotation": {"type": "object", "properties": {k: {"type": "number"} for k in "xyzw"}},
+    },
+}
+
+#: most body-frame samples per simulator in the MCAP (the states are recorded at every step)
+MAX_FRAMES = 1000
+
+
+def _ns(t: float) -> int:
+    return max(0, int(round(t * 1e9)))
+
+
+def _stamp(t: float) -> dict:
+    n = _ns(t)
+    return {"sec": n // 1_000_000_000, "nsec": n % 1_000_000_000}
+
+
+def _num(x) -> float | None:
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+class _Mcap:
+    def __init__(self, f):
+        from mcap.writer import Writer
+
+        self.w = Writer(f)
+        self.w.start(profile="", library="progmo debug")
+        self.schemas: dict[str, int] = {}
+        self.channels: dict[str, int] = {}
+
+    def channel(self, topic: str, schema_name: str, schema: dict) -> int:
+        if topic not in self.channels:
+            if schema_name not in self.schemas:
+                self.schemas[schema_name] = self.w.register_schema(
+                    name=schema_name, encoding="jsonschema", data=json.dumps(schema).encode())
+            self.channels[topic] = self.w.register_channel(
+                topic=topic, message_encoding="json", schema_id=self.schemas[schema_name])
+        return self.channels[topic]
+
+    def write(self, ch: int, t: float, msg: dict) -> None:
+        self.w.add_message(channel_id=ch, log_time=_ns(t), publish_time=_ns(t),
+                           data=json.dumps(msg).encode())
+
+    def finish(self):
+        self.w.finish()
+
+
+def _write_solver(mc: _Mcap, rec: Recording) -> None:
+    ref = rec.ref
+    cs = mc.channel("/solver/state", "progmo.State", STATE_SCHEMA)
+    cu = mc.channel("/solver/u", "progmo.Vector", VECTOR_SCHEMA)
+    cr = mc.channel("/solver/residual", "progmo.Vector", VECTOR_SCHEMA)
+    for k in range(0, len(ref.t), 2):  # the replay's sample times
+        t = float(ref.t[k])
+        mc.write(cs, t, {"t": t, "q": dict(zip(rec.q_names, map(_num, ref.q[k]))),
+                         "v": dict(zip(rec.v_names, map(_num, ref.v[k])))})
+        mc.write(cu, t, {"t": t, "values": dict(zip(rec.v_names, map(_num, ref.u[k])))})
+        mc.write(cr, t, {"t": t, "values": dict(zip(rec.row_names, map(_num, ref.residual[k])))})
+
+
+def _write_sim(mc: _Mcap, sim: str, rec: Recording, result) -> None:
+    rp = rec.replay
+    cs = mc.channel(f"/{sim}/state", "progmo.State", STATE_SCHEMA)
+    cr = mc.channel(f"/{sim}/residual", "progmo.Vector", VECTOR_SCHEMA)
+    cd = mc.channel(f"/{sim}/deviation", "progmo.Scalar", SCALAR_SCHEMA)
+    for k in range(len(rp.t)):
+        t = float(rp.t[k])
+        mc.write(cs, t, {"t": t, "q": dict(zip(rec.q_names, map(_num, rp.q[k]))),
+                         "v": dict(zip(rec.v_names, map(_num, rp.v[k])))})
+        mc.write(cr, t, {"t": t, "values": dict(zip(rec.row_names, map(_num, rec.residual[k])))})
+        mc.write(cd, t, {"t": t, "value": _num(rec.deviation[k])})
+    ct = mc.channel(f"/{sim}/tf", "foxglove.FrameTransform", FRAME_TRANSFORM_SCHEMA)
+    for t, bodies in rp.frames:
+        for name, pos, wxyz in bodies:
+            mc.write(ct, t, {
+                "timestamp": _stamp(t), "parent_frame_id": "world", "child_frame_id": f"{sim}/{name}",
+                "translation": {"x": float(pos[0]), "y": float(pos[1]), "z": float(pos[2])},
+                "rotation": {"x": float(wxyz[1]), "y": float(wxyz[2]), "z": float(wxyz[3]),
+                             "w": float(wxyz[0])}})
+    cb = mc.channel(f"/{sim}/breach", "progmo.Breach", BREACH_SCHEMA)
+    for b in result.breaches:
+        t = b.first_time if b.first_time is not None else float(rp.t[-1])
+        mc.write(cb, t, {"metric": b.metric, "first_time": b.first_time, "value": _num(b.value),
+                         "budget": b.budget})
+
+
+def _write_csv(path: str, rec: Recording) -> None:
+    ref, rp = rec.ref, rec.replay
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["t"] + [f"solver.q.{n}" for n in rec.q_names] + [f"replay.q.{n}" for n in rec.q_names]
+                   + [f"solver.v.{n}" for n in rec.v_names] + [f"replay.v.{n}" for n in rec.v_names]
+                   + [f"solver.u.{n}" for n in rec.v_names]
+                   + [f"replay.residual.{n}" for n in rec.row_names] + ["deviation"])
+        for k in range(len(rp.t)):
+            j = 2 * k
+            w.writerow([repr(float(rp.t[k]))] + [repr(float(x)) for x in (
+                *ref.q[j], *rp.q[k], *ref.v[j], *rp.v[k], *ref.u[j], *rec.residual[k], rec.deviation[k])])
+
+
+def _value_at(rec: Recording, result, metric: str, t: float | None):
+    """The metric's value at its first breach time (replay metrics), else None."""
+    if rec is None or rec.replay is None or t is None:
+        return None
+    k = int(np.argmin(np.abs(rec.replay.t - t)))
+    if metric == "replay_residual":
+        return float(np.abs(rec.residual[k]).max())
+    if metric == "replay_deviation":
+        return float(rec.deviation[k])
+    return None
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="progmo debug", description=__doc__.split("\n\n")[0])
+    p.add_argument("scene", help="scene file (.toml)")
+    p.add_argument("--simulator", choices=[*SIMULATORS, "both"], default="both")
+    p.add_argument("--out", default="debug-out", help="output directory (default: debug-out)")
+    p.add_argument("--step", type=float, default=None, help="replay step (default: the scene's)")
+    p.add_argument("--horizon", type=float, default=None, help="replay horizon in s")
+    p.add_argument("--corrupt-u-scale", type=float, default=None,
+                   help="negative control: multiply the replayed u by this factor")
+    try:
+        a = p.parse_args(argv)
+    except SystemExit as e:
+        return 2 if e.code else 0
+    if not os.path.isfile(a.scene):
+        print(f"progmo debug: error: no scene file {a.scene!r}", file=sys.stderr)
+        return 2
+    if (a.step is not None and not a.step > 0) or (a.horizon is not None and not a.horizon > 0):
+        print("progmo debug: error: --step and --horizon must be positive", file=sys.stderr)
+        return 2
+    try:
+        import mcap.writer  # noqa: F401
+    except ImportError as e:
+        print(f"progmo debug: error: the mcap package is not importable: {e}", file=sys.stderr)
+        return 1
+    sims = list(SIMULATORS) if a.simulator == "both" else [a.simulator]
+    os.makedirs(a.out, exist_ok=True)
+    corrupt = None
+    if a.corrupt_u_scale is not None:
+        factor = a.corrupt_u_scale
+        corrupt = lambda t, u: u * factor  # noqa: E731
+    opts = CheckOptions(step=a.step, horizon=a.horizon)
+    stem = os.path.splitext(os.path.basename(a.scene))[0]
+    mcap_path = os.path.join(a.out, stem + ".mcap")
+    results = []
+    with open(mcap_path, "wb") as f:
+        mc = _Mcap(f)
+        solver_written = False
+        for sim in sims:
+            rec = Recording()
+            # frames: at most MAX_FRAMES samples (the step is only known inside the check)
+            r, _ = _run(a.scene, sim, opts, corrupt_u=corrupt, frame_every=-1, record=rec)
+            results.append((sim, r, rec))
+            if rec.replay is not None:
+                if not solver_written:
+                    _write_solver(mc, rec)
+                    solver_written = True
+                _write_sim(mc, sim, rec, r)
+                csv_path = os.path.join(a.out, f"{stem}_{sim}.csv")
+                _write_csv(csv_path, rec)
+        mc.finish()
+    print(f"wrote {mcap_path}" + "".join(f", {os.path.join(a.out, f'{stem}_{s}.csv')}"
+                                         for s, _, rec in results if rec.replay is not None))
+    breaches = []
+    bad = False
+    for sim, r, rec in results:
+        m = r.metrics
+        print(f"{sim:9s} {r.status:7s} " + "  ".join(
+            f"{k} {m[k]:.3g}" for k in ("parity_mass", "parity_bias", "replay_residual", "replay_deviation",
+                                        "replay_growth_rate", "instant_u", "replay_step") if k in m)
+              + (f"  ({r.reason})" if r.reason else ""))
+        if r.status == "error":
+            bad = True
+        for b in r.breaches:
+            breaches.append((sim, b, _value_at(rec, r, b.metric, b.first_time)))
+    if breaches:
+        timed = [x for x in breaches if x[1].first_time is not None]
+        sim, b, at = min(timed, key=lambda x: x[1].first_time) if timed else breaches[0]
+        when = f"t = {b.first_time:.6g} s" if b.first_time is not None else "(no time)"
+        there = f"value there {at:.3g}, " if at is not None else ""
+        print(f"first tolerance breach: {sim} {b.metric} at {when}: {there}worst {b.value:.3g} "
+              f"vs budget {b.budget:.3g}")
+        for sim2, b2, _ in breaches:
+            if b2 is not b:
+                ft = f"t = {b2.first_time:.6g} s" if b2.first_time is not None else "(no time)"
+                print(f"  also: {sim2} {b2.metric} from {ft}: worst {b2.value:.3g} vs budget {b2.budget:.3g}")
+        return 1
+    print("no tolerance breach")
+    return 1 if bad else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

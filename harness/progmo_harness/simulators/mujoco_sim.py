@@ -1,0 +1,134 @@
+"""MuJoCo 4.0 back-end: the scene's MJCF export, RK4 with u fed at every stage through
+``mjcb_control`` (process-global: always cleared in ``finally``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import mujoco
+
+from . import BlowUp
+from .replay import CoordMap, Reference, Replay
+
+#: |qacc| beyond this is treated as a blow-up (MuJoCo returns huge values at singularities)
+ACC_LIMIT = 1e8
+
+NAME = "mujoco"
+
+
+def version() -> str:
+    return mujoco.__version__
+
+
+class MujocoBackend:
+    name = NAME
+
+    def __init__(self, doc: str, report: dict):
+        self.report = report
+        self.cm = CoordMap(report)
+        self.m = mujoco.MjModel.from_xml_string(doc)
+        self.d = mujoco.MjData(self.m)
+        m = self.m
+        # ideal rigid-body dynamics: the export disables contacts etc.; make sure of the rest
+        m.opt.integrator = mujoco.mjtIntegrator.mjINT_RK4
+        m.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_ACTUATION)
+        if m.nq != self.cm.nq or m.nv != self.cm.nv:
+            raise ValueError(f"MJCF has nq={m.nq}, nv={m.nv}; report {self.cm.nq}, {self.cm.nv}")
+        self.attractors = []
+        for hf in report.get("harness_forces", []):
+            if hf["kind"] == "attractor":
+                bodies = [(mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b), mass)
+                          for b, mass in hf["bodies"]]
+                self.attractors.append((np.array(hf["point"], float), hf["mu"], bodies))
+            else:  # springs and dampers are in the MJCF (qfrc_passive)
+                pass
+        self._jac = np.zeros((3, m.nv))
+        self.body_names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, i) for i in range(m.nbody)]
+
+    def notes(self) -> list[str]:
+        ch = self.report.get("mass_changes", [])
+        s = f"MuJoCo {mujoco.__version__}, RK4, u written to qfrc_applied at every stage (mjcb_control)"
+        if ch:
+            s += "; mass floor on " + ", ".join(
+                f'{c["body"]} (+m {c["delta_mass"]:.0e}, +I {c["delta_inertia"]:.0e})' for c in ch)
+        return [s]
+
+    def harness(self) -> np.ndarray:
+        """Generalized attractor forces from MuJoCo's own state (needs kinematics)."""
+        f = np.zeros(self.m.nv)
+        for point, mu, bodies in self.attractors:
+            for bid, mass in bodies:
+                r = self.d.xipos[bid] - point
+                force = -mu * mass * r / np.linalg.norm(r) ** 3
+                mujoco.mj_jacBodyCom(self.m, self.d, self._jac, None, bid)
+                f += self._jac.T @ force
+        return f
+
+    def _set(self, t, q, v):
+        self.d.time = t
+        self.d.qpos[:] = self.cm.q_to_sim(q)
+        self.d.qvel[:] = self.cm.v_to_sim(q, v)
+        self.d.qfrc_applied[:] = 0.0
+        self.d.xfrc_applied[:] = 0.0
+
+    def model_terms(self, t, q, v):
+        m, d, cm = self.m, self.d, self.cm
+        mujoco.set_mjcb_control(None)
+        self._set(t, q, v)
+        mujoco.mj_forward(m, d)
+        M = np.zeros((m.nv, m.nv))
+        mujoco.mj_fullM(m, d, M)
+        rhs_sim = -d.qfrc_bias + d.qfrc_passive + self.harness()
+        P = cm.P(q)
+        return P.T @ M @ P, P.T @ (rhs_sim - M @ cm.Pdot_v(q, v))
+
+    def instant_u(self, t, q, v, a, B, gamma):
+        m, d, cm = self.m, self.d, self.cm
+        mujoco.set_mjcb_control(None)
+        self._set(t, q, v)
+        d.qacc[:] = cm.a_to_sim(q, v, a)
+        mujoco.mj_inverse(m, d)
+        f = d.qfrc_inverse.copy() - self.harness()
+        return cm.f_from_sim(q, f)
+
+    def replay(self, ref: Reference, frame_every: int = 0) -> Replay:
+        m, d, cm = self.m, self.d, self.cm
+        h, n, t0 = ref.h, ref.steps, ref.t0
+        m.opt.timestep = h
+        nq, nv = len(ref.q[0]), len(ref.v[0])
+        Q = np.zeros((n + 1, nq))
+        V = np.zeros((n + 1, nv))
+        A = np.zeros((n + 1, nv))
+        frames = []
+        cur_q = [ref.q[0]]
+
+        def control(model, data):
+            u = ref.u_at(data.time)
+            data.qfrc_applied[:] = cm.f_to_sim(cur_q[0], u) + self.harness()
+
+        self._set(t0, ref.q[0], ref.v[0])
+        mujoco.set_mjcb_control(control)
+        try:
+            for k in range(n + 1):
+                tk = t0 + k * h
+                d.time = tk
+                mujoco.mj_forward(m, d)
+                qo = cm.q_from_sim(d.qpos)
+                if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
+                    raise BlowUp(tk, "non-finite state")
+                if not np.all(np.abs(d.qacc) < ACC_LIMIT):
+                    raise BlowUp(tk, f"|qacc| = {np.abs(d.qacc).max():.3g} > {ACC_LIMIT:g}")
+                Q[k] = qo
+                V[k] = cm.v_from_sim(qo, d.qvel)
+                A[k] = cm.a_from_sim(qo, V[k], d.qacc)
+                if frame_every and k % frame_every == 0:
+                    frames.append((tk, [(self.body_names[b], d.xpos[b].copy(), d.xquat[b].copy())
+                                        for b in range(1, m.nbody)]))
+                if k == n:
+                    break
+                cur_q[0] = qo
+                d.time = tk
+                mujoco.mj_step(m, d)
+        finally:
+            mujoco.set_mjcb_control(None)
+        return Replay(ref.t[::2][: n + 1], Q, V, A, frames, frame_every)
+

@@ -1,0 +1,193 @@
+"""Pinocchio 4.1 back-end: the scene's URDF export, a harness RK4 with ``pin.aba`` as the
+acceleration oracle, Lie-group-correct (RKMK4 with ``dexpinv = inv(dIntegrate(.., ARG1))``) when the
+model has ball or free joints; springs, dampers and attractors applied by the harness from
+Pinocchio's own state as the export report prescribes."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pinocchio as pin
+
+from . import BlowUp
+from .replay import CoordMap, Reference, Replay
+
+ACC_LIMIT = 1e8
+NAME = "pinocchio"
+
+#: root joints the export may ask for (the report's Python expression -> constructor)
+ROOT_JOINTS = {
+    "pin.JointModelSpherical()": lambda: pin.JointModelSpherical(),
+    "pin.JointModelFreeFlyer()": lambda: pin.JointModelFreeFlyer(),
+}
+
+
+def version() -> str:
+    return pin.__version__
+
+
+class PinocchioBackend:
+    name = NAME
+
+    def __init__(self, doc: str, report: dict):
+        self.report = report
+        self.cm = CoordMap(report)
+        rj = report.get("root_joint")
+        fd, path = tempfile.mkstemp(suffix=".urdf")
+        try:
+            with os.fdopen(fd, "w") as f:
+                f.write(doc)
+            if rj:
+                if rj["python"] not in ROOT_JOINTS:
+                    raise ValueError(f"unknown root joint {rj['python']!r}")
+                self.model = pin.buildModelFromUrdf(path, ROOT_JOINTS[rj["python"]](), rj["name"])
+            else:
+                self.model = pin.buildModelFromUrdf(path)
+        finally:
+            os.unlink(path)
+        model = self.model
+        model.gravity.linear = np.array(report["gravity"], float)
+        if model.nq != self.cm.nq or model.nv != self.cm.nv:
+            raise ValueError(f"URDF has nq={model.nq}, nv={model.nv}; report {self.cm.nq}, {self.cm.nv}")
+        self.lie = model.nq != model.nv
+        # harness forces
+        coms = {}
+        for link in ET.fromstring(doc).iter("link"):
+            o = link.find("inertial/origin")
+            coms[link.get("name")] = np.array([float(x) for x in o.get("xyz", "0 0 0").split()]) \
+                if o is not None else np.zeros(3)
+        self.attractors = []
+        self.springs = []
+        self.dampers = []
+        for hf in report.get("harness_forces", []):
+            if hf["kind"] == "attractor":
+                bodies = []
+                for b, mass in hf["bodies"]:
+                    fid = model.getFrameId(b, pin.FrameType.BODY)
+                    fr = model.frames[fid]
+                    place = fr.placement * pin.SE3(np.eye(3), coms.get(b, np.zeros(3)))
+                    cid = model.addFrame(pin.Frame(b + "__com", fr.parentJoint, fid, place,
+                                                   pin.FrameType.OP_FRAME))
+                    bodies.append((cid, mass))
+                self.attractors.append((np.array(hf["point"], float), hf["mu"], bodies))
+            elif hf["kind"] == "spring":
+                self.springs.append((hf["sim_q"], hf["sim_v"], hf["stiffness"], hf["spring_ref"]))
+            elif hf["kind"] == "damper":
+                self.dampers.append((hf["sim_v"], hf["nv"], hf["damping"]))
+        self.data = model.createData()
+        self.body_frames = [(f.name, i) for i, f in enumerate(model.frames)
+                            if f.type == pin.FrameType.BODY and f.name != "universe"]
+
+    def notes(self) -> list[str]:
+        s = f"Pinocchio {pin.__version__}, harness RK4{' (RKMK4, Lie group)' if self.lie else ''} with pin.aba"
+        if self.report.get("root_joint"):
+            s += f"; root joint {self.report['root_joint']['python']}"
+        return [s]
+
+    def harness(self, qs, vs) -> np.ndarray:
+        model, data = self.model, self.data
+        f = np.zeros(model.nv)
+        for iq, iv, k, ref in self.springs:
+            f[iv] += -k * (qs[iq] - ref)
+        for iv, n, c in self.dampers:
+            f[iv:iv + n] += -c * vs[iv:iv + n]
+        if self.attractors:
+            pin.computeJointJacobians(model, data, qs)
+            pin.updateFramePlacements(model, data)
+            for point, mu, bodies in self.attractors:
+                for fid, mass in bodies:
+                    r = data.oMf[fid].translation - point
+                    force = -mu * mass * r / np.linalg.norm(r) ** 3
+                    J = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+                    f += J[:3].T @ force
+        return f
+
+    def model_terms(self, t, q, v):
+        model, data, cm = self.model, self.data, self.cm
+        qs, vs = cm.q_to_sim(q), cm.v_to_sim(q, v)
+        M = pin.crba(model, data, qs)
+        M = np.triu(M) + np.triu(M, 1).T
+        b = pin.rnea(model, data, qs, vs, np.zeros(model.nv))
+        rhs_sim = -b + self.harness(qs, vs)
+        P = cm.P(q)
+        return P.T @ M @ P, P.T @ (rhs_sim - M @ cm.Pdot_v(q, v))
+
+    def instant_u(self, t, q, v, a, B, gamma):
+        """Ideal reaction of the programme rows (B a = gamma in our coordinates) by Pinocchio's
+        constrained dynamics: J a_sim + gamma_pin = 0 with J = B P^T, gamma_pin = -(gamma + J Pdv)."""
+        model, data, cm = self.model, self.data, self.cm
+        qs, vs = cm.q_to_sim(q), cm.v_to_sim(q, v)
+        P = cm.P(q)
+        J = np.ascontiguousarray(B @ P.T)
+        g = -(gamma + J @ cm.Pdot_v(q, v))
+        tau0 = self.harness(qs, vs)
+        pin.forwardDynamics(model, data, qs, vs, tau0, J, g, 0.0)
+        lam = np.array(data.lambda_c).copy()
+        return cm.f_from_sim(q, J.T @ lam)
+
+    def _acc(self, t, qs, vs, ref):
+        q = self.cm.q_from_sim(qs)
+        tau = self.cm.f_to_sim(q, ref.u_at(t)) + self.harness(qs, vs)
+        a = pin.aba(self.model, self.data, qs, vs, tau)
+        if not np.all(np.abs(a) < ACC_LIMIT):
+            raise BlowUp(t, f"|ddq| = {np.abs(a).max():.3g} > {ACC_LIMIT:g} (or non-finite)")
+        return np.array(a)
+
+    def _dth(self, qs, th, vs):
+        if not self.lie:
+            return vs
+        Jd = pin.dIntegrate(self.model, qs, th, pin.ArgumentPosition.ARG1)
+        return np.linalg.solve(Jd, vs)
+
+    def replay(self, ref: Reference, frame_every: int = 0) -> Replay:
+        model, data, cm = self.model, self.data, self.cm
+        h, n, t0 = ref.h, ref.steps, ref.t0
+        nq, nv = cm.nq, cm.nv
+        Q = np.zeros((n + 1, nq))
+        V = np.zeros((n + 1, nv))
+        A = np.zeros((n + 1, nv))
+        frames = []
+        qs = cm.q_to_sim(ref.q[0])
+        vs = cm.v_to_sim(ref.q[0], ref.v[0])
+        integ = pin.integrate
+        for k in range(n + 1):
+            tk = t0 + k * h
+            if not (np.all(np.isfinite(qs)) and np.all(np.isfinite(vs))):
+                raise BlowUp(tk, "non-finite state")
+            a1 = self._acc(tk, qs, vs, ref)
+            qo = cm.q_from_sim(qs)
+            Q[k], V[k] = qo, cm.v_from_sim(qo, vs)
+            A[k] = cm.a_from_sim(qo, V[k], a1)
+            if frame_every and k % frame_every == 0:
+                pin.framesForwardKinematics(model, data, qs)
+                frames.append((tk, [(name, data.oMf[i].translation.copy(),
+                                     _wxyz(data.oMf[i].rotation)) for name, i in self.body_frames]))
+            if k == n:
+                break
+            d1 = vs
+            th = 0.5 * h * d1
+            v2 = vs + 0.5 * h * a1
+            q2 = integ(model, qs, th)
+            a2 = self._acc(tk + 0.5 * h, q2, v2, ref)
+            d2 = self._dth(qs, th, v2)
+            th = 0.5 * h * d2
+            v3 = vs + 0.5 * h * a2
+            q3 = integ(model, qs, th)
+            a3 = self._acc(tk + 0.5 * h, q3, v3, ref)
+            d3 = self._dth(qs, th, v3)
+            th = h * d3
+            v4 = vs + h * a3
+            q4 = integ(model, qs, th)
+            a4 = self._acc(tk + h, q4, v4, ref)
+            d4 = self._dth(qs, th, v4)
+            qs = integ(model, qs, h / 6.0 * (d1 + 2 * d2 + 2 * d3 + d4))
+            vs = vs + h / 6.0 * (a1 + 2 * a2 + 2 * a3 + a4)
+        return Replay(ref.t[::2][: n + 1], Q, V, A, frames, frame_every)
+
+
+def _wxyz(R):
+    c = pin.Quaternion(R).coeffs()  # x, y, z, w
+    return np.array([c[3], c[0], c[1], c[2]])

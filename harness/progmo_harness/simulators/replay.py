@@ -1,0 +1,206 @@
+"""Shared machinery of the simulator back-ends: coordinate maps between our q/v and a simulator's
+qpos/dof vectors (from the export report), the solver's reference trajectory sampled at every RK4
+stage time, and the metrics computed on a replayed trajectory.
+
+Conventions (see ``src/export/mod.rs`` and ``shared/notes/simulators.md``):
+
+* ``q_sim[c.sim_index] = q[c.index]`` for every entry of the report's ``q_map`` (quaternion
+  component reordering for Pinocchio is in the map);
+* ``v_sim = P(q) v`` with ``P`` the identity on ``same`` entries and ``R^T`` on the three linear
+  entries of a free joint whose conversion is ``body_frame`` (Pinocchio); generalized forces map as
+  ``f_sim = P^-T u`` (``P`` is orthogonal: ``f_sim = P u``), back as ``u = P^T f_sim``;
+* accelerations: ``a_sim = P a + (dP/dt) v`` with ``(dP/dt) v = -w x (R^T v_lin)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+def rot_wxyz(w: float, x: float, y: float, z: float) -> np.ndarray:
+    n = np.sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = w / n, x / n, y / n, z / n
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+class CoordMap:
+    """Our q/v <-> a simulator's qpos/dof vectors, built from an export report."""
+
+    def __init__(self, report: dict):
+        self.report = report
+        self.nq = len(report["q_map"])
+        self.nv = len(report["v_map"])
+        self.q_idx = np.array([c["index"] for c in report["q_map"]], dtype=int)
+        self.q_sim = np.array([c["sim_index"] for c in report["q_map"]], dtype=int)
+        self.same = [c for c in report["v_map"] if c["conversion"] == "same"]
+        self.same_idx = np.array([c["index"] for c in self.same], dtype=int)
+        self.same_sim = np.array([c["sim_index"] for c in self.same], dtype=int)
+        # free joints whose linear velocity is body-frame in the simulator
+        groups: dict[str, list[dict]] = {}
+        for c in report["v_map"]:
+            if c["conversion"] != "same":
+                groups.setdefault(c["sim_joint"], []).append(c)
+        self.frames = []  # (q indices wxyz, lin v indices, ang v indices, sim rows)
+        for joint, cs in groups.items():
+            qi = {c["name"].rsplit(".", 1)[1]: c["index"] for c in report["q_map"]
+                  if c["sim_joint"] == joint}
+            vi = {c["name"].rsplit(".", 1)[1]: c["index"] for c in report["v_map"]
+                  if c["sim_joint"] == joint}
+            rows = [c["sim_index"] for c in sorted(cs, key=lambda c: c["index"])]
+            self.frames.append(([qi["qw"], qi["qx"], qi["qy"], qi["qz"]],
+                                [vi["vx"], vi["vy"], vi["vz"]],
+                                [vi["wx"], vi["wy"], vi["wz"]], rows))
+        # quaternion groups of OUR q (for comparisons up to sign)
+        self.quats: list[list[int]] = []
+        byj: dict[str, dict[str, int]] = {}
+        for c in report["q_map"]:
+            suffix = c["name"].rsplit(".", 1)[-1]
+            if suffix in ("qw", "qx", "qy", "qz"):
+                byj.setdefault(c["sim_joint"], {})[suffix] = c["index"]
+        for d in byj.values():
+            if len(d) == 4:
+                self.quats.append([d["qw"], d["qx"], d["qy"], d["qz"]])
+
+    # -- positions
+    def q_to_sim(self, q: np.ndarray) -> np.ndarray:
+        qs = np.zeros(self.nq)
+        qs[self.q_sim] = q[self.q_idx]
+        return qs
+
+    def q_from_sim(self, qs: np.ndarray) -> np.ndarray:
+        q = np.zeros(self.nq)
+        q[self.q_idx] = qs[self.q_sim]
+        return q
+
+    # -- velocity map
+    def P(self, q: np.ndarray) -> np.ndarray:
+        """v_sim = P(q) v (q: ours)."""
+        P = np.zeros((self.nv, self.nv))
+        P[self.same_sim, self.same_idx] = 1.0
+        for qi, lin, ang, rows in self.frames:
+            R = rot_wxyz(*q[qi])
+            for a, r in enumerate(rows):
+                P[r, lin] = R.T[a]
+        return P
+
+    def Pdot_v(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(dP/dt) v in simulator dof order."""
+        out = np.zeros(self.nv)
+        for qi, lin, ang, rows in self.frames:
+            R = rot_wxyz(*q[qi])
+            w = v[ang]
+            out[rows] = -np.cross(w, R.T @ v[lin])
+        return out
+
+    def v_to_sim(self, q, v):
+        if not self.frames:
+            vs = np.zeros(self.nv)
+            vs[self.same_sim] = v[self.same_idx]
+            return vs
+        return self.P(q) @ v
+
+    def v_from_sim(self, q, vs):
+        if not self.frames:
+            v = np.zeros(self.nv)
+            v[self.same_idx] = vs[self.same_sim]
+            return v
+        return self.P(q).T @ vs  # P orthogonal
+
+    def f_to_sim(self, q, u):
+        return self.v_to_sim(q, u)  # P^-T = P
+
+    def f_from_sim(self, q, fs):
+        return self.v_from_sim(q, fs)  # P^T
+
+    def a_from_sim(self, q, v, a_sim):
+        if not self.frames:
+            return self.v_from_sim(q, a_sim)
+        return self.P(q).T @ (a_sim - self.Pdot_v(q, v))
+
+    def a_to_sim(self, q, v, a):
+        if not self.frames:
+            return self.v_to_sim(q, a)
+        return self.P(q) @ a + self.Pdot_v(q, v)
+
+
+@dataclass
+class Reference:
+    """The solver's trajectory at every RK4 stage time of a replay with step h (output_dt = h/2)."""
+
+    t: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    u: np.ndarray
+    residual: np.ndarray
+    h: float
+    steps: int
+    t0: float
+    solve_seconds: float = 0.0
+
+    def u_at(self, time: float) -> np.ndarray:
+        """u at a stage time (exact grid value; linear interpolation off the grid)."""
+        x = (time - self.t0) / (0.5 * self.h)
+        k = int(round(x))
+        if abs(x - k) < 1e-6 and 0 <= k < len(self.t):
+            return self.u[k]
+        k = min(max(int(np.floor(x)), 0), len(self.t) - 2)
+        s = x - k
+        return (1 - s) * self.u[k] + s * self.u[k + 1]
+
+
+@dataclass
+class Replay:
+    """A replayed trajectory in OUR coordinates, at t0 + k h, k = 0..steps."""
+
+    t: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    #: optional body frames per sample: list of (name, pos[3], quat wxyz[4]) lists
+    frames: list = field(default_factory=list)
+    frame_every: int = 1
+
+
+def quat_aware_diff(cm: CoordMap, q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
+    """|q1 - q2| per entry (rows: samples), quaternions compared up to sign."""
+    d = np.abs(q1 - q2)
+    for g in cm.quats:
+        alt = np.abs(q1[:, g] + q2[:, g])
+        use_alt = alt.max(axis=1) < d[:, g].max(axis=1)
+        d[np.ix_(use_alt, g)] = alt[use_alt]
+    return d
+
+
+def growth_rate(t: np.ndarray, dev: np.ndarray) -> float:
+    """Exponential growth rate (1/s) of the deviation: least-squares fit of log(dev) over the
+    horizon, skipping the first 10% (where the deviation rises from exact zero) and values at
+    round-off level."""
+    if len(t) < 4:
+        return float("nan")
+    T = t[-1] - t[0]
+    keep = (t >= t[0] + 0.1 * T) & (dev > 1e-15) & np.isfinite(dev)
+    if keep.sum() < 4:
+        return float("nan")
+    slope, _ = np.polyfit(t[keep], np.log(dev[keep]), 1)
+    return float(slope)
+
+
+def first_time_above(t: np.ndarray, x: np.ndarray, limit: float) -> float | None:
+    bad = ~(x <= limit)
+    if not bad.any():
+        return None
+    return float(t[int(np.argmax(bad))])
+
+
+def downsample(n: int, most: int = 400) -> np.ndarray:
+    if n <= most:
+        return np.arange(n)
+    idx = np.unique(np.linspace(0, n - 1, most).round().astype(int))
+    return idx

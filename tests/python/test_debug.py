@@ -1,0 +1,75 @@
+"""progmo debug: MCAP with solver and simulator channels (schemas read back), CSV, first breach."""
+
+import csv
+import json
+import pathlib
+
+import pytest
+from mcap.reader import make_reader
+
+from progmo_harness import debug
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+SCENE = str(ROOT / "references" / "scenes" / "double_pendulum.toml")
+
+
+def read(path):
+    with open(path, "rb") as f:
+        r = make_reader(f)
+        summary = r.get_summary()
+        topics = {c.topic: summary.schemas[c.schema_id] for c in summary.channels.values()}
+        msgs = {}
+        for schema, ch, m in r.iter_messages():
+            msgs.setdefault(ch.topic, []).append(json.loads(m.data))
+    return topics, msgs
+
+
+def test_clean_run_writes_mcap_and_csv(tmp_path, capsys):
+    rc = debug.main([SCENE, "--simulator", "both", "--out", str(tmp_path), "--horizon", "1"])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    assert "no tolerance breach" in out
+    topics, msgs = read(tmp_path / "double_pendulum.mcap")
+    for t in ("/solver/state", "/solver/u", "/solver/residual"):
+        assert t in topics and len(msgs[t]) == 1001
+    for sim in ("mujoco", "pinocchio"):
+        for t in ("state", "residual", "deviation"):
+            assert len(msgs[f"/{sim}/{t}"]) == 1001
+        tf = topics[f"/{sim}/tf"]
+        assert tf.name == "foxglove.FrameTransform" and tf.encoding == "jsonschema"
+        props = json.loads(tf.data)["properties"]
+        assert set(props) >= {"timestamp", "parent_frame_id", "child_frame_id", "translation", "rotation"}
+        frames = msgs[f"/{sim}/tf"]
+        assert {m["child_frame_id"] for m in frames} >= {f"{sim}/upper", f"{sim}/lower"}
+        m = frames[-1]
+        assert set(m["timestamp"]) == {"sec", "nsec"} and m["parent_frame_id"] == "world"
+        q = m["rotation"]
+        assert abs(q["x"] ** 2 + q["y"] ** 2 + q["z"] ** 2 + q["w"] ** 2 - 1) < 1e-12
+    assert topics["/mujoco/state"].encoding == "jsonschema"
+    # MuJoCo and Pinocchio see the same lower body at the same place
+    a = [m for m in msgs["/mujoco/tf"] if m["child_frame_id"] == "mujoco/lower"][-1]["translation"]
+    b = [m for m in msgs["/pinocchio/tf"] if m["child_frame_id"] == "pinocchio/lower"][-1]["translation"]
+    assert a == pytest.approx(b, abs=1e-9)
+    with open(tmp_path / "double_pendulum_mujoco.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 1001 and "replay.q.q2" in rows[0] and "solver.q.q2" in rows[0]
+    assert abs(float(rows[-1]["replay.q.q2"]) - float(rows[-1]["solver.q.q2"])) < 1e-10
+
+
+def test_corrupted_run_prints_first_breach(tmp_path, capsys):
+    rc = debug.main([SCENE, "--simulator", "mujoco", "--out", str(tmp_path), "--horizon", "1",
+                     "--corrupt-u-scale", "1.01"])
+    out = capsys.readouterr().out
+    assert rc == 1, out
+    line = next(l for l in out.splitlines() if l.startswith("first tolerance breach"))
+    assert "mujoco" in line and " at t = " in line and "budget" in line
+    t = float(line.split(" at t = ")[1].split(" s")[0])
+    assert 0 <= t < 0.5
+    topics, msgs = read(tmp_path / "double_pendulum.mcap")
+    assert "/pinocchio/state" not in topics
+    assert {m["metric"] for m in msgs["/mujoco/breach"]} >= {"replay_residual", "replay_deviation"}
+
+
+def test_bad_input_exit_2(tmp_path, capsys):
+    assert debug.main([str(tmp_path / "missing.toml"), "--out", str(tmp_path)]) == 2
+    assert debug.main([SCENE, "--simulator", "gazebo"]) == 2
