@@ -240,6 +240,21 @@ pub struct Trajectory {
 }
 
 impl Trajectory {
+    /// An empty trajectory with the names of `problem`'s q, v and rows.
+    pub fn named_for<M: Model, C: Constraints>(problem: &Problem<M, C>) -> Self {
+        Trajectory {
+            q_names: problem.model.q_names(),
+            v_names: problem.model.v_names(),
+            row_names: problem
+                .constraints
+                .rows()
+                .iter()
+                .map(|r| r.name.clone())
+                .collect(),
+            ..Default::default()
+        }
+    }
+
     /// Number of samples.
     pub fn len(&self) -> usize {
         self.t.len()
@@ -348,17 +363,7 @@ pub struct Solution {
 
 /// Solve and keep all samples in memory.
 pub fn solve<M: Model, C: Constraints>(problem: &Problem<M, C>, settings: &Settings) -> Solution {
-    let mut traj = Trajectory {
-        q_names: problem.model.q_names(),
-        v_names: problem.model.v_names(),
-        row_names: problem
-            .constraints
-            .rows()
-            .iter()
-            .map(|r| r.name.clone())
-            .collect(),
-        ..Default::default()
-    };
+    let mut traj = Trajectory::named_for(problem);
     let mut out = solve_into(problem, settings, &mut traj);
     out.trajectory = traj;
     out
@@ -419,17 +424,7 @@ pub fn check_initial<M: Model, C: Constraints>(
     problem: &Problem<M, C>,
     settings: &Settings,
 ) -> Result<(Trajectory, Option<InitialCorrection>), ReturnCode> {
-    let mut traj = Trajectory {
-        q_names: problem.model.q_names(),
-        v_names: problem.model.v_names(),
-        row_names: problem
-            .constraints
-            .rows()
-            .iter()
-            .map(|r| r.name.clone())
-            .collect(),
-        ..Default::default()
-    };
+    let mut traj = Trajectory::named_for(problem);
     let corr = {
         let ode = ode::MotionOde::new(problem, settings, &mut traj)?;
         ode.initial_correction.clone()
