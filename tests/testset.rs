@@ -86,7 +86,9 @@ fn caraxis_y(scene: &Scene, sol: &Solution) -> [f64; 10] {
     let road = rows.iter().position(|r| r == "road").unwrap();
     let axle = rows.iter().position(|r| r == "axle").unwrap();
     let (q, v, l) = (tr.q_at(k), tr.v_at(k), tr.lambda_at(k));
-    [q[0], q[1], q[2], q[3], v[0], v[1], v[2], v[3], l[road], l[axle]]
+    [
+        q[0], q[1], q[2], q[3], v[0], v[1], v[2], v[3], l[road], l[axle],
+    ]
 }
 
 #[test]
@@ -114,7 +116,12 @@ fn caraxis_digits_against_cost() {
             ..scene.settings.clone()
         };
         let sol = scene.solve(&settings);
-        assert!(sol.code.is_success(), "{} at {tol:e}: {:?}", method_name(&method), sol.code);
+        assert!(
+            sol.code.is_success(),
+            "{} at {tol:e}: {:?}",
+            method_name(&method),
+            sol.code
+        );
         let y = caraxis_y(&scene, &sol);
         let s = &sol.stats.integrator;
         table.push(Row {
@@ -138,7 +145,17 @@ fn caraxis_digits_against_cost() {
     for r in &table {
         println!(
             "| {} | {:.0e} | {} | {} | {} | {} | {} | {:.3} | {:.3} | {} | {:.2} |",
-            r.method, r.rtol, r.steps, r.rejected, r.rhs, r.jac, r.lu, r.scd_state, r.scd_all, r.worst, r.scd_lambda_rel
+            r.method,
+            r.rtol,
+            r.steps,
+            r.rejected,
+            r.rhs,
+            r.jac,
+            r.lu,
+            r.scd_state,
+            r.scd_all,
+            r.worst,
+            r.scd_lambda_rel
         );
         let _ = r.atol;
     }
@@ -160,13 +177,26 @@ fn caraxis_digits_against_cost() {
     ];
     for (m, tol, floor) in floors {
         let r = get(m, tol);
-        assert!(r.scd_state >= floor, "{m} at {tol:e}: {:.3} digits < {floor}", r.scd_state);
-        assert!(r.scd_all >= floor, "{m} at {tol:e}: lambda: {:.3} digits < {floor}", r.scd_all);
+        assert!(
+            r.scd_state >= floor,
+            "{m} at {tol:e}: {:.3} digits < {floor}",
+            r.scd_state
+        );
+        assert!(
+            r.scd_all >= floor,
+            "{m} at {tol:e}: lambda: {:.3} digits < {floor}",
+            r.scd_all
+        );
     }
     for m in ["dop853", "radau5"] {
         for pair in [[1e-4, 1e-6], [1e-6, 1e-8], [1e-8, 1e-10], [1e-10, 1e-12]] {
             let (a, b) = (get(m, pair[0]), get(m, pair[1]));
-            assert!(b.scd_all >= a.scd_all + 1.4, "{m}: {:.2} -> {:.2}", a.scd_all, b.scd_all);
+            assert!(
+                b.scd_all >= a.scd_all + 1.4,
+                "{m}: {:.2} -> {:.2}",
+                a.scd_all,
+                b.scd_all
+            );
         }
     }
 }
@@ -199,7 +229,9 @@ fn crank_closed_form(t: Dual64) -> ([Dual64; 3], [Dual64; 3], Dual64) {
     let dx3 = s * (-L1 * OMEGA) - sin2 * dphi2 * L2;
     let a11 = J1 + M2 * L1 * L1;
     let a12 = (phi1 - phi2).cos() * (0.5 * L1 * L2 * M2);
-    let tkin = (dphi1 * dphi1 * a11 + dphi1 * dphi2 * a12 * 2.0 + dphi2 * dphi2 * J2 + dx3 * dx3 * M3) * 0.5;
+    let tkin =
+        (dphi1 * dphi1 * a11 + dphi1 * dphi2 * a12 * 2.0 + dphi2 * dphi2 * J2 + dx3 * dx3 * M3)
+            * 0.5;
     ([phi1, phi2, x3], [dphi1, dphi2, dx3], tkin)
 }
 
@@ -209,9 +241,20 @@ fn crank_reference(t: f64) -> [f64; 7] {
     let (q, v, tkin) = crank_closed_form(td);
     // The hand-derived velocities must equal the exact derivatives of the positions.
     for i in 0..3 {
-        assert!((v[i].re - q[i].eps).abs() <= 1e-12 * (1.0 + v[i].re.abs()), "closed form v{i}");
+        assert!(
+            (v[i].re - q[i].eps).abs() <= 1e-12 * (1.0 + v[i].re.abs()),
+            "closed form v{i}"
+        );
     }
-    [q[0].re, q[1].re, q[2].re, v[0].re, v[1].re, v[2].re, tkin.eps / OMEGA]
+    [
+        q[0].re,
+        q[1].re,
+        q[2].re,
+        v[0].re,
+        v[1].re,
+        v[2].re,
+        tkin.eps / OMEGA,
+    ]
 }
 
 /// Published reference of the FLEXIBLE crank at t = 0.1 (Ex_crank.f `cranksoln`): y(1:3), y(8:10), y(24).
@@ -265,10 +308,21 @@ fn crank_rigid_closed_form_digits_against_cost() {
             atol: tol,
             ..scene.settings.clone()
         };
-        let at_steps = scene.solve(&Settings { output: Output::Steps, ..base.clone() });
-        let dense = scene.solve(&Settings { output: Output::Every(0.001), ..base });
+        let at_steps = scene.solve(&Settings {
+            output: Output::Steps,
+            ..base.clone()
+        });
+        let dense = scene.solve(&Settings {
+            output: Output::Every(0.001),
+            ..base
+        });
         for sol in [&at_steps, &dense] {
-            assert!(sol.code.is_success(), "{} at {tol:e}: {:?}", method_name(&method), sol.code);
+            assert!(
+                sol.code.is_success(),
+                "{} at {tol:e}: {:?}",
+                method_name(&method),
+                sol.code
+            );
             let k = sol.trajectory.len() - 1;
             assert!((sol.trajectory.t[k] - 0.1).abs() < 1e-15);
         }
@@ -277,13 +331,28 @@ fn crank_rigid_closed_form_digits_against_cost() {
         let s = &at_steps.stats.integrator;
         println!(
             "| {} | {:.0e} | {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
-            method_name(&method), tol, s.steps, s.rhs_evals, a.0, a.1, a.2, d.0, d.1, d.2
+            method_name(&method),
+            tol,
+            s.steps,
+            s.rhs_evals,
+            a.0,
+            a.1,
+            a.2,
+            d.0,
+            d.1,
+            d.2
         );
         results.push((method_name(&method), tol, a, d));
     }
     let r = crank_reference(0.1);
-    println!("closed form at t = 0.1: phi1 = {:.16e}, phi2 = {:.16e}, x3 = {:.16e}", r[0], r[1], r[2]);
-    println!("  phi1' = {:.16e}, phi2' = {:.16e}, x3' = {:.16e}, lambda_drive = {:.16e}", r[3], r[4], r[5], r[6]);
+    println!(
+        "closed form at t = 0.1: phi1 = {:.16e}, phi2 = {:.16e}, x3 = {:.16e}",
+        r[0], r[1], r[2]
+    );
+    println!(
+        "  phi1' = {:.16e}, phi2' = {:.16e}, x3' = {:.16e}, lambda_drive = {:.16e}",
+        r[3], r[4], r[5], r[6]
+    );
     // Not a check of progmo: how far the rigid mechanism is from the published FLEXIBLE crank
     // (test set sign: AM w - F + GP^T lambda = 0, so its lambda3 = -lambda_drive).
     let rigid = [r[0], r[1], r[2], r[3], r[4], r[5], -r[6]];
@@ -301,9 +370,15 @@ fn crank_rigid_closed_form_digits_against_cost() {
     // every case. Between steps (dense output, not projected) the integrator's error shows: at
     // rtol = atol = 1e-10 >= 8.8 digits in q and 8 in v and lambda_drive for both methods.
     for (m, tol, a, d) in &results {
-        assert!(a.0 >= 11.0 && a.1 >= 10.0 && a.2 >= 9.5, "{m} at {tol:e}, steps: {a:?}");
+        assert!(
+            a.0 >= 11.0 && a.1 >= 10.0 && a.2 >= 9.5,
+            "{m} at {tol:e}, steps: {a:?}"
+        );
         if *tol == 1e-10 {
-            assert!(d.0 >= 8.8 && d.1 >= 8.0 && d.2 >= 8.0, "{m} at 1e-10, dense: {d:?}");
+            assert!(
+                d.0 >= 8.8 && d.1 >= 8.0 && d.2 >= 8.0,
+                "{m} at 1e-10, dense: {d:?}"
+            );
         }
     }
 }
