@@ -351,7 +351,7 @@ pub struct Solution {
     pub trajectory: Trajectory,
     /// Counters.
     pub stats: Statistics,
-    /// Largest |residual| of each row over every accepted step (not only the samples).
+    /// Largest |residual| of each row over every accepted step and every output sample.
     pub max_residual: Vec<f64>,
     /// Largest |dg/dt| of each position row over every accepted step (0 for other rows).
     pub max_residual_rate: Vec<f64>,

@@ -259,10 +259,10 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
             residual: &hbuf,
             residual_rate: &self.rate,
         });
+        // Every emitted sample counts towards the reported maxima (step ends are also monitored).
         for i in 0..s {
-            if self.levels[i] == Level::Acceleration {
-                self.max_residual[i] = self.max_residual[i].max(hbuf[i].abs());
-            }
+            self.max_residual[i] = self.max_residual[i].max(hbuf[i].abs());
+            self.max_residual_rate[i] = self.max_residual_rate[i].max(self.rate[i].abs());
         }
         self.res = hbuf;
         self.out_index += 1;
@@ -449,7 +449,12 @@ impl<'a, M: Model, C: Constraints> OdeProblem for MotionOde<'a, M, C> {
                 let mut yb = std::mem::take(&mut self.ybuf);
                 dense.eval(tk, &mut yb);
                 self.chart_to_q(&yb);
-                let q = std::mem::take(&mut self.q);
+                let mut q = std::mem::take(&mut self.q);
+                // The interpolant is not on the manifold: with projection on, samples are projected
+                // like step ends, so every output sample meets the programme to the same tolerance.
+                if let DriftControl::Projection { tol, max_iter } = self.settings.drift {
+                    self.proj.project(tk, &mut q, &mut yb[nv..], tol, max_iter);
+                }
                 let r = self.emit(tk, &q, &yb[nv..]);
                 self.q = q;
                 self.ybuf = yb;
