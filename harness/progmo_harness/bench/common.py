@@ -102,6 +102,11 @@ def _fmt(x):
 
 
 def save_figure(fig, path: Path, prov: Provenance) -> Path:
+    from matplotlib.ticker import NullFormatter
+
+    for ax in fig.axes:  # minor tick labels of log axes overlap: drop them
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.yaxis.set_minor_formatter(NullFormatter())
     fig.text(0.01, 0.005, prov.footer(), fontsize=6, va="bottom", ha="left", family="monospace")
     fig.savefig(path, dpi=110)
     import matplotlib.pyplot as plt

@@ -86,8 +86,12 @@ def measure(scene, states) -> list[dict]:
                  note=fails.get(f, "")) for f in FORMULATIONS]
 
 
-def families(quick: bool):
+def families(quick: bool, smoke: bool = False):
     """(family, name, toml) of the conditioning scenes."""
+    if smoke:
+        return [("2-link, m2/m1", "two_link_m2_1e-06", chain_toml(2, masses=[1.0, 1e-6], length=0.5, q0=0.3,
+                                                                  name="two_link_m2_1e-06")),
+                ("uniform chain, n links", "chain_4", chain_toml(4, name="chain_4"))]
     ratios = [1.0, 1e-2, 1e-4, 1e-6, 1e-8] if not quick else [1.0, 1e-4, 1e-8]
     out = []
     for r in ratios:
@@ -101,12 +105,12 @@ def families(quick: bool):
     return out
 
 
-def run(out: Path, prov: Provenance, quick: bool, states: int = 3) -> list[dict]:
+def run(out: Path, prov: Provenance, quick: bool, states: int = 3, smoke: bool = False) -> list[dict]:
     from .. import Scene
 
     rows = []
     with SceneDir() as d:
-        for fam, name, text in families(quick):
+        for fam, name, text in families(quick, smoke):
             log(f"[conditioning] {name}")
             scene = Scene(str(d.write(name, text)))
             for r in measure(scene, sample_states(scene, states)):

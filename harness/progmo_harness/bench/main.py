@@ -20,6 +20,9 @@ QUICK = dict(scenes=("double_pendulum", "chain_8"), tols=[1e-4, 1e-6, 1e-8, 1e-1
              scipy_tols=[1e-4, 1e-6, 1e-8, 1e-10], radau_min_tol=1e-8, states=3)
 FULL = dict(scenes=("double_pendulum", "chain_8"), tols=[10.0 ** -k for k in range(4, 13)], repeats=5,
             scipy_tols=[10.0 ** -k for k in range(4, 13)], radau_min_tol=1e-10, states=5)
+# --smoke: the smallest end-to-end run (tests): one scene, two tolerances, two chain lengths
+SMOKE = dict(scenes=("double_pendulum",), tols=[1e-5, 1e-8], repeats=1, scipy_tols=[1e-5, 1e-8],
+             radau_min_tol=1e-8, states=2, scaling_ns=[2, 7], conditioning="smoke")
 
 
 def parser() -> argparse.ArgumentParser:
@@ -29,6 +32,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="out/bench", help="output directory (default out/bench)")
     p.add_argument("--only", default=",".join(PARTS),
                    help=f"comma-separated parts to run (default all: {','.join(PARTS)})")
+    p.add_argument("--smoke", action="store_true",
+                   help="smallest end-to-end run (for tests; numbers not meaningful)")
     p.add_argument("--scenes", default=None,
                    help="comma-separated bundled scene names for workprecision/scipy "
                         "(default double_pendulum,chain_8)")
@@ -43,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
     if bad:
         print(f"progmo bench: unknown part(s) {bad}; choose from {PARTS}", file=sys.stderr)
         return 2
-    cfg = dict(QUICK if ns.quick else FULL)
+    cfg = dict(SMOKE if ns.smoke else QUICK if ns.quick else FULL)
     if ns.scenes:
         cfg["scenes"] = tuple(s.strip() for s in ns.scenes.split(",") if s.strip())
     out = Path(ns.out)
@@ -140,7 +145,8 @@ def main(argv: list[str] | None = None) -> int:
         sections.append(("2. What a user would pick instead: scipy solve_ivp + Pinocchio", inner))
 
     if "conditioning" in only:
-        rows = conditioning.run(out, prov, quick=ns.quick, states=cfg["states"])
+        rows = conditioning.run(out, prov, quick=ns.quick, states=cfg["states"],
+                                 smoke=cfg.get("conditioning") == "smoke")
         table_rows = []
         scenes_c = list(dict.fromkeys(r["scene"] for r in rows))
         for sc in scenes_c:
@@ -160,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
             summary.append("  " + " | ".join([r[3].rjust(8), r[1].ljust(22)] + [c.ljust(19) for c in r[4:]]))
 
     if "scaling" in only:
-        sc = scaling.run(out, prov, quick=ns.quick)
+        sc = scaling.run(out, prov, quick=ns.quick or ns.smoke, ns=cfg.get("scaling_ns"))
         rows = sc["rows"]
         trs = [[r["n"], f"{r['progmo_null_space_s'] * 1e6:.2f}", f"{r['progmo_kkt_s'] * 1e6:.2f}",
                 f"{r['pin_fd_only_s'] * 1e6:.2f}", f"{r['pin_fd_u_s'] * 1e6:.2f}", f"{r['pin_pipeline_s'] * 1e6:.2f}",

@@ -75,10 +75,10 @@ def measure(scene, formulations=("null_space", "kkt"), budget_s: float = 0.05, r
     return row
 
 
-def run(out: Path, prov: Provenance, quick: bool) -> dict:
+def run(out: Path, prov: Provenance, quick: bool, ns=None) -> dict:
     from .. import Scene
 
-    ns = [2, 4, 7, 16, 30, 64] if quick else [2, 4, 7, 8, 16, 30, 32, 64, 96, 128]
+    ns = ns or ([2, 4, 7, 16, 30, 64] if quick else [2, 4, 7, 8, 16, 30, 32, 64, 96, 128])
     budget = 0.03 if quick else 0.2
     overhead = python_overhead()
     rows = []

@@ -228,8 +228,9 @@ def plot(scene_name, progmo_rows, scipy_rows, ratio_rows, ref, out, prov):
         ax.set_ylabel("final-state error")
         ax.grid(True, which="both", alpha=0.3)
     best = [r for r in ratio_rows if r["comparison"].startswith("best")]
-    txt = "; ".join(f"{r['ratio']:.1f}x at {r['error']:.0e}" for r in best) or "no common error range"
-    axes[0].set_title(f"{scene_name}: what a user would pick (best scipy/best progmo: {txt})", fontsize=9)
+    txt = "; ".join(f"{r['ratio']:.1f}x at {r['error']:.0e}" for r in best[:4]) or "no common error range"
+    axes[0].set_title(f"{scene_name}: scipy + Pinocchio vs progmo", fontsize=10)
+    axes[1].set_title(f"CPU(best scipy)/CPU(best progmo): {txt}", fontsize=8)
     axes[1].legend(fontsize=7)
     fig.tight_layout(rect=(0, 0.06, 1, 1))
     from .common import save_figure
