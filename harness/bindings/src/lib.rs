@@ -333,7 +333,9 @@ impl PyScene {
         let (q, v) = (q.as_slice()?.to_vec(), v.as_slice()?.to_vec());
         let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
         if q.len() != nq || v.len() != nv {
-            return Err(PyValueError::new_err(format!("q needs {nq} entries, v {nv}")));
+            return Err(PyValueError::new_err(format!(
+                "q needs {nq} entries, v {nv}"
+            )));
         }
         let rank = RankTolerances {
             dependent: self.scene.settings.rank_dependent,
