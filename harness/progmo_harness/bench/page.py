@@ -44,6 +44,11 @@ def write(out: Path, prov: Provenance, sections: list[tuple[str, str]], omission
     return p
 
 
+def doc(text: str) -> str:
+    """A module docstring as preformatted prose."""
+    return f"<pre style='white-space:pre-wrap;background:none'>{html.escape(text.strip())}</pre>"
+
+
 def img(name: str) -> str:
     return f"<p><img src='{html.escape(name)}' alt='{html.escape(name)}'></p>"
 
