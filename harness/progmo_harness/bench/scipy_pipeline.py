@@ -169,7 +169,8 @@ def sweep(scene, ref, tols, repeats: int = 1, radau_min_tol: float = 0.0) -> lis
     return rows
 
 
-def ratios(scene_name: str, progmo_rows: list[dict], scipy_rows: list[dict]) -> list[dict]:
+def ratios(scene_name: str, progmo_rows: list[dict], scipy_rows: list[dict],
+           nodrift_rows: list[dict] | None = None) -> list[dict]:
     """CPU(scipy) / CPU(progmo) at common errors, interpolated log-log on each Pareto front.
     Partners: scipy DOP853 vs progmo dop853, scipy Radau vs progmo radau5 (both null_space), and
     the best of scipy vs the best of progmo (any formulation and integrator)."""
@@ -183,6 +184,9 @@ def ratios(scene_name: str, progmo_rows: list[dict], scipy_rows: list[dict]) -> 
         s = [r for r in scipy_rows if r["method"] == f"scipy {m}"]
         p = [r for r in progmo_rows if r["integrator"] == PARTNER[m] and r["formulation"] == "null_space"]
         pairs.append((f"scipy {m} / progmo {PARTNER[m]} null_space", s, p))
+    if nodrift_rows:
+        s = [r for r in scipy_rows if r["method"] == "scipy DOP853"]
+        pairs.append(("scipy DOP853 / progmo dop853 null_space drift=none (same problem)", s, nodrift_rows))
     pairs.append(("best scipy / best progmo", scipy_rows, progmo_rows))
     out = []
     for label, s, p in pairs:
@@ -201,7 +205,7 @@ def agreement(scene, ref, tol: float = 1e-12) -> float:
     return float(np.abs(r.y[:, -1] - ref.state["dop853"]).max()) if r.status == 0 else float("nan")
 
 
-def plot(scene_name, progmo_rows, scipy_rows, ratio_rows, ref, out, prov):
+def plot(scene_name, progmo_rows, scipy_rows, ratio_rows, ref, out, prov, nodrift_rows=()):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -217,6 +221,11 @@ def plot(scene_name, progmo_rows, scipy_rows, ratio_rows, ref, out, prov):
             if pts:
                 x, y = zip(*pts)
                 ax.loglog(x, np.maximum(y, 1e-17), "-o", ms=4, color=COLORS[integ], label=f"progmo {integ} null_space")
+        pts = sorted((r[xkey], r["error"]) for r in nodrift_rows if np.isfinite(r["error"]))
+        if pts:
+            x, y = zip(*pts)
+            ax.loglog(x, np.maximum(y, 1e-17), ":o", ms=4, color=COLORS["dop853"], mfc="none",
+                      label="progmo dop853 null_space, drift control off")
         for m in SCIPY_METHODS:
             pts = sorted((r[xkey], r["error"]) for r in scipy_rows if r["method"] == f"scipy {m}" and np.isfinite(r["error"]))
             if pts:

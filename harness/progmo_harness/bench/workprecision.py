@@ -57,14 +57,15 @@ def reference(scene) -> Reference:
 
 
 def sweep(scene, ref: Reference, tols, formulations=FORMULATIONS, integrators=INTEGRATORS,
-          repeats: int = 3) -> list[dict]:
+          repeats: int = 3, drift: str | None = None) -> list[dict]:
+    """drift None: the scene's drift control (projection in the bundled scenes)."""
     rows = []
     for form in formulations:
         for integ in integrators:
             ref_name, ref_state = ref.against(integ)
             for tol in tols:
                 dt, r = cpu_time(lambda: scene.solve(rtol=tol, atol=tol, integrator=integ,
-                                                     formulation=form,
+                                                     formulation=form, drift=drift,
                                                      output_dt=scene.t1 - scene.t0), repeats)
                 ok = bool(r["success"]) and abs(r["t"][-1] - scene.t1) < 1e-12
                 err = float(np.abs(final_state(r) - ref_state).max()) if ok else float("nan")
@@ -74,7 +75,8 @@ def sweep(scene, ref: Reference, tols, formulations=FORMULATIONS, integrators=IN
                                  rhs_evals=st["integrator"]["rhs_evals"],
                                  steps=st["integrator"]["steps"],
                                  rejected=st["integrator"]["rejected"],
-                                 factorizations=st["factorizations"], reference=ref_name))
+                                 factorizations=st["factorizations"], reference=ref_name,
+                                 drift=r["settings"]["drift"]["kind"]))
     return rows
 
 
@@ -128,7 +130,7 @@ def plot(scene_name: str, rows: list[dict], ref: Reference, res_run, out: Path, 
     return [save_figure(fig, out / f"workprecision_{scene_name}.png", prov)]
 
 
-HEADER = ["scene", "formulation", "integrator", "rtol", "atol", "code", "error", "cpu_s",
+HEADER = ["scene", "formulation", "integrator", "drift", "rtol", "atol", "code", "error", "cpu_s",
           "rhs_evals", "steps", "rejected", "factorizations", "reference"]
 
 
