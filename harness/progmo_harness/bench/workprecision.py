@@ -140,7 +140,11 @@ def run(scenes, tols, out: Path, prov: Provenance, repeats: int = 3) -> dict:
     all_rows = []
     for scene in scenes:
         log(f"[workprecision] {scene.name}: references")
-        ref = reference(scene)
+        try:
+            ref = reference(scene)
+        except RuntimeError as e:  # a scene whose reference fails is reported, not fatal
+            results[scene.name] = dict(skipped=str(e))
+            continue
         log(f"[workprecision] {scene.name}: sweep over {len(tols)} tolerances")
         rows = sweep(scene, ref, tols, repeats=repeats)
         rr = residual_run(scene)
