@@ -95,6 +95,19 @@ class Scene:
     ) -> SolveResult: ...
     def residuals(self, t: F64, q: F64, v: F64, a: F64 | None = None) -> F64: ...
     def dynamics(self, t: float, q: F64, v: F64) -> Dynamics: ...
+    def accelerations(
+        self, t: float, q: F64, v: F64, formulation: Literal["null_space", "kkt", "range_space", "udwadia_kalaba"]
+    ) -> dict[str, F64]:
+        """One right-hand side (no drift control): {"a": dv/dt, "u", "reactions", "lambda"}."""
+    def rhs_benchmark(
+        self,
+        iterations: int,
+        formulation: Literal["null_space", "kkt", "range_space", "udwadia_kalaba"],
+        t: float | None = None,
+        q: F64 | None = None,
+        v: F64 | None = None,
+    ) -> float:
+        """Wall-clock seconds per right-hand side (dv/dt and u), looped in Rust, at (t0, q0, v0) by default."""
     def export(self, format: Literal["mjcf", "urdf"], *, timestep: float = 1e-3) -> tuple[str, dict[str, Any]]: ...
 
 def version() -> str: ...

@@ -4,7 +4,7 @@
 
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
-use progmo::formulation::Formulation;
+use progmo::formulation::{Formulation, RankTolerances};
 use progmo::integrate::Method;
 use progmo::model::Model;
 use progmo::programme::{Constraints, Level, Role};
@@ -200,17 +200,7 @@ impl PyScene {
             };
         }
         if let Some(f) = formulation {
-            s.formulation = match f {
-                "null_space" => Formulation::NullSpace,
-                "kkt" => Formulation::Kkt,
-                "range_space" => Formulation::RangeSpace,
-                "udwadia_kalaba" => Formulation::UdwadiaKalaba,
-                other => {
-                    return Err(PyValueError::new_err(format!(
-                        "unknown formulation {other:?}"
-                    )))
-                }
-            };
+            s.formulation = parse_formulation(f)?;
         }
         if let Some(d) = drift {
             s.drift = match d {
@@ -328,6 +318,105 @@ impl PyScene {
         Ok(d)
     }
 
+    /// One right-hand side at (t, q, v) with `formulation` (no drift control): dv/dt ("a"), the
+    /// control force u of the programme rows (2.12), the system rows' reactions and the multipliers.
+    /// Row norms for the vanishing-row test are taken at this state. For benchmarks and checks.
+    fn accelerations<'py>(
+        &self,
+        py: Python<'py>,
+        t: f64,
+        q: PyReadonlyArray1<'py, f64>,
+        v: PyReadonlyArray1<'py, f64>,
+        formulation: &str,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let f = parse_formulation(formulation)?;
+        let (q, v) = (q.as_slice()?.to_vec(), v.as_slice()?.to_vec());
+        let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
+        if q.len() != nq || v.len() != nv {
+            return Err(PyValueError::new_err(format!(
+                "q needs {nq} entries, v {nv}"
+            )));
+        }
+        let rank = RankTolerances {
+            dependent: self.scene.settings.rank_dependent,
+            vanishing: self.scene.settings.rank_vanishing,
+        };
+        let d = PyDict::new(py);
+        with_problem!(&self.scene.system, p => {
+            let mut ev = Evaluator::<_, _, f64>::new(&p.model, &p.constraints);
+            ev.prepare(t, &q, &v);
+            // reference row norms for the vanishing-row test, as the solver takes them at t0
+                ev.row_scale = (0..ev.jet.b.nrows())
+                    .map(|i| ev.jet.b.row(i).iter().map(|x| x * x).sum::<f64>().sqrt())
+                    .collect();
+            ev.evaluate(f, &rank, None, t, &q, &v)
+                .map_err(|e| PyRuntimeError::new_err(format!("{formulation}: {e:?}")))?;
+            let mut u = vec![0.0; nv];
+            let mut r = vec![0.0; nv];
+            ev.reaction(Role::Programme, &mut u);
+            ev.reaction(Role::System, &mut r);
+            d.set_item("a", PyArray1::from_vec(py, ev.acc.clone()))?;
+            d.set_item("u", PyArray1::from_vec(py, u))?;
+            d.set_item("reactions", PyArray1::from_vec(py, r))?;
+            d.set_item("lambda", PyArray1::from_vec(py, ev.lambda.clone()))?;
+        });
+        Ok(d)
+    }
+
+    /// Seconds (wall clock, GIL released) per right-hand side: `iterations` evaluations of dv/dt
+    /// and u (`accelerations` without the Python conversions) at (t0, q0, v0), or at (t, q, v) when
+    /// given. Each call recomputes A, G + Q, the constraint jet and solves with `formulation`.
+    #[pyo3(signature = (iterations, formulation, t=None, q=None, v=None))]
+    fn rhs_benchmark<'py>(
+        &self,
+        py: Python<'py>,
+        iterations: usize,
+        formulation: &str,
+        t: Option<f64>,
+        q: Option<PyReadonlyArray1<'py, f64>>,
+        v: Option<PyReadonlyArray1<'py, f64>>,
+    ) -> PyResult<f64> {
+        let f = parse_formulation(formulation)?;
+        let t = t.unwrap_or(self.scene.span().0);
+        let q = match q {
+            Some(q) => q.as_slice()?.to_vec(),
+            None => with_problem!(&self.scene.system, p => p.q0.clone()),
+        };
+        let v = match v {
+            Some(v) => v.as_slice()?.to_vec(),
+            None => with_problem!(&self.scene.system, p => p.v0.clone()),
+        };
+        let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
+        if q.len() != nq || v.len() != nv || iterations == 0 {
+            return Err(PyValueError::new_err(format!(
+                "q needs {nq} entries, v {nv}, iterations > 0"
+            )));
+        }
+        let rank = RankTolerances {
+            dependent: self.scene.settings.rank_dependent,
+            vanishing: self.scene.settings.rank_vanishing,
+        };
+        let out: Result<f64, String> = py.detach(|| {
+            with_problem!(&self.scene.system, p => {
+                let mut ev = Evaluator::<_, _, f64>::new(&p.model, &p.constraints);
+                ev.prepare(t, &q, &v);
+                // reference row norms for the vanishing-row test, as the solver takes them at t0
+                ev.row_scale = (0..ev.jet.b.nrows())
+                    .map(|i| ev.jet.b.row(i).iter().map(|x| x * x).sum::<f64>().sqrt())
+                    .collect();
+                let mut u = vec![0.0; nv];
+                let start = std::time::Instant::now();
+                for _ in 0..iterations {
+                    ev.evaluate(f, &rank, None, t, &q, &v).map_err(|e| format!("{e:?}"))?;
+                    ev.reaction(Role::Programme, &mut u);
+                    std::hint::black_box(&u);
+                }
+                Ok(start.elapsed().as_secs_f64() / iterations as f64)
+            })
+        });
+        out.map_err(|e| PyRuntimeError::new_err(format!("{formulation}: {e}")))
+    }
+
     /// Export a tree scene's model: `format` "mjcf" or "urdf". Returns (document, report dict) —
     /// the report lists mass floors applied, forces the harness must apply itself (attractors;
     /// springs/dampers in URDF), gravity, the root joint to pass to Pinocchio, and q/v maps.
@@ -372,6 +461,20 @@ impl PyScene {
             self.scene.path.display()
         )
     }
+}
+
+fn parse_formulation(f: &str) -> PyResult<Formulation> {
+    Ok(match f {
+        "null_space" => Formulation::NullSpace,
+        "kkt" => Formulation::Kkt,
+        "range_space" => Formulation::RangeSpace,
+        "udwadia_kalaba" => Formulation::UdwadiaKalaba,
+        other => {
+            return Err(PyValueError::new_err(format!(
+                "unknown formulation {other:?}"
+            )))
+        }
+    })
 }
 
 fn positive(name: &str, x: f64) -> PyResult<()> {

@@ -1,0 +1,273 @@
+"""Shared pieces of `progmo bench`: provenance (rerun command, versions), generated chain scenes,
+Pinocchio models from our URDF export, CPU timing and the log-log interpolation at equal error."""
+
+from __future__ import annotations
+
+import csv
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Callable, Iterable, Sequence
+
+import numpy as np
+
+FORMULATIONS = ("null_space", "kkt", "range_space", "udwadia_kalaba")
+INTEGRATORS = ("dop853", "dopri5", "radau5")
+
+
+def repo_root() -> Path:
+    """The checkout holding references/scenes (the package lives in harness/progmo_harness)."""
+    return Path(__file__).resolve().parents[3]
+
+
+def scene_path(name: str) -> Path:
+    return repo_root() / "references" / "scenes" / f"{name}.toml"
+
+
+# ---------------------------------------------------------------------------------------------
+# Provenance
+
+
+class Provenance:
+    """The command that reproduces a run and the versions that produced it."""
+
+    def __init__(self, argv: Sequence[str]):
+        args = " ".join(argv)
+        self.command = f"progmo bench {args}".strip()
+        self.python_command = f"python -m progmo_harness.bench.main {args}".strip()
+        self.versions = versions()
+
+    def lines(self) -> list[str]:
+        v = ", ".join(f"{k} {val}" for k, val in self.versions.items())
+        return [
+            f"rerun: {self.command}   (equivalently: {self.python_command}, from {repo_root()})",
+            f"versions: {v}",
+        ]
+
+    def footer(self) -> str:
+        """Short text for the bottom of a figure."""
+        keys = ("progmo", "commit", "numpy", "scipy", "pin", "mpmath", "python")
+        v = ", ".join(f"{k} {self.versions[k]}" for k in keys if k in self.versions)
+        return f"rerun: {self.command}\n{v}"
+
+
+def versions() -> dict[str, str]:
+    from .. import _core
+
+    out = {"progmo": _core.version(), "commit": _git_commit(), "python": platform.python_version()}
+    for mod, name in (("numpy", "numpy"), ("scipy", "scipy"), ("pinocchio", "pin"),
+                      ("mpmath", "mpmath"), ("matplotlib", "matplotlib")):
+        try:
+            m = __import__(mod)
+            out[name] = getattr(m, "__version__", "?")
+        except Exception:  # noqa: BLE001 - an absent optional tool is reported, not fatal
+            out[name] = "absent"
+    out["machine"] = f"{platform.machine()} {os.cpu_count()} cpu ({platform.processor() or 'unknown'})"
+    return out
+
+
+def _git_commit() -> str:
+    try:
+        r = subprocess.run(["git", "-C", str(repo_root()), "rev-parse", "--short", "HEAD"],
+                           capture_output=True, text=True, timeout=10)
+        dirty = subprocess.run(["git", "-C", str(repo_root()), "status", "--porcelain", "-uno"],
+                               capture_output=True, text=True, timeout=10).stdout.strip()
+        return r.stdout.strip() + ("+dirty" if dirty else "") if r.returncode == 0 else "unknown"
+    except Exception:  # noqa: BLE001
+        return "unknown"
+
+
+def write_csv(path: Path, prov: Provenance, header: Sequence[str], rows: Iterable[Sequence]) -> Path:
+    """CSV whose first lines are `# rerun: ...` and `# versions: ...` comments."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as fh:
+        for line in prov.lines():
+            fh.write(f"# {line}\n")
+        w = csv.writer(fh)
+        w.writerow(header)
+        for r in rows:
+            w.writerow([_fmt(x) for x in r])
+    return path
+
+
+def _fmt(x):
+    if isinstance(x, float):
+        return f"{x:.6e}"
+    return x
+
+
+def save_figure(fig, path: Path, prov: Provenance) -> Path:
+    from matplotlib.ticker import NullFormatter
+
+    for ax in fig.axes:  # minor tick labels of log axes overlap: drop them
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.yaxis.set_minor_formatter(NullFormatter())
+    fig.text(0.01, 0.005, prov.footer(), fontsize=6, va="bottom", ha="left", family="monospace")
+    fig.savefig(path, dpi=110)
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return path
+
+
+# ---------------------------------------------------------------------------------------------
+# Timing
+
+
+def cpu_time(fn: Callable[[], object], repeats: int, budget_s: float = 1.0) -> tuple[float, object]:
+    """Median process CPU time of up to `repeats` calls of fn (fewer once `budget_s` of CPU is
+    spent: slow solves are timed once or twice), and the last result."""
+    times = []
+    result = None
+    for _ in range(max(1, repeats)):
+        t = time.process_time()
+        result = fn()
+        times.append(time.process_time() - t)
+        if sum(times) > budget_s:
+            break
+    return statistics.median(times), result
+
+
+def pareto(errors: Sequence[float], times: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    """Lower-left envelope of (error, time): the runs a user would pick. Sorted by error ascending,
+    time strictly decreasing. Non-finite or zero errors are dropped (zero is clamped to 1e-17)."""
+    pts = sorted((max(e, 1e-17), t) for e, t in zip(errors, times) if np.isfinite(e) and t > 0)
+    front: list[tuple[float, float]] = []
+    for e, t in pts:
+        if not front or t < front[-1][1]:
+            front.append((e, t))
+    return np.array([p[0] for p in front]), np.array([p[1] for p in front])
+
+
+def time_at_error(errors, times, target: float) -> float:
+    """CPU time needed for error `target`, interpolated in log-log on the Pareto front; NaN if the
+    front does not cover the target."""
+    e, t = pareto(errors, times)
+    if len(e) == 0 or not (e[0] <= target <= e[-1]):
+        return float("nan")
+    if len(e) == 1:
+        return float(t[0])
+    return float(np.exp(np.interp(np.log(target), np.log(e), np.log(t))))
+
+
+def common_error_levels(curves: Sequence[tuple[Sequence[float], Sequence[float]]]) -> list[float]:
+    """Decades inside the error range every curve's Pareto front covers; the geometric middle of the
+    overlap if no decade fits."""
+    lo, hi = 0.0, np.inf
+    for errs, ts in curves:
+        e, _ = pareto(errs, ts)
+        if len(e) == 0:
+            return []
+        lo, hi = max(lo, e[0]), min(hi, e[-1])
+    if not lo <= hi:
+        return []
+    decades = [10.0 ** k for k in range(-14, 0) if lo <= 10.0 ** k <= hi]
+    return decades or [float(np.sqrt(lo * hi))]
+
+
+# ---------------------------------------------------------------------------------------------
+# Generated scenes
+
+
+def chain_toml(n: int, *, masses: Sequence[float] | None = None, length: float = 0.25,
+               q0: float | None = None, name: str | None = None, t1: float = 2.0) -> str:
+    """An n-link planar chain (hinges about y) in the layout of references/scenes/chain_8.toml:
+    programme rows tip_height (tip.z - ztip0 - A (1 - cos w t)) and, for n >= 3, shoulder
+    (q1 - q0 - B (1 - cos w t)). Link k: mass m_k at mid-link, rod inertia m l^2/12 (and m l^2/120
+    about the axis). Every joint starts bent by q0 (default min(0.15, 1.2/n): the tip-height row
+    stays regular and the chain does not curl for large n)."""
+    masses = list(masses) if masses is not None else [0.2] * n
+    assert len(masses) == n and n >= 2
+    q0 = min(0.15, 1.2 / n) if q0 is None else q0
+    name = name or f"chain_{n}"
+    l = length
+    cos_sum = " + ".join(f"cos({k}*q0)" for k in range(1, n + 1))
+    out = [
+        f'name = "{name}"',
+        f'description = "Generated {n}-link planar chain for progmo bench."',
+        'purpose = "Benchmark scene generated by progmo_harness.bench (not a reference scene)."',
+        "",
+        "[parameters]",
+        f"q0 = {q0!r}",
+        "A = 0.1",
+        "B = 0.2",
+        "w = 3.0",
+        f"l = {l!r}",
+        f'ztip0 = "-l*({cos_sum})"',
+        "",
+        "[model]",
+        'kind = "tree"',
+        "gravity = [0.0, 0.0, -9.81]",
+    ]
+    for k in range(1, n + 1):
+        m = masses[k - 1]
+        ixx = m * l * l / 12.0
+        out += ["", "[[model.bodies]]", f'name = "link{k}"']
+        if k > 1:
+            out += [f'parent = "link{k - 1}"', f"pos = [0.0, 0.0, {-l!r}]"]
+        out += [
+            f"mass = {m!r}",
+            f"com = [0.0, 0.0, {-l / 2!r}]",
+            f"inertia = [{ixx!r}, {ixx!r}, {ixx / 10!r}]",
+            f'joints = [{{ name = "q{k}", type = "hinge", axis = [0.0, 1.0, 0.0] }}]',
+        ]
+    out += ["", "[[model.sites]]", 'name = "tip"', f'body = "link{n}"', f"pos = [0.0, 0.0, {-l!r}]",
+            "", "[[programme]]", 'name = "tip_height"', 'expr = "tip.z - ztip0 - A*(1 - cos(w*t))"']
+    if n >= 3:
+        out += ["", "[[programme]]", 'name = "shoulder"', 'expr = "q1 - q0 - B*(1 - cos(w*t))"']
+    qs = ", ".join(f'q{k} = "q0"' for k in range(1, n + 1))
+    out += ["", "[initial]", f"q = {{ {qs} }}", "", "[time]", f"t1 = {t1!r}", "output_dt = 0.02", ""]
+    return "\n".join(out)
+
+
+class SceneDir:
+    """A temporary directory of generated scene files (removed on close)."""
+
+    def __init__(self):
+        self._tmp = tempfile.TemporaryDirectory(prefix="progmo-bench-")
+        self.path = Path(self._tmp.name)
+
+    def write(self, name: str, text: str) -> Path:
+        p = self.path / f"{name}.toml"
+        p.write_text(text)
+        return p
+
+    def close(self):
+        self._tmp.cleanup()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def pinocchio_model(scene):
+    """Pinocchio model and data from the scene's URDF export (gravity set from the report). The
+    exported coordinates must map one to one (hinge/slide trees); anything else raises."""
+    import pinocchio as pin
+
+    doc, rep = scene.export("urdf")
+    for c in rep["q_map"] + rep["v_map"]:
+        if c["conversion"] != "same" or c["index"] != c["sim_index"]:
+            raise ValueError(f"{scene.name}: coordinates do not map one to one ({c})")
+    if rep.get("root_joint") or rep.get("harness_forces"):
+        raise ValueError(f"{scene.name}: root joints / harness forces not supported by the bench")
+    with tempfile.NamedTemporaryFile("w", suffix=".urdf", delete=False) as fh:
+        fh.write(doc)
+        path = fh.name
+    try:
+        model = pin.buildModelFromUrdf(path)
+    finally:
+        os.unlink(path)
+    model.gravity.linear = np.array(rep["gravity"], dtype=float)
+    return model, model.createData()
+
+
+def log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
