@@ -104,8 +104,8 @@ def main(argv: list[str] | None = None) -> int:
             info = res["residual"][2]
             inner += (f"<h3>{name}</h3><p>Reference floor |dop853 ref - radau5 ref| = {ref.floor:.1e} "
                       f"(tolerances {ref.tol}). Residual run (right panel): {info}. The plotted residual is "
-                      f"sampled at the scene's output_dt, i.e. also between accepted steps (dense output, "
-                      f"not projected); the maximum over accepted steps is {info['max_residual']:.1e}.</p>"
+                      f"sampled at the scene's output_dt (dense output, projected like the step ends when "
+                      f"drift control is projection); the reported maximum is {info['max_residual']:.1e}.</p>"
                       + page.img(f"workprecision_{name}.png"))
             good = [r for r in res["rows"] if np.isfinite(r["error"]) and r["error"] < 1e-8]
             best = min(good, key=lambda r: r["cpu_s"], default=None)
