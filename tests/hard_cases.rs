@@ -157,7 +157,8 @@ fn sub(a: &[f64], b: &[f64]) -> Vec<f64> {
 /// Transverse damping drives rho = |(p, q)| = rho0 exp(-c t / A) to 0; the programme's gradient
 /// (-q, p, 0) has norm rho, so the solver must stop with `SingularProgramme` naming "precession" when
 /// rho < vanishing x rho0, i.e. at t* = (A / c) ln(1 / vanishing) (13.816 s by default, 6.908 s with
-/// vanishing = 1e-6), keeping a trajectory that matches the closed form up to there.
+/// vanishing = 1e-6) -- localized to 1e-2 s (default: rho ~ atol there) and 1e-6 s -- keeping a
+/// trajectory that matches the closed form up to there.
 #[test]
 fn c1b_precession_stops_where_gradient_vanishes() {
     let p = hard::precession_to_axis();
@@ -180,12 +181,11 @@ fn c1b_precession_stops_where_gradient_vanishes() {
                 assert_eq!(rows, &vec!["precession".to_string()]);
                 assert_eq!(*t, sol.t_end);
                 assert!(*rcond <= vanishing, "rcond {rcond:e}");
-                // Stopped by the first evaluation past t*: within the last step before t*.
-                let h = sol.t_end - tr.t[n - 2];
-                assert!(
-                    *t <= t_star && t_star - *t < 2.0 * h,
-                    "t {t} vs t* {t_star}"
-                );
+                // Localized: steps that reach past t* are rejected and shrunk until they cannot.
+                // The threshold is crossed where the computed rho (accurate to ~ atol + rtol rho)
+                // crosses vanishing x rho0.
+                let tol_t = if vanishing < 1e-9 { 1e-2 } else { 1e-6 };
+                assert!((*t - t_star).abs() < tol_t, "t {t} vs t* {t_star}");
             }
             other => panic!("expected SingularProgramme, got {other:?}"),
         }

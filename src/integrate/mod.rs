@@ -126,7 +126,10 @@ pub trait OdeProblem {
     /// Dimension m of y.
     fn dim(&self) -> usize;
 
-    /// f(t, y) into `dy`. Must not allocate.
+    /// f(t, y) into `dy`. Must not allocate. An error inside a trial step of an adaptive method
+    /// rejects the step and shrinks it (like non-finite values); the run stops with
+    /// [`Outcome::Problem`] only when the step cannot shrink further (or the method has a fixed
+    /// step), so the stop is localized at the point where f fails.
     fn rhs(&mut self, t: f64, y: &[f64], dy: &mut [f64]) -> Result<(), Self::Error>;
 
     /// Exact Jacobian df/dy at (t, y) into `jac` (m x m). Needed by implicit methods only.
@@ -180,7 +183,8 @@ pub enum Outcome<E> {
     /// Non-finite values that shrinking the step could not cure, at time `t`.
     NonFinite { t: f64 },
     /// The problem stopped the run (from `rhs`, `jacobian` or `accepted`) at time `t`
-    /// (the last accepted time).
+    /// (the last accepted time). `rhs` errors inside a trial step first shrink the step (see
+    /// [`OdeProblem::rhs`]).
     Problem { t: f64, error: E },
 }
 
