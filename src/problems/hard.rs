@@ -390,3 +390,82 @@ impl<M: Model> Model for NanAfter<M> {
         }
     }
 }
+
+/// The arm's tip programmed along a fixed ray from the pivot at angle `alpha` from the downward
+/// vertical, radius rho(t) = (l1 + l2) - delta (t - tc)^2: it touches the workspace boundary (full
+/// stretch, q2 = 0, B of rank 1) at t = tc with zero radial velocity and comes back. The programme has
+/// smooth solutions through tc (the elbow flips sign, q2 ~ (t - tc)) and non-smooth ones (it bounces):
+/// the continuation past the dead point is not unique.
+#[derive(Clone, Debug)]
+pub struct TipOnRay {
+    pub l1: f64,
+    pub l2: f64,
+    pub alpha: f64,
+    pub delta: f64,
+    pub tc: f64,
+    rows: [RowSpec; 2],
+}
+
+impl TipOnRay {
+    /// Ray at `alpha`, touching full stretch at `tc`.
+    pub fn new(l1: f64, l2: f64, alpha: f64, delta: f64, tc: f64) -> Self {
+        TipOnRay {
+            l1,
+            l2,
+            alpha,
+            delta,
+            tc,
+            rows: [
+                RowSpec::new("tip_x", Level::Position, Role::Programme),
+                RowSpec::new("tip_y", Level::Position, Role::Programme),
+            ],
+        }
+    }
+
+    /// rho and rho' at t.
+    pub fn rho(&self, t: f64) -> (f64, f64) {
+        let s = t - self.tc;
+        (
+            self.l1 + self.l2 - self.delta * s * s,
+            -2.0 * self.delta * s,
+        )
+    }
+}
+
+impl Constraints for TipOnRay {
+    type Workspace<S: Scalar> = ();
+    fn workspace<S: Scalar>(&self) {}
+    fn rows(&self) -> &[RowSpec] {
+        &self.rows
+    }
+    fn eval<S: Scalar>(&self, _: &mut (), t: S, q: &[S], _v: &[S], _a: &[S], out: &mut [S]) {
+        let q12 = q[0] + q[1];
+        let s = t - self.tc;
+        let rho = -(s * s) * self.delta + (self.l1 + self.l2);
+        out[0] = q[0].sin() * self.l1 + q12.sin() * self.l2 - rho * self.alpha.sin();
+        out[1] = -(q[0].cos() * self.l1 + q12.cos() * self.l2) + rho * self.alpha.cos();
+    }
+}
+
+/// Unit links and masses, gravity; ray at alpha = 0.6, delta = 0.1, full stretch at tc = 1.5 s;
+/// t1 = 3 s.
+pub fn arm_touching_boundary() -> Problem<DoublePendulum, TipOnRay> {
+    let cons = TipOnRay::new(1.0, 1.0, 0.6, 0.1, 1.5);
+    let (rho, rhod) = cons.rho(0.0);
+    let (sa, ca) = cons.alpha.sin_cos();
+    let (q0, v0) = arm_ik(1.0, 1.0, rho * sa, -rho * ca, rhod * sa, -rhod * ca);
+    Problem {
+        model: DoublePendulum {
+            m1: 1.0,
+            m2: 1.0,
+            l1: 1.0,
+            l2: 1.0,
+            g: 9.81,
+        },
+        constraints: cons,
+        t0: 0.0,
+        t1: 3.0,
+        q0: q0.to_vec(),
+        v0: v0.to_vec(),
+    }
+}
