@@ -305,6 +305,24 @@ fn c1c_arm_touching_the_boundary_known_limitation() {
                 tr.q_at(n - 1)[1],
                 max_abs(sol.max_residual.iter().copied()),
             );
+            eprintln!(
+                "  max projection corrections: dq {:.2e}, dv {:.2e}",
+                sol.stats.max_position_correction, sol.stats.max_velocity_correction
+            );
+            if std::env::var("HARD_VERBOSE").is_ok() {
+                for k in 0..n {
+                    if (tr.t[k] - tc).abs() < 0.05 {
+                        eprintln!(
+                            "    t {:.9} q2 {:+.3e} q2' {:+.3e} u {:+.3e} {:+.3e}",
+                            tr.t[k],
+                            tr.q_at(k)[1],
+                            tr.v_at(k)[1],
+                            tr.u_at(k)[0],
+                            tr.u_at(k)[1]
+                        );
+                    }
+                }
+            }
             assert_partial_results_clean(&sol);
             assert!(max_abs(sol.max_residual.iter().copied()) <= 1e-10);
             assert!(sol.stats.min_b_rcond < 2e-5, "rank loss not recorded");
