@@ -19,7 +19,8 @@
 //!   0.01 err3^2)); Radau5 uses RADAU5's transformed tolerances (see `radau5`);
 //! - PI step-size control (HNW I, IV.2) for DOPRI5 (beta = 0.04) and DOP853 (beta = 0), never
 //!   increasing h right after a rejection; Gustafsson's predictive controller for Radau5;
-//! - non-finite stages or error estimates reject the step and divide h by 4;
+//! - non-finite stages or error estimates, and `rhs` errors inside a trial step, reject the step and
+//!   divide h by 4 (an `rhs` error is reported once h < h_min, so a stop is localized);
 //! - after [`Accept::Changed`] the explicit methods re-evaluate f(t1, y) instead of reusing the FSAL
 //!   stage (counted in `rhs_evals`); h and the controller memory are kept;
 //! - the last step lands exactly on t1 (steps within 1% of the remaining interval are stretched);
