@@ -759,7 +759,18 @@ impl ErkWork {
                 stats,
             ) {
                 Ok(r) => r,
-                Err(error) => return Outcome::Problem { t, error },
+                // A failed evaluation inside a trial step (a stage past a singular point) is not
+                // evidence about the trajectory: reject and shrink, and report the error only when
+                // the step cannot shrink any more, so that the stop is localized.
+                Err(error) => {
+                    stats.rejected += 1;
+                    h = hs * 0.25;
+                    last_rejected = true;
+                    if !adaptive || h < h_min(opts, t) {
+                        return Outcome::Problem { t, error };
+                    }
+                    continue;
+                }
             };
             if let Trial::NonFinite = trial {
                 stats.rejected += 1;
@@ -795,7 +806,14 @@ impl ErkWork {
             }
             // Accepted.
             if let Err(error) = self.prepare_dense(kind, problem, t, y, hs, stats) {
-                return Outcome::Problem { t, error };
+                // As for a failed stage: shrink while the step can.
+                stats.rejected += 1;
+                h = hs * 0.25;
+                last_rejected = true;
+                if !adaptive || h < h_min(opts, t) {
+                    return Outcome::Problem { t, error };
+                }
+                continue;
             }
             y.copy_from_slice(&self.ynew);
             let tnew = if last {

@@ -19,7 +19,8 @@
 //!   0.01 err3^2)); Radau5 uses RADAU5's transformed tolerances (see `radau5`);
 //! - PI step-size control (HNW I, IV.2) for DOPRI5 (beta = 0.04) and DOP853 (beta = 0), never
 //!   increasing h right after a rejection; Gustafsson's predictive controller for Radau5;
-//! - non-finite stages or error estimates reject the step and divide h by 4;
+//! - non-finite stages or error estimates, and `rhs` errors inside a trial step, reject the step and
+//!   divide h by 4 (an `rhs` error is reported once h < h_min, so a stop is localized);
 //! - after [`Accept::Changed`] the explicit methods re-evaluate f(t1, y) instead of reusing the FSAL
 //!   stage (counted in `rhs_evals`); h and the controller memory are kept;
 //! - the last step lands exactly on t1 (steps within 1% of the remaining interval are stretched);
@@ -126,7 +127,10 @@ pub trait OdeProblem {
     /// Dimension m of y.
     fn dim(&self) -> usize;
 
-    /// f(t, y) into `dy`. Must not allocate.
+    /// f(t, y) into `dy`. Must not allocate. An error inside a trial step of an adaptive method
+    /// rejects the step and shrinks it (like non-finite values); the run stops with
+    /// [`Outcome::Problem`] only when the step cannot shrink further (or the method has a fixed
+    /// step), so the stop is localized at the point where f fails.
     fn rhs(&mut self, t: f64, y: &[f64], dy: &mut [f64]) -> Result<(), Self::Error>;
 
     /// Exact Jacobian df/dy at (t, y) into `jac` (m x m). Needed by implicit methods only.
@@ -180,7 +184,8 @@ pub enum Outcome<E> {
     /// Non-finite values that shrinking the step could not cure, at time `t`.
     NonFinite { t: f64 },
     /// The problem stopped the run (from `rhs`, `jacobian` or `accepted`) at time `t`
-    /// (the last accepted time).
+    /// (the last accepted time). `rhs` errors inside a trial step first shrink the step (see
+    /// [`OdeProblem::rhs`]).
     Problem { t: f64, error: E },
 }
 

@@ -497,7 +497,16 @@ impl RadauWork {
                 &mut theta,
                 stats,
             ) {
-                Err(error) => return Outcome::Problem { t, error },
+                // A failed evaluation at a collocation stage: reject and shrink (see erk.rs).
+                Err(error) => {
+                    stats.rejected += 1;
+                    reject = true;
+                    h = hs * 0.25;
+                    if !adaptive || h < h_min(opts, t) {
+                        return Outcome::Problem { t, error };
+                    }
+                    continue;
+                }
                 Ok(Newton::Converged(it)) => it,
                 Ok(Newton::Fail(fac)) => {
                     stats.rejected += 1;
@@ -531,7 +540,15 @@ impl RadauWork {
                 let err = match self.estimate(problem, t, y, hs, atol, rtol, first || reject, stats)
                 {
                     Ok(e) => e,
-                    Err(error) => return Outcome::Problem { t, error },
+                    Err(error) => {
+                        stats.rejected += 1;
+                        reject = true;
+                        h = hs * 0.25;
+                        if h < h_min(opts, t) {
+                            return Outcome::Problem { t, error };
+                        }
+                        continue;
+                    }
                 };
                 if !err.is_finite() {
                     stats.rejected += 1;

@@ -570,8 +570,10 @@ fn accepted_hook_projection_keeps_controller() {
     }
 }
 
-/// Errors from `rhs`, `jacobian` and `accepted` stop the run at once with Outcome::Problem at the
-/// last accepted time, y holding the last accepted value (as the problem left it for `accepted`).
+/// Errors from `jacobian` and `accepted` stop the run at once with Outcome::Problem at the last
+/// accepted time, y holding the last accepted value (as the problem left it for `accepted`). Errors
+/// from `rhs` inside a trial step shrink the step first (adaptive methods), so the run stops within
+/// a minimal step of where f fails; fixed-step RK4 stops at once.
 #[test]
 fn problem_errors_propagate() {
     let methods = [
@@ -592,6 +594,16 @@ fn problem_errors_propagate() {
                 assert_eq!(t, last);
                 assert!(t > 0.0 && st.steps > 0);
                 assert!((y[0] - (-t).exp()).abs() < 1e-6, "{m:?}: y = {y:?} at {t}");
+                let gap = if matches!(m, Method::Rk4 { .. }) {
+                    0.01
+                } else {
+                    1e-12
+                };
+                assert!(
+                    0.5 - t <= gap,
+                    "{m:?}: stopped {} before the failure",
+                    0.5 - t
+                );
             }
             o => panic!("{m:?}: {o:?}"),
         }
