@@ -13,6 +13,7 @@ help speaks of ``progmo``. Exit codes of ``check`` (stable; the nightly job bran
 from __future__ import annotations
 
 import argparse
+import importlib
 import importlib.util
 import os
 import shlex
@@ -292,8 +293,7 @@ def cmd_debug(args: list[str]) -> int:
     if importlib.util.find_spec("progmo_harness.debug") is None:
         _say("progmo debug: not available in this build (progmo_harness.debug is missing)")
         return EXIT_USAGE
-    from . import debug  # type: ignore[attr-defined]
-
+    debug = importlib.import_module("progmo_harness.debug")  # via sys.modules (tests substitute it)
     rc = debug.main(args)
     return int(rc or 0)
 
