@@ -2,7 +2,7 @@
 # Prepares everything the harness needs on a fresh machine, idempotently:
 #   .venv with numpy, scipy, MuJoCo, Pinocchio, matplotlib, mcap, pytest (versions pinned in
 #   pyproject.toml) and the Rust core built into it as progmo_harness._core (maturin, release).
-# Sourced by harness/nightly.sh and harness/test.sh; prints what it does, fails loudly.
+# Run by harness/nightly.sh and harness/test.sh; prints what it does, fails loudly.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
@@ -15,8 +15,16 @@ stamp=.venv/.progmo-deps
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   echo "setup: installing Python dependencies (first run: about a minute)" >&2
   .venv/bin/python -m pip install -q --upgrade pip
-  .venv/bin/python -m pip install -q "maturin>=1.16,<2" "numpy>=2.4,<2.5" "scipy==1.17.1" "mujoco==4.0.0" "pin==4.1.0" \
-    "matplotlib>=3.11,<3.12" "mcap==1.6.0" "pytest>=9.2,<10"
+  # One list of requirements: pyproject.toml (build-system, dependencies, the `test` extra).
+  mapfile -t reqs < <(.venv/bin/python - <<'PY'
+import tomllib
+with open("pyproject.toml", "rb") as f:
+    d = tomllib.load(f)
+print("\n".join(d["build-system"]["requires"] + d["project"]["dependencies"]
+                + d["project"]["optional-dependencies"]["test"]))
+PY
+)
+  .venv/bin/python -m pip install -q "${reqs[@]}"
   touch "$stamp"
 fi
 echo "setup: building the Rust core into .venv (maturin develop --release)" >&2
