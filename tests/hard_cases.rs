@@ -11,7 +11,7 @@ use nalgebra::{DMatrix, DVector};
 use progmo::formulation::{Formulation, RankTolerances};
 use progmo::integrate::Method;
 use progmo::model::Model;
-use progmo::problems::hard::{self, NanAfter};
+use progmo::problems::hard::{self, NanAfterLaw, WithForce};
 use progmo::problems::particle::{self, ConstantSpeed};
 use progmo::problems::pendulum::{self, DoublePendulum, ElbowProgramme};
 use progmo::programme::Constraints;
@@ -810,9 +810,9 @@ fn rc_step_too_small_with_absurd_tolerance() {
 fn rc_non_finite_force_keeps_partial_results() {
     let base = pendulum::double_pendulum();
     let p = Problem {
-        model: NanAfter {
+        model: WithForce {
             inner: base.model.clone(),
-            t_nan: 1.0,
+            law: NanAfterLaw { t_nan: 1.0 },
         },
         constraints: base.constraints.clone(),
         t0: base.t0,

@@ -5,8 +5,8 @@
 //! - [`arm_through_boundary`]: a two-link arm whose end point is programmed along a line that
 //!   leaves the workspace (dead point: the programme Jacobian loses rank at full stretch).
 //! - [`nearly_redundant`]: a point mass with two rows whose gradients differ by eps.
-//! - [`JointSpring`]: a stiff, damped joint spring added to any Euclidean model.
-//! - [`NanAfter`]: a model whose applied force turns NaN after a given time (return-code tests).
+//! - [`WithForce`] with [`JointSpringLaw`]: a stiff, damped joint spring added to any Euclidean model.
+//! - [`WithForce`] with [`NanAfterLaw`]: an applied force that turns NaN after a given time.
 
 use super::euclidean_names;
 use super::pendulum::{DoublePendulum, ElbowProgramme};
@@ -269,16 +269,20 @@ pub fn nearly_redundant(eps: f64) -> Problem<PointMass3, NearlyRedundant> {
     }
 }
 
-/// Adds the joint torque -k q_j - c v_j (a stiff, damped spring at rest at 0) to a Euclidean model.
-#[derive(Clone, Debug)]
-pub struct JointSpring<M> {
-    pub inner: M,
-    pub joint: usize,
-    pub k: f64,
-    pub c: f64,
+/// A force law added to a model's applied forces Q (generic over the scalar, like the models).
+pub trait ForceLaw: Send + Sync {
+    /// Add this law's generalized forces at (t, q, v) to `f`.
+    fn add<S: Scalar>(&self, t: S, q: &[S], v: &[S], f: &mut [S]);
 }
 
-impl<M: Model> Model for JointSpring<M> {
+/// A model with an extra force law; everything else is the inner model's.
+#[derive(Clone, Debug)]
+pub struct WithForce<M, L> {
+    pub inner: M,
+    pub law: L,
+}
+
+impl<M: Model, L: ForceLaw> Model for WithForce<M, L> {
     type Workspace<S: Scalar> = M::Workspace<S>;
     fn workspace<S: Scalar>(&self) -> M::Workspace<S> {
         self.inner.workspace()
@@ -313,17 +317,34 @@ impl<M: Model> Model for JointSpring<M> {
         f: &mut [S],
     ) {
         self.inner.applied_forces(ws, t, q, v, f);
+        self.law.add(t, q, v, f);
+    }
+}
+
+/// The joint torque -k q_j - c v_j (a stiff, damped spring at rest at 0) on a Euclidean joint.
+#[derive(Clone, Debug)]
+pub struct JointSpringLaw {
+    pub joint: usize,
+    pub k: f64,
+    pub c: f64,
+}
+
+impl ForceLaw for JointSpringLaw {
+    fn add<S: Scalar>(&self, _t: S, q: &[S], v: &[S], f: &mut [S]) {
         let j = self.joint;
         f[j] -= q[j] * self.k + v[j] * self.c;
     }
 }
+
+/// A model with a stiff, damped joint spring.
+pub type JointSpring<M> = WithForce<M, JointSpringLaw>;
 
 /// Double pendulum (unit links and masses) whose shoulder has a spring k = 1e6 N m/rad with damping
 /// c = 2e4 N m s/rad (overdamped: modes near -k/c = -50 /s and -c/A11 ~ -4e3 /s), elbow programmed
 /// q2 = 0.5 sin(2 t); t1 = 2 s. The fast mode makes DOP853 stability-limited.
 pub fn stiff_shoulder() -> Problem<JointSpring<DoublePendulum>, ElbowProgramme> {
     Problem {
-        model: JointSpring {
+        model: WithForce {
             inner: DoublePendulum {
                 m1: 1.0,
                 m2: 1.0,
@@ -331,9 +352,11 @@ pub fn stiff_shoulder() -> Problem<JointSpring<DoublePendulum>, ElbowProgramme> 
                 l2: 1.0,
                 g: 9.81,
             },
-            joint: 0,
-            k: 1e6,
-            c: 2e4,
+            law: JointSpringLaw {
+                joint: 0,
+                k: 1e6,
+                c: 2e4,
+            },
         },
         constraints: ElbowProgramme::new(0.5, 2.0),
         t0: 0.0,
@@ -343,53 +366,22 @@ pub fn stiff_shoulder() -> Problem<JointSpring<DoublePendulum>, ElbowProgramme> 
     }
 }
 
-/// Wraps a model; its applied forces are NaN for t > `t_nan`.
+/// Makes the first applied force NaN for t > `t_nan` (return-code tests).
 #[derive(Clone, Debug)]
-pub struct NanAfter<M> {
-    pub inner: M,
+pub struct NanAfterLaw {
     pub t_nan: f64,
 }
 
-impl<M: Model> Model for NanAfter<M> {
-    type Workspace<S: Scalar> = M::Workspace<S>;
-    fn workspace<S: Scalar>(&self) -> M::Workspace<S> {
-        self.inner.workspace()
-    }
-    fn nq(&self) -> usize {
-        self.inner.nq()
-    }
-    fn nv(&self) -> usize {
-        self.inner.nv()
-    }
-    fn segments(&self) -> &[Segment] {
-        self.inner.segments()
-    }
-    fn q_names(&self) -> Vec<String> {
-        self.inner.q_names()
-    }
-    fn v_names(&self) -> Vec<String> {
-        self.inner.v_names()
-    }
-    fn mass_matrix<S: Scalar>(&self, ws: &mut M::Workspace<S>, q: &[S], a: &mut DMatrix<S>) {
-        self.inner.mass_matrix(ws, q, a)
-    }
-    fn velocity_terms<S: Scalar>(&self, ws: &mut M::Workspace<S>, q: &[S], v: &[S], g: &mut [S]) {
-        self.inner.velocity_terms(ws, q, v, g)
-    }
-    fn applied_forces<S: Scalar>(
-        &self,
-        ws: &mut M::Workspace<S>,
-        t: S,
-        q: &[S],
-        v: &[S],
-        f: &mut [S],
-    ) {
-        self.inner.applied_forces(ws, t, q, v, f);
+impl ForceLaw for NanAfterLaw {
+    fn add<S: Scalar>(&self, t: S, _q: &[S], _v: &[S], f: &mut [S]) {
         if t.re() > self.t_nan {
             f[0] = c(f64::NAN);
         }
     }
 }
+
+/// A model whose applied forces are NaN for t > `law.t_nan`.
+pub type NanAfter<M> = WithForce<M, NanAfterLaw>;
 
 /// The arm's tip programmed along a fixed ray from the pivot at angle `alpha` from the downward
 /// vertical, radius rho(t) = (l1 + l2) - delta (t - tc)^2: it touches the workspace boundary (full
