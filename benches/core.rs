@@ -6,9 +6,11 @@
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use progmo::formulation::{Formulation, RankTolerances};
 use progmo::model::Model;
-use progmo::problems::{particle, pendulum, rigid_body};
+use progmo::problems::{hard, particle, pendulum, rigid_body};
 use progmo::programme::Constraints;
-use progmo::solve::{solve, Evaluator, Problem, Settings};
+use progmo::solve::{
+    solve, solve_into, DriftControl, Evaluator, Problem, Sample, SampleSink, Settings,
+};
 use std::hint::black_box;
 
 fn rhs_group<M: Model, C: Constraints>(c: &mut Criterion, name: &str, p: &Problem<M, C>) {
@@ -59,5 +61,40 @@ fn whole_solves(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, rhs, whole_solves);
+/// Drops every sample: the solve's own work only.
+struct Discard;
+impl SampleSink for Discard {
+    fn sample(&mut self, _: &Sample<'_>) {}
+}
+
+/// Cost of drift control over 10^4 periods (issue target: projection within 15 % of no projection;
+/// residuals are checked by tests/hard_cases.rs case 6).
+fn drift(c: &mut Criterion) {
+    let mut g = c.benchmark_group("drift/ten_thousand_periods");
+    g.sample_size(10);
+    let p = hard::ten_thousand_periods();
+    for (name, d) in [
+        (
+            "projection",
+            DriftControl::Projection {
+                tol: 1e-12,
+                max_iter: 8,
+            },
+        ),
+        ("none", DriftControl::None),
+    ] {
+        let s = Settings {
+            rtol: 1e-8,
+            atol: 1e-10,
+            drift: d,
+            ..Settings::default()
+        };
+        g.bench_function(name, |b| {
+            b.iter(|| black_box(solve_into(&p, &s, &mut Discard).t_end))
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, rhs, whole_solves, drift);
 criterion_main!(benches);

@@ -641,12 +641,7 @@ impl SampleSink for MaxSink {
 /// (one per accepted step plus t0) and stores O(1).
 #[test]
 fn c6_ten_thousand_periods_residual_and_constant_memory() {
-    let mut p = pendulum::double_pendulum();
-    let w = 200.0 * std::f64::consts::PI;
-    p.constraints = ElbowProgramme::new(0.2, w);
-    p.q0 = vec![0.3, 0.0];
-    p.v0 = vec![0.0, 0.2 * w];
-    p.t1 = 100.0;
+    let p = hard::ten_thousand_periods();
     let mut s = Settings::default();
     s.rtol = 1e-8;
     s.atol = 1e-10;

@@ -461,3 +461,15 @@ pub fn arm_touching_boundary() -> Problem<DoublePendulum, TipOnRay> {
         v0: v0.to_vec(),
     }
 }
+
+/// Double pendulum with the elbow programmed at period 0.01 s (q2 = 0.2 sin(200 pi t)) for 100 s =
+/// 10^4 periods: the long-horizon drift case (tests/hard_cases.rs case 6, benches/core.rs `drift`).
+pub fn ten_thousand_periods() -> Problem<DoublePendulum, ElbowProgramme> {
+    let mut p = crate::problems::pendulum::double_pendulum();
+    let w = 200.0 * std::f64::consts::PI;
+    p.constraints = ElbowProgramme::new(0.2, w);
+    p.q0 = vec![0.3, 0.0];
+    p.v0 = vec![0.0, 0.2 * w];
+    p.t1 = 100.0;
+    p
+}
