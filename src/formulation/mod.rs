@@ -328,13 +328,7 @@ impl<S: Scalar> FormulationWork<S> {
             }
             self.rhs[nv + r] = gamma[r] * inv;
         }
-        let rcond = linalg::lu_factor(&mut self.k, n, &mut self.piv, 0.0)
-            .map_err(|e| FormulationError::SingularSystem { rcond: e.rcond })?;
-        diag.factorizations += 1;
-        diag.system_rcond = rcond;
-        linalg::lu_solve(&self.k, n, &self.piv, &mut self.rhs[..n]);
-        acc[..nv].copy_from_slice(&self.rhs[..nv]);
-        Ok(())
+        self.lu_solve_k(n, acc, diag)
     }
 
     /// Explicit inverse: lambda = (B A^-1 B^T)^-1 (gamma - B A^-1 F), a = A^-1 (F + B^T lambda).
@@ -348,11 +342,7 @@ impl<S: Scalar> FormulationWork<S> {
         diag: &mut Diagnostics,
     ) -> Result<(), FormulationError> {
         let (nv, s) = (self.nv, self.s);
-        for i in 0..nv {
-            for j in 0..nv {
-                self.k[(i, j)] = a[(i, j)];
-            }
-        }
+        self.load_mass(a);
         let rcond = linalg::lu_factor(&mut self.k, nv, &mut self.piv, 0.0)
             .map_err(|e| FormulationError::SingularSystem { rcond: e.rcond })?;
         diag.factorizations += 1;
@@ -421,11 +411,7 @@ impl<S: Scalar> FormulationWork<S> {
         diag: &mut Diagnostics,
     ) -> Result<(), FormulationError> {
         let (nv, s) = (self.nv, self.s);
-        for i in 0..nv {
-            for j in 0..nv {
-                self.k[(i, j)] = a[(i, j)];
-            }
-        }
+        self.load_mass(a);
         linalg::cholesky(&mut self.k, nv)
             .map_err(|e| FormulationError::SingularSystem { rcond: e.rcond })?;
         diag.factorizations += 1;
@@ -485,6 +471,15 @@ impl<S: Scalar> FormulationWork<S> {
         }
         diag.system_rcond = 1.0;
         Ok(())
+    }
+
+    /// The leading nv x nv block of k <- A.
+    fn load_mass(&mut self, a: &DMatrix<S>) {
+        for i in 0..self.nv {
+            for j in 0..self.nv {
+                self.k[(i, j)] = a[(i, j)];
+            }
+        }
     }
 
     /// L y = x in place (L in the lower triangle of k).
