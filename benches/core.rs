@@ -6,7 +6,7 @@
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use progmo::formulation::{Formulation, RankTolerances};
 use progmo::model::Model;
-use progmo::problems::{hard, particle, pendulum, rigid_body};
+use progmo::problems::{chain, hard, particle, pendulum, rigid_body};
 use progmo::programme::Constraints;
 use progmo::solve::{
     solve, solve_into, DriftControl, Evaluator, Problem, Sample, SampleSink, Settings,
@@ -40,6 +40,11 @@ fn rhs(c: &mut Criterion) {
     rhs_group(c, "example_2_1", &particle::example_2_1());
     rhs_group(c, "heavy_top", &rigid_body::heavy_top());
     rhs_group(c, "double_pendulum", &pendulum::double_pendulum());
+    // generated tree scenes (expression rows, a body-point signal): the sizes of issue 5's targets
+    for n in [7, 30] {
+        let scene = chain::ChainSpec::uniform(n).scene().expect("generated chain loads");
+        progmo::with_problem!(&scene.system, p => rhs_group(c, &format!("chain_{n}"), p));
+    }
 }
 
 fn whole_solves(c: &mut Criterion) {

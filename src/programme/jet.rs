@@ -17,8 +17,21 @@ use crate::model::{lie, Segment};
 use crate::scalar::{Dual, Dual2, Scalar};
 use nalgebra::DMatrix;
 
+/// Where [`Constraints::jet`] writes: the public outputs of a [`Jet`].
+pub struct JetRows<'a, S: Scalar> {
+    /// B, `s x nv`.
+    pub b: &'a mut DMatrix<S>,
+    /// gamma, so that B a = gamma.
+    pub gamma: &'a mut [S],
+    /// Row values: g (position), f (velocity), h(t, q, v, 0) (acceleration).
+    pub value: &'a mut [S],
+    /// dg/dt for position rows; zero for other rows.
+    pub gdot: &'a mut [S],
+}
+
 /// Derivatives of all rows at one state; preallocated, reused at every evaluation.
 pub struct Jet<C: Constraints, S: Scalar> {
+    ws0: C::Workspace<S>,
     ws1: C::Workspace<Dual<S>>,
     ws2: C::Workspace<Dual2<S>>,
     q1: Vec<Dual<S>>,
@@ -56,6 +69,7 @@ impl<C: Constraints, S: Scalar> Jet<C, S> {
             levels.contains(&Level::Acceleration),
         ];
         Jet {
+            ws0: constraints.workspace(),
             ws1: constraints.workspace(),
             ws2: constraints.workspace(),
             q1: vec![Dual::from_re(S::zero()); nq],
@@ -91,8 +105,23 @@ impl<C: Constraints, S: Scalar> Jet<C, S> {
         &self.levels
     }
 
-    /// Compute B, gamma, the row values and dg/dt at (t, q, v). Allocates nothing.
+    /// Compute B, gamma, the row values and dg/dt at (t, q, v): the constraints' own
+    /// [`Constraints::jet`] when they have one, else [`Jet::compute_generic`]. Allocates nothing.
     pub fn compute(&mut self, c: &C, segments: &[Segment], t: S, q: &[S], v: &[S]) {
+        let out = JetRows {
+            b: &mut self.b,
+            gamma: &mut self.gamma,
+            value: &mut self.value,
+            gdot: &mut self.gdot,
+        };
+        if !c.jet(&mut self.ws0, segments, t, q, v, out) {
+            self.compute_generic(c, segments, t, q, v);
+        }
+    }
+
+    /// The generic passes over [`Constraints::eval`] (nv `Dual` passes per level and one `Dual2`
+    /// pass); also the independent reference the specialised jets are tested against.
+    pub fn compute_generic(&mut self, c: &C, segments: &[Segment], t: S, q: &[S], v: &[S]) {
         let nv = self.nv;
         crate::model::qdot(segments, q, v, &mut self.qd);
         for x in self.gdot.iter_mut() {

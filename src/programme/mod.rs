@@ -16,6 +16,7 @@
 
 pub mod jet;
 
+use crate::model::Segment;
 use crate::scalar::Scalar;
 
 /// At which level a row constrains the motion.
@@ -84,6 +85,23 @@ pub trait Constraints: Send + Sync {
         a: &[S],
         out: &mut [S],
     );
+
+    /// B, gamma, the row values and dg/dt (the outputs of [`jet::Jet`]) in one go, for constraints
+    /// that know their structure better than generic AD passes over [`Constraints::eval`] (scene
+    /// rows: chain rule through their slots, [`crate::scene`]). Return `false` (the default) to let
+    /// [`jet::Jet`] run the generic passes. `ws` is a workspace over `S` itself.
+    #[allow(unused_variables)]
+    fn jet<S: Scalar>(
+        &self,
+        ws: &mut Self::Workspace<S>,
+        segments: &[Segment],
+        t: S,
+        q: &[S],
+        v: &[S],
+        out: jet::JetRows<'_, S>,
+    ) -> bool {
+        false
+    }
 }
 
 /// No constraints at all (the natural system).

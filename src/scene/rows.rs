@@ -3,12 +3,27 @@
 //! A row's level is the highest level among the symbols it reads (q: position, v: velocity,
 //! dv/dt: acceleration; body-point signals by their derivative order). Acceleration rows are
 //! checked to be linear in dv/dt when the scene is loaded.
+//!
+//! The jet of the rows (B, gamma; [`crate::programme::jet`]) goes through the slots by the chain
+//! rule instead of nv AD passes over the whole evaluation (which would re-run the tree's forward
+//! kinematics per direction). Along the motion through (t, q, v) with dv/dt = 0 every slot has a
+//! Taylor jet: t (t, 1, 0); q (q, N v, (dN/dt) v); v (v, 0); dv/dt 0; signals from one set of
+//! forward passes ([`Signals::jets`]). A row of level L (differentiated m = 2, 1, 0 times for
+//! position, velocity, acceleration) then has
+//! - gamma_i = -d^m E_i/dt^m along that motion: one `Dual2`, `Dual` or plain pass over the
+//!   expressions of that level;
+//! - B_i = d(d^m E_i/dt^m)/d(dv/dt) = sum over the slots s of level L that E_i reads of
+//!   dE_i/ds * J_s, with J_s = N(q) rows for q, unit rows for v and dv/dt, the tree's point
+//!   Jacobian rows for signals; one `Dual` pass per such slot gives dE_i/ds.
 
 use super::layout::Layout;
-use super::signals::{SignalWork, Signals};
+use super::signals::{SignalJets, SignalWork, Signals};
 use crate::expr::Expr;
-use crate::programme::{Constraints, RowSpec};
-use crate::scalar::Scalar;
+use crate::model::{lie, Segment};
+use crate::programme::jet::JetRows;
+use crate::programme::{Constraints, Level, RowSpec};
+use crate::scalar::{Dual, Dual2, Scalar};
+use nalgebra::DMatrix;
 
 /// Rows as expressions over the scene's slots.
 #[derive(Clone, Debug)]
@@ -18,6 +33,12 @@ pub struct ExprConstraints {
     layout: Layout,
     signals: Signals,
     max_stack: usize,
+    /// Slots that enter B (read by a row of the slot's own level), each with those rows.
+    seeds: Vec<(usize, Vec<usize>)>,
+    /// Signals whose Jacobian row enters B.
+    signal_needs: Vec<bool>,
+    /// Rows per level: position, velocity, acceleration.
+    by_level: [Vec<usize>; 3],
 }
 
 /// Scratch of an [`ExprConstraints`] evaluation.
@@ -25,18 +46,66 @@ pub struct RowsWork<S: Scalar> {
     slots: Vec<S>,
     stack: Vec<S>,
     signals: SignalWork<S>,
+    slots1: Vec<Dual<S>>,
+    stack1: Vec<Dual<S>>,
+    slots2: Vec<Dual2<S>>,
+    stack2: Vec<Dual2<S>>,
+    jets: SignalJets<S>,
+    qd: Vec<S>,
+    qdd: Vec<S>,
+}
+
+fn level_index(l: Level) -> usize {
+    match l {
+        Level::Position => 0,
+        Level::Velocity => 1,
+        Level::Acceleration => 2,
+    }
 }
 
 impl ExprConstraints {
     /// Rows with their specs (name, level, role) and expressions.
     pub fn new(specs: Vec<RowSpec>, exprs: Vec<Expr>, layout: Layout, signals: Signals) -> Self {
         let max_stack = exprs.iter().map(|e| e.max_stack()).max().unwrap_or(1);
+        let mut by_level: [Vec<usize>; 3] = Default::default();
+        for (i, sp) in specs.iter().enumerate() {
+            by_level[level_index(sp.level)].push(i);
+        }
+        // The level of a slot (t enters no B row).
+        let slot_level = |slot: usize| -> Option<Level> {
+            if slot == layout.t {
+                None
+            } else if slot >= layout.signals {
+                Some(signals.quantity(slot - layout.signals).level())
+            } else {
+                layout.level(slot)
+            }
+        };
+        let mut seeds: Vec<(usize, Vec<usize>)> = vec![];
+        let mut signal_needs = vec![false; signals.len()];
+        for (i, (sp, e)) in specs.iter().zip(&exprs).enumerate() {
+            for &slot in e.slots() {
+                if slot_level(slot) != Some(sp.level) {
+                    continue;
+                }
+                if slot >= layout.signals {
+                    signal_needs[slot - layout.signals] = true;
+                }
+                match seeds.iter_mut().find(|(s, _)| *s == slot) {
+                    Some((_, rows)) => rows.push(i),
+                    None => seeds.push((slot, vec![i])),
+                }
+            }
+        }
         ExprConstraints {
             specs,
             exprs,
             layout,
             signals,
             max_stack,
+            seeds,
+            signal_needs,
+            by_level,
         }
     }
 
@@ -50,10 +119,18 @@ impl Constraints for ExprConstraints {
     type Workspace<S: Scalar> = RowsWork<S>;
 
     fn workspace<S: Scalar>(&self) -> RowsWork<S> {
+        let n = self.layout.slots + self.signals.len();
         RowsWork {
-            slots: vec![S::zero(); self.layout.slots + self.signals.len()],
+            slots: vec![S::zero(); n],
             stack: Vec::with_capacity(self.max_stack),
             signals: self.signals.work(),
+            slots1: vec![Dual::from_re(S::zero()); n],
+            stack1: Vec::with_capacity(self.max_stack),
+            slots2: vec![Dual2::from_re(S::zero()); n],
+            stack2: Vec::with_capacity(self.max_stack),
+            jets: SignalJets::new(self.signals.len(), self.layout.nv),
+            qd: vec![S::zero(); self.layout.nq],
+            qdd: vec![S::zero(); self.layout.nq],
         }
     }
 
@@ -79,6 +156,126 @@ impl Constraints for ExprConstraints {
             .fill(&mut ws.signals, q, v, a, &mut ws.slots[l.signals..]);
         for (o, e) in out.iter_mut().zip(&self.exprs) {
             *o = e.eval(&ws.slots, &mut ws.stack);
+        }
+    }
+
+    fn jet<S: Scalar>(
+        &self,
+        ws: &mut RowsWork<S>,
+        segments: &[Segment],
+        t: S,
+        q: &[S],
+        v: &[S],
+        out: JetRows<'_, S>,
+    ) -> bool {
+        let l = &self.layout;
+        let z = S::zero();
+        // q along the motion with dv/dt = 0: q' = N v; q'' = (dN/dt) v = 1/2 q' (x) (0, v) on
+        // quaternion blocks, 0 elsewhere.
+        crate::model::qdot(segments, q, v, &mut ws.qd);
+        ws.qdd.fill(z);
+        for seg in segments {
+            if let Segment::Quaternion { q: iq, v: iv } = *seg {
+                let r = lie::quat_rate(&ws.qd[iq..iq + 4], &v[iv..iv + 3]);
+                ws.qdd[iq..iq + 4].copy_from_slice(&r);
+            }
+        }
+        self.signals
+            .jets(&mut ws.signals, q, v, &self.signal_needs, &mut ws.jets);
+        // Values at dv/dt = 0.
+        ws.slots[l.t] = t;
+        ws.slots[l.q..l.q + l.nq].copy_from_slice(q);
+        ws.slots[l.v..l.v + l.nv].copy_from_slice(v);
+        ws.slots[l.a..l.a + l.nv].fill(z);
+        for (k, j) in ws.jets.taylor.iter().enumerate() {
+            ws.slots[l.signals + k] = j[0];
+        }
+        out.gdot.fill(z);
+        // gamma and values, level by level.
+        if !self.by_level[0].is_empty() {
+            for (x, &y) in ws.slots2.iter_mut().zip(&ws.slots) {
+                *x = Dual2::from_re(y);
+            }
+            ws.slots2[l.t] = Dual2::new(t, S::one(), z);
+            for k in 0..l.nq {
+                ws.slots2[l.q + k] = Dual2::new(q[k], ws.qd[k], ws.qdd[k]);
+            }
+            for (k, j) in ws.jets.taylor.iter().enumerate() {
+                ws.slots2[l.signals + k] = Dual2::new(j[0], j[1], j[2]);
+            }
+            for &i in &self.by_level[0] {
+                let g = self.exprs[i].eval(&ws.slots2, &mut ws.stack2);
+                out.value[i] = g.re;
+                out.gdot[i] = g.v1;
+                out.gamma[i] = -g.v2;
+            }
+        }
+        if !self.by_level[1].is_empty() {
+            for (x, &y) in ws.slots1.iter_mut().zip(&ws.slots) {
+                *x = Dual::from_re(y);
+            }
+            ws.slots1[l.t] = Dual::new(t, S::one());
+            for k in 0..l.nq {
+                ws.slots1[l.q + k] = Dual::new(q[k], ws.qd[k]);
+            }
+            for (k, j) in ws.jets.taylor.iter().enumerate() {
+                ws.slots1[l.signals + k] = Dual::new(j[0], j[1]);
+            }
+            for &i in &self.by_level[1] {
+                let f = self.exprs[i].eval(&ws.slots1, &mut ws.stack1);
+                out.value[i] = f.re;
+                out.gamma[i] = -f.eps;
+            }
+        }
+        for &i in &self.by_level[2] {
+            let h = self.exprs[i].eval(&ws.slots, &mut ws.stack);
+            out.value[i] = h;
+            out.gamma[i] = -h;
+        }
+        // B: one Dual pass per slot that enters it.
+        out.b.fill(z);
+        for x in ws.slots1.iter_mut().zip(&ws.slots) {
+            *x.0 = Dual::from_re(*x.1);
+        }
+        for (slot, rows) in &self.seeds {
+            let slot = *slot;
+            ws.slots1[slot].eps = S::one();
+            for &i in rows {
+                let d = self.exprs[i].eval(&ws.slots1, &mut ws.stack1).eps;
+                if slot >= l.signals {
+                    let k = slot - l.signals;
+                    for j in 0..l.nv {
+                        out.b[(i, j)] += d * ws.jets.jac[(k, j)];
+                    }
+                } else if slot >= l.a {
+                    out.b[(i, slot - l.a)] += d;
+                } else if slot >= l.v {
+                    out.b[(i, slot - l.v)] += d;
+                } else {
+                    add_n_row(segments, q, slot - l.q, d, out.b, i);
+                }
+            }
+            ws.slots1[slot].eps = z;
+        }
+        true
+    }
+}
+
+/// b[i, :] += d * (row k of N(q)), N the map v -> dq/dt of [`crate::model::qdot`].
+fn add_n_row<S: Scalar>(segments: &[Segment], q: &[S], k: usize, d: S, b: &mut DMatrix<S>, i: usize) {
+    for seg in segments {
+        match *seg {
+            Segment::Euclidean { q: iq, v: iv, len } if k >= iq && k < iq + len => {
+                b[(i, iv + k - iq)] += d;
+            }
+            Segment::Quaternion { q: iq, v: iv } if k >= iq && k < iq + 4 => {
+                for j in 0..3 {
+                    let mut e = [S::zero(); 3];
+                    e[j] = S::one();
+                    b[(i, iv + j)] += d * lie::quat_rate(&q[iq..iq + 4], &e)[k - iq];
+                }
+            }
+            _ => {}
         }
     }
 }

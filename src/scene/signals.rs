@@ -10,7 +10,8 @@
 use crate::programme::Level;
 use crate::scalar::Scalar;
 use crate::tree::{self, TreeData};
-use nalgebra::Vector3;
+use crate::tree::spatial::quat_from_rot;
+use nalgebra::{DMatrix, Vector3};
 use std::sync::Arc;
 
 /// What a signal measures.
@@ -92,6 +93,27 @@ pub struct SignalWork<S: Scalar> {
     data: Option<TreeData<S>>,
 }
 
+/// Signals as Taylor jets along the motion with dv/dt = 0 at (q, v), and their velocity
+/// Jacobians: what the chain-rule jet of the rows ([`super::rows`]) needs.
+pub struct SignalJets<S: Scalar> {
+    /// Per signal: value, d/dt, d^2/dt^2 along the motion with dv/dt = 0 (entries a signal's
+    /// derivative order does not reach are zero).
+    pub taylor: Vec<[S; 3]>,
+    /// Row k: d(signal k^(m))/d(dv/dt) where m = 2 - (derivative order of signal k): the signal's
+    /// linear or angular Jacobian (orientation: d(quat')/dv). Filled for signals flagged in `needs`.
+    pub jac: DMatrix<S>,
+}
+
+impl<S: Scalar> SignalJets<S> {
+    /// Storage for `n` signals and `nv` velocities.
+    pub fn new(n: usize, nv: usize) -> Self {
+        SignalJets {
+            taylor: vec![[S::zero(); 3]; n],
+            jac: DMatrix::from_element(n, nv, S::zero()),
+        }
+    }
+}
+
 impl Signals {
     /// No signals (Lagrangian scenes).
     pub fn none() -> Self {
@@ -147,36 +169,133 @@ impl Signals {
         }
     }
 
-    /// Compute all signals at (q, v, a) into `out`.
+    /// Highest derivative order any signal needs (0 positions/orientations, 1 velocities, 2).
+    fn max_order(&self) -> u8 {
+        self.list
+            .iter()
+            .map(|&(_, q)| match q {
+                Quantity::Position { order, .. } => order,
+                Quantity::Orientation { .. } => 0,
+                Quantity::Angular { order, .. } => order + 1,
+            })
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// Compute all signals at (q, v, a) into `out`: the tree's forward passes run once, up to the
+    /// order the signals need.
     pub fn fill<S: Scalar>(&self, w: &mut SignalWork<S>, q: &[S], v: &[S], a: &[S], out: &mut [S]) {
         let (Some(tree), Some(data)) = (&self.tree, &mut w.data) else {
             return;
         };
+        if self.list.is_empty() {
+            return;
+        }
+        let order = self.max_order();
+        tree::forward_kinematics(tree, data, q);
+        if order >= 1 {
+            tree::forward_velocity(tree, data, v);
+        }
+        if order >= 2 {
+            tree::forward_acceleration(tree, data, a, &Vector3::zeros());
+        }
         for (k, &(si, quantity)) in self.list.iter().enumerate() {
             let site = &self.sites[si];
-            let p = Vector3::new(
-                S::from(site.pos[0]),
-                S::from(site.pos[1]),
-                S::from(site.pos[2]),
-            );
+            let p = lift(&site.pos);
+            let (rot, origin) = tree::body_frame(tree, data, site.body);
             out[k] = match quantity {
-                Quantity::Position { axis, order: 0 } => {
-                    tree::point_position(tree, data, q, site.body, &p)[axis]
-                }
-                Quantity::Position { axis, order: 1 } => {
-                    tree::point_velocity(tree, data, q, v, site.body, &p)[axis]
-                }
-                Quantity::Position { axis, .. } => {
-                    tree::point_acceleration(tree, data, q, v, a, site.body, &p).0[axis]
-                }
-                Quantity::Orientation { k } => tree::body_quaternion(tree, data, q, site.body)[k],
-                Quantity::Angular { axis, order: 0 } => {
-                    tree::body_angular_velocity(tree, data, q, v, site.body)[axis]
-                }
-                Quantity::Angular { axis, .. } => {
-                    tree::point_acceleration(tree, data, q, v, a, site.body, &p).1[axis]
+                Quantity::Position { axis, order: 0 } => (origin + rot * p)[axis],
+                Quantity::Orientation { k } => quat_from_rot(&rot)[k],
+                _ => {
+                    let pk = tree::point_kinematics(tree, data, site.body, &p);
+                    match quantity {
+                        Quantity::Position { axis, order: 1 } => pk.vel[axis],
+                        Quantity::Position { axis, .. } => pk.acc[axis],
+                        Quantity::Angular { axis, order: 0 } => pk.omega[axis],
+                        Quantity::Angular { axis, .. } => pk.alpha[axis],
+                        Quantity::Orientation { .. } => unreachable!(),
+                    }
                 }
             };
         }
     }
+
+    /// Taylor jets of all signals along the motion with dv/dt = 0 at (q, v), and the Jacobian rows
+    /// of the signals flagged in `needs` (see [`SignalJets`]). One set of forward passes.
+    ///
+    /// Position p: (p, p', p''_0), row J_p; velocity p': (p', p''_0), row J_p; acceleration p'':
+    /// p''_0, row J_p. Angular velocity w: (w, w'_0), row J_w; w': w'_0, row J_w. Orientation
+    /// quat (body -> world): quat' = 1/2 (0, w) (x) quat, quat''_0 = 1/2 [(0, w'_0) (x) quat +
+    /// (0, w) (x) quat'], row 1/2 (0, J_w) (x) quat.
+    pub fn jets<S: Scalar>(
+        &self,
+        w: &mut SignalWork<S>,
+        q: &[S],
+        v: &[S],
+        needs: &[bool],
+        out: &mut SignalJets<S>,
+    ) {
+        let (Some(tree), Some(data)) = (&self.tree, &mut w.data) else {
+            return;
+        };
+        if self.list.is_empty() {
+            return;
+        }
+        let zero_a = std::mem::take(&mut data.zero_v);
+        tree::forward_kinematics(tree, data, q);
+        tree::forward_velocity(tree, data, v);
+        tree::forward_acceleration(tree, data, &zero_a, &Vector3::zeros());
+        data.zero_v = zero_a;
+        let z = S::zero();
+        for (k, &(si, quantity)) in self.list.iter().enumerate() {
+            let site = &self.sites[si];
+            let pk = tree::point_kinematics(tree, data, site.body, &lift(&site.pos));
+            let (quat, dquat) = if let Quantity::Orientation { .. } = quantity {
+                let qb = quat_from_rot(&pk.rot);
+                let d = omega_times(&pk.omega, &qb);
+                (qb, d)
+            } else {
+                ([z; 4], [z; 4])
+            };
+            out.taylor[k] = match quantity {
+                Quantity::Position { axis, order: 0 } => [pk.pos[axis], pk.vel[axis], pk.acc[axis]],
+                Quantity::Position { axis, order: 1 } => [pk.vel[axis], pk.acc[axis], z],
+                Quantity::Position { axis, .. } => [pk.acc[axis], z, z],
+                Quantity::Angular { axis, order: 0 } => [pk.omega[axis], pk.alpha[axis], z],
+                Quantity::Angular { axis, .. } => [pk.alpha[axis], z, z],
+                Quantity::Orientation { k: c } => {
+                    let a = omega_times(&pk.alpha, &quat);
+                    let b = omega_times(&pk.omega, &dquat);
+                    [quat[c], dquat[c], a[c] + b[c]]
+                }
+            };
+            if !needs[k] {
+                continue;
+            }
+            let mut row = out.jac.row_mut(k);
+            row.fill(z);
+            tree::for_each_point_column(tree, data, site.body, &pk.pos, |j, wc, lin| {
+                row[j] = match quantity {
+                    Quantity::Position { axis, .. } => lin[axis],
+                    Quantity::Angular { axis, .. } => wc[axis],
+                    Quantity::Orientation { k: c } => omega_times(&wc, &quat)[c],
+                };
+            });
+        }
+    }
+}
+
+/// 1/2 (0, w) (x) quat: the rate of a body -> world quaternion under world angular velocity w.
+fn omega_times<S: Scalar>(w: &Vector3<S>, q: &[S; 4]) -> [S; 4] {
+    let h = S::from(0.5);
+    [
+        -(w[0] * q[1] + w[1] * q[2] + w[2] * q[3]) * h,
+        (w[0] * q[0] + w[1] * q[3] - w[2] * q[2]) * h,
+        (w[1] * q[0] + w[2] * q[1] - w[0] * q[3]) * h,
+        (w[2] * q[0] + w[0] * q[2] - w[1] * q[1]) * h,
+    ]
+}
+
+fn lift<S: Scalar>(p: &[f64; 3]) -> Vector3<S> {
+    Vector3::new(S::from(p[0]), S::from(p[1]), S::from(p[2]))
 }

@@ -359,16 +359,58 @@ pub fn point_acceleration<S: Scalar>(
     forward_kinematics(model, data, q);
     forward_velocity(model, data, v);
     forward_acceleration(model, data, a, &Vector3::zeros());
+    let k = point_kinematics(model, data, body, point);
+    (k.acc, k.alpha)
+}
+
+/// World rotation and origin of a body after [`forward_kinematics`].
+pub fn body_frame<S: Scalar>(model: &Model, data: &TreeData<S>, body: usize) -> (Matrix3<S>, Vector3<S>) {
+    let ld = &data.links[model.body_link[body]];
+    (ld.rot, ld.pos)
+}
+
+/// Everything about a body point the forward passes give, world frame.
+#[derive(Clone, Copy, Debug)]
+pub struct PointKinematics<S: Scalar> {
+    /// Body rotation (body -> world).
+    pub rot: Matrix3<S>,
+    /// Point position.
+    pub pos: Vector3<S>,
+    /// Point velocity.
+    pub vel: Vector3<S>,
+    /// Classical point acceleration `R (a_O + α x p + ω x (v_O + ω x p))`.
+    pub acc: Vector3<S>,
+    /// Body angular velocity.
+    pub omega: Vector3<S>,
+    /// Body angular acceleration `R α` (= d/dt of the world angular velocity).
+    pub alpha: Vector3<S>,
+}
+
+/// Read a body point's kinematics from `data` after [`forward_kinematics`], [`forward_velocity`]
+/// and [`forward_acceleration`] (run once for all points; gravity must be zero in the last pass).
+pub fn point_kinematics<S: Scalar>(
+    model: &Model,
+    data: &TreeData<S>,
+    body: usize,
+    point: &Vector3<S>,
+) -> PointKinematics<S> {
     let ld = &data.links[model.body_link[body]];
     let w = ld.v.ang;
     let vp = ld.v.lin + cross(&w, point);
     let ap = ld.a.lin + cross(&ld.a.ang, point) + cross(&w, &vp);
-    (ld.rot * ap, ld.rot * ld.a.ang)
+    PointKinematics {
+        rot: ld.rot,
+        pos: ld.pos + ld.rot * point,
+        vel: ld.rot * vp,
+        acc: ld.rot * ap,
+        omega: ld.rot * w,
+        alpha: ld.rot * ld.a.ang,
+    }
 }
 
 /// Calls `f(dof, ω_col, v_col)` for every dof `k` that moves `body`, with the world-frame angular
 /// velocity column and the world-frame velocity column of the (world) point `pw`.
-pub(crate) fn for_each_point_column<S: Scalar>(
+pub fn for_each_point_column<S: Scalar>(
     model: &Model,
     data: &TreeData<S>,
     body: usize,

@@ -1,0 +1,157 @@
+//! The chain-rule jet of scene rows (`ExprConstraints::jet`: one `Dual2`/`Dual` pass per level and
+//! one `Dual` pass per slot entering B, signals from one set of tree passes) against the generic AD
+//! passes over the whole evaluation (`Jet::compute_generic`: nv `Dual` passes through the tree's
+//! forward kinematics): two independent ways to the same B, gamma, values and dg/dt.
+//!
+//! Scenes: every bundled scene, the generated chains, and tests/scenes/all_signals.toml (every slot
+//! kind at every level: hinge, ball and free joints, quasi-velocities, accelerations, body-point
+//! positions, velocities, accelerations, orientation, angular velocity and acceleration).
+//! States: the initial state and random states around it (quaternions renormalized). Tolerance:
+//! round-off class, 1e3 eps relative to the largest entry of the compared quantity.
+
+use progmo::model::Model;
+use progmo::problems::chain::ChainSpec;
+use progmo::programme::jet::Jet;
+use progmo::programme::Constraints;
+use progmo::scalar::Dual;
+use progmo::scene::Scene;
+use progmo::with_problem;
+use std::path::PathBuf;
+
+const TOL: f64 = 1e3 * f64::EPSILON;
+
+/// Small deterministic generator (xorshift), uniform in [-1, 1).
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+    }
+}
+
+fn scenes() -> Vec<Scene> {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let mut out: Vec<Scene> = std::fs::read_dir(root.join("references/scenes"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .map(|p| Scene::load(&p).unwrap_or_else(|e| panic!("{e}")))
+        .collect();
+    out.push(Scene::load(&root.join("tests/scenes/all_signals.toml")).unwrap_or_else(|e| panic!("{e}")));
+    for n in [2, 3, 7] {
+        out.push(ChainSpec::uniform(n).scene().unwrap());
+    }
+    out
+}
+
+fn max_abs(x: impl IntoIterator<Item = f64>) -> f64 {
+    x.into_iter().fold(0.0, |m, y| m.max(y.abs()))
+}
+
+/// Largest difference relative to the largest entry (floored at 1).
+fn rel(a: &[f64], b: &[f64]) -> f64 {
+    let scale = max_abs(a.iter().copied()).max(1.0);
+    max_abs(a.iter().zip(b).map(|(x, y)| x - y)) / scale
+}
+
+/// States: the initial one, then random perturbations (quaternion blocks renormalized by the
+/// model's own retraction: perturb through delta on the chart).
+fn states<M: Model>(m: &M, q0: &[f64], v0: &[f64], count: usize, seed: u64) -> Vec<(f64, Vec<f64>, Vec<f64>)> {
+    let mut rng = Rng(seed);
+    let mut out = vec![(0.1, q0.to_vec(), v0.to_vec())];
+    for _ in 0..count {
+        let delta: Vec<f64> = (0..m.nv()).map(|_| 0.3 * rng.next()).collect();
+        let mut q = vec![0.0; m.nq()];
+        progmo::model::retract(m.segments(), q0, &delta, &mut q);
+        let v: Vec<f64> = v0.iter().map(|x| x + rng.next()).collect();
+        out.push((rng.next(), q, v));
+    }
+    out
+}
+
+#[test]
+fn chain_rule_jet_matches_the_generic_ad_passes_on_every_scene() {
+    let mut compared = 0;
+    for scene in scenes() {
+        with_problem!(&scene.system, p => {
+            let (m, c) = (&p.model, &p.constraints);
+            let mut fast = Jet::<_, f64>::new(c, m.segments(), m.nq(), m.nv());
+            let mut slow = Jet::<_, f64>::new(c, m.segments(), m.nq(), m.nv());
+            for (t, q, v) in states(m, &p.q0, &p.v0, 20, 0x9e3779b97f4a7c15) {
+                fast.compute(c, m.segments(), t, &q, &v);
+                slow.compute_generic(c, m.segments(), t, &q, &v);
+                let what = [
+                    ("B", rel(slow.b.as_slice(), fast.b.as_slice())),
+                    ("gamma", rel(&slow.gamma, &fast.gamma)),
+                    ("value", rel(&slow.value, &fast.value)),
+                    ("gdot", rel(&slow.gdot, &fast.gdot)),
+                ];
+                for (name, err) in what {
+                    assert!(err <= TOL, "{}: {name} differs by {err:.2e} at t = {t}, q = {q:?}, v = {v:?}", scene.name);
+                }
+                compared += 1;
+            }
+            assert!(c.rows().len() > 0, "{}: no rows", scene.name);
+        });
+    }
+    assert!(compared >= 14 * 21, "compared {compared} states");
+}
+
+/// The same over dual numbers (what the implicit integrator differentiates): value and derivative
+/// parts agree.
+#[test]
+fn chain_rule_jet_matches_the_generic_ad_passes_over_dual_numbers() {
+    type D = Dual<f64>;
+    for scene in scenes() {
+        with_problem!(&scene.system, p => {
+            let (m, c) = (&p.model, &p.constraints);
+            let mut fast = Jet::<_, D>::new(c, m.segments(), m.nq(), m.nv());
+            let mut slow = Jet::<_, D>::new(c, m.segments(), m.nq(), m.nv());
+            let mut rng = Rng(17);
+            for (t, q, v) in states(m, &p.q0, &p.v0, 4, 99) {
+                // seed a random direction in (t, q, v) (q only along Euclidean-safe directions:
+                // the jets are compared as functions, quaternion norm does not matter here)
+                let td = D::new(t, rng.next());
+                let qd: Vec<D> = q.iter().map(|&x| D::new(x, rng.next())).collect();
+                let vd: Vec<D> = v.iter().map(|&x| D::new(x, rng.next())).collect();
+                fast.compute(c, m.segments(), td, &qd, &vd);
+                slow.compute_generic(c, m.segments(), td, &qd, &vd);
+                let parts = |x: &[D]| -> (Vec<f64>, Vec<f64>) { (x.iter().map(|d| d.re).collect(), x.iter().map(|d| d.eps).collect()) };
+                for (name, a, b) in [
+                    ("B", slow.b.as_slice(), fast.b.as_slice()),
+                    ("gamma", &slow.gamma[..], &fast.gamma[..]),
+                ] {
+                    let (ar, ae) = parts(a);
+                    let (br, be) = parts(b);
+                    let err = rel(&ar, &br).max(rel(&ae, &be));
+                    assert!(err <= 1e4 * f64::EPSILON, "{}: {name} (dual) differs by {err:.2e}", scene.name);
+                }
+            }
+        });
+    }
+}
+
+/// Negative control: the comparison sees a wrong Jacobian (a perturbed B entry, a dropped
+/// Jacobian term) — the tolerance is not so loose that anything passes.
+#[test]
+fn the_comparison_detects_a_wrong_jet() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let scene = Scene::load(&root.join("tests/scenes/all_signals.toml")).unwrap();
+    with_problem!(&scene.system, p => {
+        let (m, c) = (&p.model, &p.constraints);
+        let mut fast = Jet::<_, f64>::new(c, m.segments(), m.nq(), m.nv());
+        let mut slow = Jet::<_, f64>::new(c, m.segments(), m.nq(), m.nv());
+        fast.compute(c, m.segments(), 0.2, &p.q0, &p.v0);
+        slow.compute_generic(c, m.segments(), 0.2, &p.q0, &p.v0);
+        assert!(rel(slow.b.as_slice(), fast.b.as_slice()) <= TOL);
+        fast.b[(0, 3)] *= 1.0 + 1e-9;
+        assert!(rel(slow.b.as_slice(), fast.b.as_slice()) > TOL);
+        // every row has a nonzero B row and gamma (the scene exercises every term)
+        for i in 0..c.rows().len() {
+            assert!(max_abs(slow.b.row(i).iter().copied()) > 1e-3, "row {i} has no Jacobian");
+            assert!(slow.gamma[i].abs() > 1e-6, "row {i} has no gamma");
+        }
+    });
+}
