@@ -291,6 +291,25 @@ pub fn cholesky<S: Scalar>(a: &mut DMatrix<S>, n: usize) -> Result<(), Singular>
     Ok(())
 }
 
+/// Solve L L^T x = b in place, L the lower triangle of the leading `n x n` block of `l`
+/// (as left by [`cholesky`]).
+pub fn cholesky_solve<S: Scalar>(l: &DMatrix<S>, n: usize, b: &mut [S]) {
+    for i in 0..n {
+        let mut v = b[i];
+        for j in 0..i {
+            v -= l[(i, j)] * b[j];
+        }
+        b[i] = v / l[(i, i)];
+    }
+    for i in (0..n).rev() {
+        let mut v = b[i];
+        for j in i + 1..n {
+            v -= l[(j, i)] * b[j];
+        }
+        b[i] = v / l[(i, i)];
+    }
+}
+
 /// Explicit inverse of an LU-factored matrix into `inv` (column by column); `col` is scratch of length n.
 pub fn lu_inverse<S: Scalar>(
     lu: &DMatrix<S>,

@@ -85,6 +85,7 @@ enum Command {
 #[derive(Clone, Copy, ValueEnum)]
 enum FormulationArg {
     NullSpace,
+    NullSpaceStacked,
     Kkt,
     RangeSpace,
     UdwadiaKalaba,
@@ -215,6 +216,7 @@ fn settings_from(a: &SolveArgs, base: &Settings) -> Result<Settings, String> {
     if let Some(f) = a.formulation {
         s.formulation = match f {
             FormulationArg::NullSpace => Formulation::NullSpace,
+            FormulationArg::NullSpaceStacked => Formulation::NullSpaceStacked,
             FormulationArg::Kkt => Formulation::Kkt,
             FormulationArg::RangeSpace => Formulation::RangeSpace,
             FormulationArg::UdwadiaKalaba => Formulation::UdwadiaKalaba,

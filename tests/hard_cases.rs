@@ -867,7 +867,7 @@ fn rc_singular_system_only_where_a_is_inverted() {
         let sol = solve(&p, &s);
         eprintln!("m2 = 0, {f:?}: {:?}", sol.code);
         match f {
-            Formulation::NullSpace | Formulation::Kkt => {
+            Formulation::NullSpace | Formulation::NullSpaceStacked | Formulation::Kkt => {
                 assert_eq!(sol.code, ReturnCode::Success);
                 assert_partial_results_clean(&sol);
             }

@@ -7,8 +7,14 @@
 //!
 //! - [`Formulation::NullSpace`] (the paper, (2.7)-(2.10)): D = orthonormal basis of null(B) from a
 //!   column-pivoted Householder QR of B^T (rank-revealing; never the paper's hand-made ratios of
-//!   (2.19), which divide by velocities); solve the square system [D A; B] a = [D F; gamma] by LU.
+//!   (2.19), which divide by velocities). The equations D A a = D F, B a = gamma are solved in the
+//!   QR's orthonormal basis: with B_hat^T P = Q R, Q = [Q1 Q2], D = Q2^T and a = Q1 y1 + Q2 y2,
+//!   R1^T y1 = P^T gamma_hat and (D A Q2) y2 = D F - (D A Q1) y1, where D A Q2 is the symmetric
+//!   positive definite reduced inertia (Cholesky). Q^T A Q costs O(s n^2) with the reflectors.
 //!   No inverse of A.
+//! - [`Formulation::NullSpaceStacked`]: the same equations as the paper writes them, the square
+//!   system [D A; B] a = [D F; gamma] (2.10), by LU of the stacked matrix (2/3 n^3 flops, and its
+//!   rows mix the scales of A and of B).
 //! - [`Formulation::Kkt`] (Lagrange multipliers): [A, -B^T; B, 0] [a; lambda] = [F; gamma].
 //! - [`Formulation::RangeSpace`] (the earlier method the paper criticizes, refs [4, 5]): explicit
 //!   A^-1; lambda = (B A^-1 B^T)^-1 (gamma - B A^-1 F), a = A^-1 (F + B^T lambda).
@@ -28,8 +34,11 @@ use nalgebra::DMatrix;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Formulation {
-    /// The paper's null-space form (2.8)-(2.10) with D from a rank-revealing QR.
+    /// The paper's null-space form (2.8)-(2.10) with D from a rank-revealing QR, solved in the
+    /// QR's orthonormal basis (Cholesky of the reduced inertia D A D^T).
     NullSpace,
+    /// The same, solved as the stacked square system [D A; B] a = [D F; gamma] by LU.
+    NullSpaceStacked,
     /// Lagrange multipliers: the (n + s) KKT system.
     Kkt,
     /// Range space with an explicit inverse of A.
@@ -40,8 +49,9 @@ pub enum Formulation {
 
 impl Formulation {
     /// All formulations, for comparisons.
-    pub const ALL: [Formulation; 4] = [
+    pub const ALL: [Formulation; 5] = [
         Formulation::NullSpace,
+        Formulation::NullSpaceStacked,
         Formulation::Kkt,
         Formulation::RangeSpace,
         Formulation::UdwadiaKalaba,
@@ -209,6 +219,9 @@ impl<S: Scalar> FormulationWork<S> {
         }
         match formulation {
             Formulation::NullSpace => self.null_space(a, force, gamma, acc, &mut diag)?,
+            Formulation::NullSpaceStacked => {
+                self.null_space_stacked(a, force, gamma, acc, &mut diag)?
+            }
             Formulation::Kkt => self.kkt(a, force, b, gamma, acc, &mut diag)?,
             Formulation::RangeSpace => self.range_space(a, force, b, gamma, acc, &mut diag)?,
             Formulation::UdwadiaKalaba => {
@@ -246,8 +259,64 @@ impl<S: Scalar> FormulationWork<S> {
         Ok(diag)
     }
 
-    /// (2.8)-(2.10): [B_hat; D A] a = [gamma_hat; D F], D = rows s..nv of Q^T.
+    /// (2.8)-(2.10) in the basis Q of the QR of B_hat^T (module docs): K = Q^T A Q,
+    /// R1^T y1 = P^T gamma_hat, K22 y2 = (Q^T F)_2 - K21 y1 (Cholesky), a = Q y.
     fn null_space(
+        &mut self,
+        a: &DMatrix<S>,
+        force: &[S],
+        gamma: &[S],
+        acc: &mut [S],
+        diag: &mut Diagnostics,
+    ) -> Result<(), FormulationError> {
+        let (nv, s) = (self.nv, self.s);
+        let m = nv - s;
+        // K = Q^T A Q = (Q^T (Q^T A)^T)^T, A symmetric; K is symmetric, so the last transpose is moot.
+        self.load_mass(a);
+        linalg::qr_apply_qt_mat(&self.bt, nv, s, &self.beta, &mut self.k, nv);
+        for i in 0..nv {
+            for j in i + 1..nv {
+                self.k.swap((i, j), (j, i));
+            }
+        }
+        linalg::qr_apply_qt_mat(&self.bt, nv, s, &self.beta, &mut self.k, nv);
+        // y1 from the programme rows in pivot order.
+        for j in 0..s {
+            let row = self.perm[j];
+            self.rhs[j] = gamma[row] / self.norms[row];
+        }
+        linalg::solve_upper_t(&self.bt, s, &mut self.rhs[..s]);
+        // (Q^T F)_2 - K21 y1, then the reduced inertia K22 = D A D^T by Cholesky.
+        self.tmp[..nv].copy_from_slice(&force[..nv]);
+        linalg::qr_apply_qt(&self.bt, nv, s, &self.beta, &mut self.tmp[..nv]);
+        for i in s..nv {
+            let mut x = self.tmp[i];
+            for j in 0..s {
+                x -= self.k[(i, j)] * self.rhs[j];
+            }
+            self.rhs[i] = x;
+            for j in s..nv {
+                self.inv[(i - s, j - s)] = self.k[(i, j)];
+            }
+        }
+        linalg::cholesky(&mut self.inv, m)
+            .map_err(|e| FormulationError::SingularSystem { rcond: e.rcond })?;
+        diag.factorizations += 1;
+        let (mut lmin, mut lmax) = (f64::INFINITY, 0.0f64);
+        for i in 0..m {
+            let l = re(self.inv[(i, i)]).abs();
+            lmin = lmin.min(l);
+            lmax = lmax.max(l);
+        }
+        diag.system_rcond = if m == 0 { 1.0 } else { (lmin / lmax).powi(2) };
+        linalg::cholesky_solve(&self.inv, m, &mut self.rhs[s..nv]);
+        linalg::qr_apply_q(&self.bt, nv, s, &self.beta, &mut self.rhs[..nv]);
+        acc[..nv].copy_from_slice(&self.rhs[..nv]);
+        Ok(())
+    }
+
+    /// (2.10) as written: [B_hat; D A] a = [gamma_hat; D F], D = rows s..nv of Q^T, by LU.
+    fn null_space_stacked(
         &mut self,
         a: &DMatrix<S>,
         force: &[S],

@@ -66,6 +66,25 @@ pub trait Model: Send + Sync {
         v: &[S],
         f: &mut [S],
     );
+
+    /// F = G + Q (2.2), the total natural force the formulations take. The default sums
+    /// [`Model::velocity_terms`] and [`Model::applied_forces`] (`scratch` has nv entries); models
+    /// that get both from one pass (one inverse-dynamics sweep for Coriolis and gravity) override it.
+    fn natural_forces<S: Scalar>(
+        &self,
+        ws: &mut Self::Workspace<S>,
+        t: S,
+        q: &[S],
+        v: &[S],
+        f: &mut [S],
+        scratch: &mut [S],
+    ) {
+        self.velocity_terms(ws, q, v, f);
+        self.applied_forces(ws, t, q, v, scratch);
+        for (x, &y) in f.iter_mut().zip(scratch.iter()) {
+            *x += y;
+        }
+    }
 }
 
 /// dq/dt = N(q) v for the given segments.

@@ -879,6 +879,7 @@ fn solver(src: &Source, file: &SceneFile) -> R<Settings> {
             ("kkt", Formulation::Kkt),
             ("range_space", Formulation::RangeSpace),
             ("udwadia_kalaba", Formulation::UdwadiaKalaba),
+            ("null_space_stacked", Formulation::NullSpaceStacked),
         ],
         s.formulation,
     )?;

@@ -132,6 +132,27 @@ impl Model for TreeSceneModel {
     }
     fn applied_forces<S: Scalar>(&self, ws: &mut TreeWork<S>, t: S, q: &[S], v: &[S], f: &mut [S]) {
         tree::applied_forces(&self.tree, &mut ws.data, t, q, v, &mut ws.buf);
+        self.add_user_forces(ws, t, q, v);
+        f.copy_from_slice(ws.buf.as_slice());
+    }
+    fn natural_forces<S: Scalar>(
+        &self,
+        ws: &mut TreeWork<S>,
+        t: S,
+        q: &[S],
+        v: &[S],
+        f: &mut [S],
+        _scratch: &mut [S],
+    ) {
+        tree::natural_forces(&self.tree, &mut ws.data, q, v, &mut ws.buf);
+        self.add_user_forces(ws, t, q, v);
+        f.copy_from_slice(ws.buf.as_slice());
+    }
+}
+
+impl TreeSceneModel {
+    /// Adds the scene's coordinate and point forces (expressions) to `ws.buf`.
+    fn add_user_forces<S: Scalar>(&self, ws: &mut TreeWork<S>, t: S, q: &[S], v: &[S]) {
         if !self.point_forces.is_empty() || !self.coordinate_forces.is_empty() {
             let l = &self.layout;
             ws.slots[l.t] = t;
@@ -154,6 +175,5 @@ impl Model for TreeSceneModel {
                 tree::body_point_force(&self.tree, &mut ws.data, q, pf.body, &p, &fw, &mut ws.buf);
             }
         }
-        f.copy_from_slice(ws.buf.as_slice());
     }
 }

@@ -67,12 +67,7 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
     pub fn prepare(&mut self, t: S, q: &[S], v: &[S]) {
         self.model.mass_matrix(&mut self.mws, q, &mut self.mass);
         self.model
-            .velocity_terms(&mut self.mws, q, v, &mut self.force);
-        self.model
-            .applied_forces(&mut self.mws, t, q, v, &mut self.qf);
-        for (f, &x) in self.force.iter_mut().zip(&self.qf) {
-            *f += x;
-        }
+            .natural_forces(&mut self.mws, t, q, v, &mut self.force, &mut self.qf);
         self.jet.compute(self.cons, self.model.segments(), t, q, v);
     }
 

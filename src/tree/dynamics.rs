@@ -6,7 +6,7 @@ use super::kinematics::{
     forward_velocity, TreeData,
 };
 use super::model::{JointKind, Model};
-use super::spatial::{lift3, Inertia};
+use super::spatial::{lift3, Inertia, Xform};
 use crate::scalar::{c, Scalar};
 use nalgebra::{DMatrix, DVector, Vector3};
 
@@ -55,22 +55,31 @@ pub fn rnea<'d, S: Scalar>(
 }
 
 /// Composite-rigid-body algorithm (Featherstone Table 6.2): joint-space inertia matrix `M(q)`
-/// (the paper's `A(q)`), symmetric `nv x nv`.
+/// (the paper's `A(q)`), symmetric `nv x nv`. Written in world coordinates (as Pinocchio does):
+/// composite inertias `Ic_i` and motion subspace columns `S_i` are expressed in the world frame,
+/// so `M[j, i] = S_j . (Ic_i S_i)` for every ancestor joint j needs no transform along the way.
 pub fn crba<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &[S], m: &mut DMatrix<S>) {
     forward_kinematics(model, data, q);
     let nv = model.nv();
     ensure_mat(m, nv, nv);
     m.fill(c(0.0));
     for (i, link) in model.links.iter().enumerate() {
-        data.links[i].ic = match &link.inertia {
-            Some(inr) => Inertia::lift(inr),
+        let ld = &mut data.links[i];
+        let xw = Xform::from_pose(ld.rot, ld.pos);
+        ld.ic = match &link.inertia {
+            Some(inr) => Inertia::lift(inr).transform_to_parent(&xw),
             None => Inertia::zero(),
         };
+        if let Some(j) = link.joint {
+            for k in 0..model.joints[j].nv {
+                ld.sw[k] = xw.inv_apply_motion(&ld.s[k]);
+            }
+        }
     }
     for i in (0..model.links.len()).rev() {
         if let Some(p) = model.links[i].parent {
-            let ip = data.links[i].ic.transform_to_parent(&data.links[i].x);
-            data.links[p].ic = data.links[p].ic.add(&ip);
+            let ic = data.links[i].ic;
+            data.links[p].ic = data.links[p].ic.add(&ic);
         }
     }
     for (i, link) in model.links.iter().enumerate() {
@@ -78,18 +87,17 @@ pub fn crba<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &[S], m: &mut D
         let jti = &model.joints[ji];
         for k in 0..jti.nv {
             let col = jti.iv + k;
-            let mut f = data.links[i].ic.mul_motion(&data.links[i].s[k]);
+            let f = data.links[i].ic.mul_motion(&data.links[i].sw[k]);
             for kk in 0..jti.nv {
-                m[(jti.iv + kk, col)] = data.links[i].s[kk].dot(&f);
+                m[(jti.iv + kk, col)] = data.links[i].sw[kk].dot(&f);
             }
             let mut j = i;
             while let Some(p) = model.links[j].parent {
-                f = data.links[j].x.transpose_force(&f);
                 j = p;
                 if let Some(jj) = model.links[j].joint {
                     let jtj = &model.joints[jj];
                     for kk in 0..jtj.nv {
-                        let val = data.links[j].s[kk].dot(&f);
+                        let val = data.links[j].sw[kk].dot(&f);
                         m[(jtj.iv + kk, col)] = val;
                         m[(col, jtj.iv + kk)] = val;
                     }
@@ -214,6 +222,33 @@ pub fn applied_forces<S: Scalar>(
 ) {
     let g = lift3::<S>(&Vector3::from(model.fields.gravity));
     gravity_forces(model, data, q, &g, out); // also runs forward_kinematics(q)
+    add_field_forces(model, data, q, v, out);
+}
+
+/// `G + Q` of the paper in one inverse-dynamics sweep: `-rnea(q, v, 0)` with the model's gravity
+/// (Coriolis, centrifugal and gravity together) plus attractors, springs and dampers.
+pub fn natural_forces<S: Scalar>(
+    model: &Model,
+    data: &mut TreeData<S>,
+    q: &[S],
+    v: &[S],
+    out: &mut DVector<S>,
+) {
+    let g = lift3::<S>(&Vector3::from(model.fields.gravity));
+    bias(model, data, q, v, &g, out);
+    out.neg_mut();
+    add_field_forces(model, data, q, v, out);
+}
+
+/// Adds attraction, spring and damper forces (the part of [`applied_forces`] beyond gravity);
+/// needs `forward_kinematics(q)` done on `data`.
+fn add_field_forces<S: Scalar>(
+    model: &Model,
+    data: &mut TreeData<S>,
+    q: &[S],
+    v: &[S],
+    out: &mut DVector<S>,
+) {
     if !model.fields.attractors.is_empty() {
         for (b, body) in model.bodies.iter().enumerate() {
             if body.massless {

@@ -19,6 +19,8 @@ pub(crate) struct LinkData<S: Scalar> {
     pub pos: Vector3<S>,
     /// Motion subspace columns (nv of the joint).
     pub s: [Motion<S>; 6],
+    /// The same in world coordinates (set by the CRBA).
+    pub sw: [Motion<S>; 6],
     pub v: Motion<S>,
     pub a: Motion<S>,
     /// Joint velocity `S qdot` and velocity-product term `c_J` (Featherstone ch. 3, apparent derivative of S).
@@ -36,6 +38,7 @@ impl<S: Scalar> LinkData<S> {
             rot: Matrix3::identity(),
             pos: Vector3::zeros(),
             s: [Motion::zero(); 6],
+            sw: [Motion::zero(); 6],
             v: Motion::zero(),
             a: Motion::zero(),
             vj: Motion::zero(),
@@ -54,6 +57,10 @@ pub struct TreeData<S: Scalar> {
     /// Result of the last [`super::rnea`].
     pub(crate) tau: DVector<S>,
     pub(crate) zero_v: Vec<S>,
+    /// q of the last [`forward_kinematics`] (its results are reused while q is unchanged: the
+    /// mass matrix, the forces and the signals of one evaluation share one pass).
+    fk_q: Vec<S>,
+    fk_valid: bool,
 }
 
 impl<S: Scalar> TreeData<S> {
@@ -62,6 +69,8 @@ impl<S: Scalar> TreeData<S> {
             links: vec![LinkData::new(); model.links.len()],
             tau: DVector::zeros(model.nv()),
             zero_v: vec![c(0.0); model.nv()],
+            fk_q: vec![c(0.0); model.nq()],
+            fk_valid: false,
         }
     }
 }
@@ -91,8 +100,16 @@ fn check_len(what: &str, got: usize, want: usize) {
 /// `R = R(quat)`, `p = a - R a`; free `R = R(quat)`, `p = position`. Motion subspaces in the
 /// post-joint frame: hinge `(u, a x u)`, slide `(0, u)`, ball `(e_k, a x e_k)`, free
 /// `[(0, R^T e_k) | (e_k, 0)]` (world linear velocity, body angular velocity).
+///
+/// Over `f64`, skipped when q equals the q of the previous call on `data`. (Not over dual numbers:
+/// their `==` compares real parts only.)
 pub fn forward_kinematics<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &[S]) {
     check_len("q", q.len(), model.nq());
+    let plain = std::any::TypeId::of::<S>() == std::any::TypeId::of::<f64>();
+    if plain && data.fk_valid && data.fk_q.as_slice() == q {
+        return;
+    }
+    data.fk_valid = false;
     let zero = Vector3::<S>::zeros();
     for (i, link) in model.links.iter().enumerate() {
         let place = Xform::<S>::lift(&link.place);
@@ -146,6 +163,8 @@ pub fn forward_kinematics<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &
         ld.x = x;
         ld.s = s;
     }
+    data.fk_q.copy_from_slice(q);
+    data.fk_valid = true;
 }
 
 /// Velocity pass (after [`forward_kinematics`]): `v_i = X_i v_λ + S_i qdot_i` (Featherstone

@@ -51,7 +51,7 @@ pub mod spatial;
 pub use config::{difference_configuration, integrate_configuration, quat_exp, quat_log};
 pub use dynamics::{
     applied_forces, bias, body_point_force, body_torque, crba, gravity_forces, kinetic_energy,
-    mass_matrix, potential_energy, rnea, velocity_terms,
+    mass_matrix, natural_forces, potential_energy, rnea, velocity_terms,
 };
 pub use kinematics::{
     body_angular_velocity, body_frame, body_pose, body_quaternion, for_each_point_column, forward_acceleration,

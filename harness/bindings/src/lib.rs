@@ -469,6 +469,7 @@ fn parse_formulation(f: &str) -> PyResult<Formulation> {
         "kkt" => Formulation::Kkt,
         "range_space" => Formulation::RangeSpace,
         "udwadia_kalaba" => Formulation::UdwadiaKalaba,
+        "null_space_stacked" => Formulation::NullSpaceStacked,
         other => {
             return Err(PyValueError::new_err(format!(
                 "unknown formulation {other:?}"

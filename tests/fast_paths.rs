@@ -1,4 +1,6 @@
-//! The chain-rule jet of scene rows (`ExprConstraints::jet`: one `Dual2`/`Dual` pass per level and
+//! Fast paths of one evaluation, each against the straightforward computation it replaces.
+//!
+//! 1. The chain-rule jet of scene rows (`ExprConstraints::jet`: one `Dual2`/`Dual` pass per level and
 //! one `Dual` pass per slot entering B, signals from one set of tree passes) against the generic AD
 //! passes over the whole evaluation (`Jet::compute_generic`: nv `Dual` passes through the tree's
 //! forward kinematics): two independent ways to the same B, gamma, values and dg/dt.
@@ -6,6 +8,9 @@
 //! Scenes: every bundled scene, the generated chains, and tests/scenes/all_signals.toml (every slot
 //! kind at every level: hinge, ball and free joints, quasi-velocities, accelerations, body-point
 //! positions, velocities, accelerations, orientation, angular velocity and acceleration).
+//! 2. `Model::natural_forces` of tree scenes (one inverse-dynamics sweep for G and gravity) against
+//!    `velocity_terms + applied_forces` (two sweeps), and the cached forward kinematics against a
+//!    fresh workspace per call.
 //! States: the initial state and random states around it (quaternions renormalized). Tolerance:
 //! round-off class, 1e3 eps relative to the largest entry of the compared quantity.
 
@@ -154,4 +159,38 @@ fn the_comparison_detects_a_wrong_jet() {
             assert!(slow.gamma[i].abs() > 1e-6, "row {i} has no gamma");
         }
     });
+}
+
+/// G + Q from one sweep equals the two separate sweeps; a workspace reused across states (forward
+/// kinematics cached while q is unchanged) gives what a fresh workspace gives.
+#[test]
+fn natural_forces_and_cached_kinematics_match_the_plain_computation() {
+    let mut compared = 0;
+    for scene in scenes() {
+        with_problem!(&scene.system, p => {
+            let m = &p.model;
+            let nv = m.nv();
+            let mut ws = m.workspace::<f64>();
+            for (t, q, v) in states(m, &p.q0, &p.v0, 10, 7) {
+                for _repeat in 0..2 {
+                    let (mut f, mut scratch) = (vec![0.0; nv], vec![0.0; nv]);
+                    m.natural_forces(&mut ws, t, &q, &v, &mut f, &mut scratch);
+                    let mut a = nalgebra::DMatrix::zeros(nv, nv);
+                    m.mass_matrix(&mut ws, &q, &mut a);
+                    let mut fresh = m.workspace::<f64>();
+                    let (mut g, mut qf) = (vec![0.0; nv], vec![0.0; nv]);
+                    m.velocity_terms(&mut fresh, &q, &v, &mut g);
+                    m.applied_forces(&mut fresh, t, &q, &v, &mut qf);
+                    let sum: Vec<f64> = g.iter().zip(&qf).map(|(x, y)| x + y).collect();
+                    let mut a2 = nalgebra::DMatrix::zeros(nv, nv);
+                    m.mass_matrix(&mut m.workspace::<f64>(), &q, &mut a2);
+                    let ef = rel(&sum, &f);
+                    let ea = rel(a2.as_slice(), a.as_slice());
+                    assert!(ef <= TOL && ea <= TOL, "{}: G + Q differs by {ef:.2e}, A by {ea:.2e}", scene.name);
+                    compared += 1;
+                }
+            }
+        });
+    }
+    assert!(compared > 100);
 }
