@@ -18,14 +18,20 @@ fn rhs_group<M: Model, C: Constraints>(c: &mut Criterion, name: &str, p: &Proble
     for f in Formulation::ALL {
         let mut ev = Evaluator::<M, C, f64>::new(&p.model, &p.constraints);
         let tol = RankTolerances::default();
+        // Two nearby states, alternated: every evaluation is at a new q, as in a solve (nothing
+        // cached from the previous call can be reused).
+        let qb: Vec<f64> = p.q0.iter().map(|x| x + 1e-9).collect();
+        let states = [&p.q0, &qb];
+        let mut k = 0usize;
         g.bench_function(BenchmarkId::from_parameter(format!("{f:?}")), |b| {
             b.iter(|| {
+                k ^= 1;
                 ev.evaluate(
                     f,
                     &tol,
                     None,
                     black_box(0.1),
-                    black_box(&p.q0),
+                    black_box(states[k]),
                     black_box(&p.v0),
                 )
                 .unwrap();

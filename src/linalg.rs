@@ -55,13 +55,16 @@ pub fn lu_factor<S: Scalar>(
             a.swap_rows(k, p);
         }
         let inv = a[(k, k)].recip();
-        for i in k + 1..n {
-            let l = a[(i, k)] * inv;
-            a[(i, k)] = l;
-            for j in k + 1..n {
-                let akj = a[(k, j)];
-                a[(i, j)] -= l * akj;
-            }
+        let ld = a.nrows();
+        let data = a.as_mut_slice();
+        for x in &mut data[k * ld + k + 1..k * ld + n] {
+            *x *= inv;
+        }
+        // Right-looking update, column by column (contiguous in column-major storage).
+        for j in k + 1..n {
+            let (colk, colj) = two_columns(data, ld, k, j);
+            let akj = colj[k];
+            axpy_neg(akj, &colk[k + 1..n], &mut colj[k + 1..n]);
         }
     }
     let rcond = if n == 0 { 1.0 } else { umin / umax };
@@ -79,20 +82,44 @@ pub fn lu_solve<S: Scalar>(a: &DMatrix<S>, n: usize, piv: &[usize], b: &mut [S])
     for k in 0..n {
         b.swap(k, piv[k]);
     }
-    for i in 0..n {
-        let mut s = b[i];
-        for j in 0..i {
-            s -= a[(i, j)] * b[j];
-        }
-        b[i] = s;
+    let ld = a.nrows();
+    let data = a.as_slice();
+    // L (unit lower) then U, column-oriented.
+    for j in 0..n {
+        let bj = b[j];
+        axpy_neg(bj, &data[j * ld + j + 1..j * ld + n], &mut b[j + 1..n]);
     }
-    for i in (0..n).rev() {
-        let mut s = b[i];
-        for j in i + 1..n {
-            s -= a[(i, j)] * b[j];
-        }
-        b[i] = s / a[(i, i)];
+    for j in (0..n).rev() {
+        b[j] /= data[j * ld + j];
+        let bj = b[j];
+        axpy_neg(bj, &data[j * ld..j * ld + j], &mut b[..j]);
     }
+}
+
+/// Columns k < j of a column-major slice with leading dimension `ld`: (column k, column j).
+#[inline]
+fn two_columns<S>(data: &mut [S], ld: usize, k: usize, j: usize) -> (&[S], &mut [S]) {
+    debug_assert!(k < j);
+    let (left, right) = data.split_at_mut(j * ld);
+    (&left[k * ld..(k + 1) * ld], &mut right[..ld])
+}
+
+/// y <- y - alpha x.
+#[inline]
+fn axpy_neg<S: Scalar>(alpha: S, x: &[S], y: &mut [S]) {
+    for (yi, &xi) in y.iter_mut().zip(x) {
+        *yi -= alpha * xi;
+    }
+}
+
+/// x . y
+#[inline]
+fn dot<S: Scalar>(x: &[S], y: &[S]) -> S {
+    let mut s = S::zero();
+    for (&a, &b) in x.iter().zip(y) {
+        s += a * b;
+    }
+    s
 }
 
 /// Householder QR with column pivoting of the leading `m x k` block of `a` (m >= k):
@@ -214,7 +241,7 @@ pub fn qr_apply_q<S: Scalar>(qr: &DMatrix<S>, m: usize, k: usize, beta: &[S], y:
     }
 }
 
-/// Columns `col0..col0+ncols` of M <- Q^T M, for an `m`-row matrix M (reflectors of [`qr_colpiv`]).
+/// The first `ncols` columns of M <- Q^T M, for an `m`-row matrix M (reflectors of [`qr_colpiv`]).
 pub fn qr_apply_qt_mat<S: Scalar>(
     qr: &DMatrix<S>,
     m: usize,
@@ -223,21 +250,57 @@ pub fn qr_apply_qt_mat<S: Scalar>(
     mat: &mut DMatrix<S>,
     ncols: usize,
 ) {
+    let (ldq, ldm) = (qr.nrows(), mat.nrows());
+    let q = qr.as_slice();
+    let md = mat.as_mut_slice();
     for j in 0..k {
         if beta[j] == S::zero() {
             continue;
         }
+        let w = &q[j * ldq + j + 1..j * ldq + m];
         for col in 0..ncols {
-            let mut s = mat[(j, col)];
-            for i in j + 1..m {
-                s += qr[(i, j)] * mat[(i, col)];
+            let c = &mut md[col * ldm..col * ldm + m];
+            let s = (c[j] + dot(w, &c[j + 1..m])) * beta[j];
+            c[j] -= s;
+            axpy_neg(s, w, &mut c[j + 1..m]);
+        }
+    }
+}
+
+/// The first `nrows` rows of M <- M Q, for a matrix M with `m` columns (reflectors of
+/// [`qr_colpiv`]); `v` is scratch of length `nrows`.
+pub fn qr_apply_q_right<S: Scalar>(
+    qr: &DMatrix<S>,
+    m: usize,
+    k: usize,
+    beta: &[S],
+    mat: &mut DMatrix<S>,
+    nrows: usize,
+    v: &mut [S],
+) {
+    let (ldq, ldm) = (qr.nrows(), mat.nrows());
+    let q = qr.as_slice();
+    let md = mat.as_mut_slice();
+    let v = &mut v[..nrows];
+    // M Q = M H_0 H_1 ... H_{k-1}; M H_j = M - beta_j (M w_j) w_j^T.
+    for j in 0..k {
+        if beta[j] == S::zero() {
+            continue;
+        }
+        let w = &q[j * ldq..j * ldq + m];
+        v.copy_from_slice(&md[j * ldm..j * ldm + nrows]);
+        for i in j + 1..m {
+            let wi = w[i];
+            for (vr, &x) in v.iter_mut().zip(&md[i * ldm..i * ldm + nrows]) {
+                *vr += wi * x;
             }
-            s *= beta[j];
-            mat[(j, col)] -= s;
-            for i in j + 1..m {
-                let w = qr[(i, j)];
-                mat[(i, col)] -= s * w;
-            }
+        }
+        for x in v.iter_mut() {
+            *x *= beta[j];
+        }
+        axpy_neg(S::one(), v, &mut md[j * ldm..j * ldm + nrows]);
+        for i in j + 1..m {
+            axpy_neg(w[i], v, &mut md[i * ldm..i * ldm + nrows]);
         }
     }
 }
@@ -264,13 +327,13 @@ pub fn solve_upper_t<S: Scalar>(qr: &DMatrix<S>, k: usize, b: &mut [S]) {
     }
 }
 
-/// In-place Cholesky A = L L^T of the leading `n x n` block (lower triangle overwritten by L).
+/// In-place Cholesky A = L L^T of the leading `n x n` block (lower triangle overwritten by L;
+/// right-looking, column by column; the upper triangle is not touched).
 pub fn cholesky<S: Scalar>(a: &mut DMatrix<S>, n: usize) -> Result<(), Singular> {
+    let ld = a.nrows();
+    let data = a.as_mut_slice();
     for j in 0..n {
-        let mut d = a[(j, j)];
-        for k in 0..j {
-            d -= a[(j, k)] * a[(j, k)];
-        }
+        let d = data[j * ld + j];
         if re(d) <= 0.0 || !re(d).is_finite() {
             return Err(Singular {
                 column: j,
@@ -278,14 +341,15 @@ pub fn cholesky<S: Scalar>(a: &mut DMatrix<S>, n: usize) -> Result<(), Singular>
             });
         }
         let l = d.sqrt();
-        a[(j, j)] = l;
+        data[j * ld + j] = l;
         let inv = l.recip();
-        for i in j + 1..n {
-            let mut s = a[(i, j)];
-            for k in 0..j {
-                s -= a[(i, k)] * a[(j, k)];
-            }
-            a[(i, j)] = s * inv;
+        for x in &mut data[j * ld + j + 1..j * ld + n] {
+            *x *= inv;
+        }
+        for k in j + 1..n {
+            let (colj, colk) = two_columns(data, ld, j, k);
+            let akj = colj[k];
+            axpy_neg(akj, &colj[k..n], &mut colk[k..n]);
         }
     }
     Ok(())
@@ -294,19 +358,16 @@ pub fn cholesky<S: Scalar>(a: &mut DMatrix<S>, n: usize) -> Result<(), Singular>
 /// Solve L L^T x = b in place, L the lower triangle of the leading `n x n` block of `l`
 /// (as left by [`cholesky`]).
 pub fn cholesky_solve<S: Scalar>(l: &DMatrix<S>, n: usize, b: &mut [S]) {
-    for i in 0..n {
-        let mut v = b[i];
-        for j in 0..i {
-            v -= l[(i, j)] * b[j];
-        }
-        b[i] = v / l[(i, i)];
+    let ld = l.nrows();
+    let data = l.as_slice();
+    for j in 0..n {
+        b[j] /= data[j * ld + j];
+        let bj = b[j];
+        axpy_neg(bj, &data[j * ld + j + 1..j * ld + n], &mut b[j + 1..n]);
     }
-    for i in (0..n).rev() {
-        let mut v = b[i];
-        for j in i + 1..n {
-            v -= l[(j, i)] * b[j];
-        }
-        b[i] = v / l[(i, i)];
+    for j in (0..n).rev() {
+        let col = &data[j * ld + j + 1..j * ld + n];
+        b[j] = (b[j] - dot(col, &b[j + 1..n])) / data[j * ld + j];
     }
 }
 

@@ -231,11 +231,13 @@ impl<S: Scalar> FormulationWork<S> {
         // Reaction u = A a - F = B^T lambda = B_hat^T N lambda. With Q^T u = w:
         // R P^T (N lambda) = w[..s], and D u = w[s..] should vanish (2.7).
         for i in 0..nv {
-            let mut x = -force[i];
-            for j in 0..nv {
-                x += a[(i, j)] * acc[j];
+            self.tmp[i] = -force[i];
+        }
+        for (j, col) in a.column_iter().enumerate() {
+            let aj = acc[j];
+            for (t, &x) in self.tmp[..nv].iter_mut().zip(col.iter()) {
+                *t += x * aj;
             }
-            self.tmp[i] = x;
         }
         // Scale of the terms of u = A a - F, so that du measures round-off, not cancellation.
         let mut umax = 0.0f64;
@@ -271,15 +273,10 @@ impl<S: Scalar> FormulationWork<S> {
     ) -> Result<(), FormulationError> {
         let (nv, s) = (self.nv, self.s);
         let m = nv - s;
-        // K = Q^T A Q = (Q^T (Q^T A)^T)^T, A symmetric; K is symmetric, so the last transpose is moot.
+        // K = (Q^T A) Q.
         self.load_mass(a);
         linalg::qr_apply_qt_mat(&self.bt, nv, s, &self.beta, &mut self.k, nv);
-        for i in 0..nv {
-            for j in i + 1..nv {
-                self.k.swap((i, j), (j, i));
-            }
-        }
-        linalg::qr_apply_qt_mat(&self.bt, nv, s, &self.beta, &mut self.k, nv);
+        linalg::qr_apply_q_right(&self.bt, nv, s, &self.beta, &mut self.k, nv, &mut self.tmp2);
         // y1 from the programme rows in pivot order.
         for j in 0..s {
             let row = self.perm[j];
@@ -289,15 +286,19 @@ impl<S: Scalar> FormulationWork<S> {
         // (Q^T F)_2 - K21 y1, then the reduced inertia K22 = D A D^T by Cholesky.
         self.tmp[..nv].copy_from_slice(&force[..nv]);
         linalg::qr_apply_qt(&self.bt, nv, s, &self.beta, &mut self.tmp[..nv]);
-        for i in s..nv {
-            let mut x = self.tmp[i];
-            for j in 0..s {
-                x -= self.k[(i, j)] * self.rhs[j];
+        self.rhs[s..nv].copy_from_slice(&self.tmp[s..nv]);
+        for j in 0..s {
+            let yj = self.rhs[j];
+            for i in s..nv {
+                let kij = self.k[(i, j)];
+                self.rhs[i] -= kij * yj;
             }
-            self.rhs[i] = x;
-            for j in s..nv {
-                self.inv[(i - s, j - s)] = self.k[(i, j)];
-            }
+        }
+        for j in s..nv {
+            self.inv
+                .column_mut(j - s)
+                .rows_mut(0, m)
+                .copy_from(&self.k.column(j).rows(s, m));
         }
         linalg::cholesky(&mut self.inv, m)
             .map_err(|e| FormulationError::SingularSystem { rcond: e.rcond })?;
@@ -544,10 +545,9 @@ impl<S: Scalar> FormulationWork<S> {
 
     /// The leading nv x nv block of k <- A.
     fn load_mass(&mut self, a: &DMatrix<S>) {
-        for i in 0..self.nv {
-            for j in 0..self.nv {
-                self.k[(i, j)] = a[(i, j)];
-            }
+        let nv = self.nv;
+        for j in 0..nv {
+            self.k.column_mut(j).rows_mut(0, nv).copy_from(&a.column(j));
         }
     }
 

@@ -405,9 +405,12 @@ impl PyScene {
                     .map(|i| ev.jet.b.row(i).iter().map(|x| x * x).sum::<f64>().sqrt())
                     .collect();
                 let mut u = vec![0.0; nv];
+                // two nearby states, alternated: every evaluation is at a new q, as in a solve
+                let qb: Vec<f64> = q.iter().map(|x| x + 1e-9).collect();
+                let states = [&q, &qb];
                 let start = std::time::Instant::now();
-                for _ in 0..iterations {
-                    ev.evaluate(f, &rank, None, t, &q, &v).map_err(|e| format!("{e:?}"))?;
+                for i in 0..iterations {
+                    ev.evaluate(f, &rank, None, t, states[i % 2], &v).map_err(|e| format!("{e:?}"))?;
                     ev.reaction(Role::Programme, &mut u);
                     std::hint::black_box(&u);
                 }
