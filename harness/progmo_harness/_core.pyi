@@ -3,7 +3,7 @@
 Shapes: n = number of samples, nq / nv = sizes of q / v, s = number of constraint rows.
 """
 
-from typing import Any, Literal, TypedDict
+from typing import Sequence, Any, Literal, TypedDict
 
 import numpy as np
 import numpy.typing as npt
@@ -102,7 +102,7 @@ class Scene:
     def rhs_benchmark(
         self,
         iterations: int,
-        formulation: Literal["null_space", "kkt", "range_space", "udwadia_kalaba"],
+        formulation: Literal["null_space", "null_space_stacked", "kkt", "range_space", "udwadia_kalaba"],
         t: float | None = None,
         q: F64 | None = None,
         v: F64 | None = None,
@@ -111,3 +111,13 @@ class Scene:
     def export(self, format: Literal["mjcf", "urdf"], *, timestep: float = 1e-3) -> tuple[str, dict[str, Any]]: ...
 
 def version() -> str: ...
+def chain_toml(
+    n: int,
+    *,
+    masses: Sequence[float] | None = None,
+    length: float = 0.25,
+    q0: float | None = None,
+    name: str | None = None,
+    t1: float = 2.0,
+) -> str:
+    """Scene text of a generated n-link planar chain (progmo::problems::chain)."""

@@ -83,26 +83,20 @@ pub fn crba<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &[S], m: &mut D
         }
     }
     for (i, link) in model.links.iter().enumerate() {
-        let Some(ji) = link.joint else { continue };
-        let jti = &model.joints[ji];
-        for k in 0..jti.nv {
-            let col = jti.iv + k;
-            let f = data.links[i].ic.mul_motion(&data.links[i].sw[k]);
-            for kk in 0..jti.nv {
-                m[(jti.iv + kk, col)] = data.links[i].sw[kk].dot(&f);
-            }
-            let mut j = i;
-            while let Some(p) = model.links[j].parent {
-                j = p;
-                if let Some(jj) = model.links[j].joint {
-                    let jtj = &model.joints[jj];
-                    for kk in 0..jtj.nv {
-                        let val = data.links[j].sw[kk].dot(&f);
-                        m[(jtj.iv + kk, col)] = val;
-                        m[(col, jtj.iv + kk)] = val;
-                    }
-                }
-            }
+        if let Some(j) = link.joint {
+            let jt = &model.joints[j];
+            data.sw_dof[jt.iv..jt.iv + jt.nv].copy_from_slice(&data.links[i].sw[..jt.nv]);
+        }
+    }
+    for col in 0..nv {
+        let f = data.links[model.dof_link[col]].ic.mul_motion(&data.sw_dof[col]);
+        m[(col, col)] = data.sw_dof[col].dot(&f);
+        let mut d = model.dof_parent[col];
+        while let Some(r) = d {
+            let val = data.sw_dof[r].dot(&f);
+            m[(r, col)] = val;
+            m[(col, r)] = val;
+            d = model.dof_parent[r];
         }
     }
 }

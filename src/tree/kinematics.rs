@@ -61,6 +61,8 @@ pub struct TreeData<S: Scalar> {
     /// mass matrix, the forces and the signals of one evaluation share one pass).
     fk_q: Vec<S>,
     fk_valid: bool,
+    /// World-frame motion subspace column of each dof (CRBA).
+    pub(crate) sw_dof: Vec<Motion<S>>,
 }
 
 impl<S: Scalar> TreeData<S> {
@@ -71,6 +73,7 @@ impl<S: Scalar> TreeData<S> {
             zero_v: vec![c(0.0); model.nv()],
             fk_q: vec![c(0.0); model.nq()],
             fk_valid: false,
+            sw_dof: vec![Motion::zero(); model.nv()],
         }
     }
 }

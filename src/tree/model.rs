@@ -291,6 +291,11 @@ pub struct Model {
     pub(crate) links: Vec<Link>,
     /// Link index of each body's frame (its last link).
     pub(crate) body_link: Vec<usize>,
+    /// Per dof: the previous dof on its path to the root (Featherstone's lambda over dofs), so the
+    /// CRBA walks ancestors without touching links.
+    pub(crate) dof_parent: Vec<Option<usize>>,
+    /// Per dof: its link.
+    pub(crate) dof_link: Vec<usize>,
     pub(crate) fields: Fields,
     nq: usize,
     nv: usize,
@@ -543,11 +548,32 @@ impl Model {
                 joints: j0..joints.len(),
             });
         }
+        // dof tree: within a joint, dof k follows dof k-1; the first dof of a joint follows the
+        // last dof of the nearest ancestor link that has a joint.
+        let mut dof_parent = vec![None; nv];
+        let mut dof_link = vec![0; nv];
+        let mut last_dof: Vec<Option<usize>> = vec![None; links.len()];
+        for (i, link) in links.iter().enumerate() {
+            let inherited = link.parent.and_then(|p| last_dof[p]);
+            last_dof[i] = inherited;
+            if let Some(j) = link.joint {
+                let jt: &Joint = &joints[j];
+                let mut prev = inherited;
+                for k in 0..jt.nv {
+                    dof_parent[jt.iv + k] = prev;
+                    dof_link[jt.iv + k] = i;
+                    prev = Some(jt.iv + k);
+                }
+                last_dof[i] = prev;
+            }
+        }
         Ok(Model {
             bodies,
             joints,
             links,
             body_link,
+            dof_parent,
+            dof_link,
             fields,
             nq,
             nv,

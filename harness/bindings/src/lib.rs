@@ -528,6 +528,40 @@ fn solution_dict<'py>(
     Ok(d)
 }
 
+/// Scene text of a generated n-link planar chain (`progmo::problems::chain`): the one generator
+/// shared by the Rust benchmarks, the tests and `progmo bench`.
+#[pyfunction]
+#[pyo3(signature = (n, *, masses=None, length=0.25, q0=None, name=None, t1=2.0))]
+fn chain_toml(
+    n: usize,
+    masses: Option<Vec<f64>>,
+    length: f64,
+    q0: Option<f64>,
+    name: Option<String>,
+    t1: f64,
+) -> PyResult<String> {
+    if n < 2 {
+        return Err(PyValueError::new_err(format!("chain_toml: n = {n}, a chain needs at least 2 links")));
+    }
+    if let Some(m) = &masses {
+        if m.len() != n {
+            return Err(PyValueError::new_err(format!(
+                "chain_toml: {} masses for {n} links",
+                m.len()
+            )));
+        }
+    }
+    let spec = progmo::problems::chain::ChainSpec {
+        n,
+        masses,
+        length,
+        q0,
+        name,
+        t1,
+    };
+    Ok(spec.toml())
+}
+
 /// Version of the core.
 #[pyfunction]
 fn version() -> &'static str {
@@ -539,5 +573,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyScene>()?;
     m.add("SceneError", m.py().get_type::<SceneError>())?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
+    m.add_function(wrap_pyfunction!(chain_toml, m)?)?;
     Ok(())
 }
