@@ -90,7 +90,7 @@ class Scene:
         atol: float | None = None,
         integrator: Literal["dop853", "dopri5", "radau5", "rk4"] | None = None,
         step: float | None = None,
-        formulation: Literal["null_space", "kkt", "range_space", "udwadia_kalaba"] | None = None,
+        formulation: Literal["null_space", "null_space_stacked", "kkt", "range_space", "udwadia_kalaba"] | None = None,
         drift: Literal["projection", "baumgarte", "none"] | None = None,
     ) -> SolveResult: ...
     def residuals(self, t: F64, q: F64, v: F64, a: F64 | None = None) -> F64: ...

@@ -17,7 +17,8 @@ def test_bench_runs_end_to_end_and_every_output_names_its_rerun_command(tmp_path
     assert main(["--smoke", "--out", str(out)]) == 0
     expected = ["workprecision.csv", "residual_double_pendulum.csv", "scipy.csv", "scipy_ratio.csv",
                 "conditioning.csv", "scaling.csv", "workprecision_double_pendulum.png",
-                "scipy_double_pendulum.png", "conditioning.png", "scaling.png", "index.html"]
+                "scipy_double_pendulum.png", "conditioning.png", "scaling.png", "index.html",
+                "testset.csv", "testset_caraxis.png"]
     for name in expected:
         assert (out / name).stat().st_size > 0, name
     rerun = f"progmo bench --smoke --out {out}"
@@ -29,13 +30,27 @@ def test_bench_runs_end_to_end_and_every_output_names_its_rerun_command(tmp_path
     # the work-precision CSV holds every formulation x integrator x tolerance, all successful,
     # and errors that fall as the tolerance tightens (dop853: 1e-5 -> 1e-8)
     rows = list(csv.DictReader(line for line in open(out / "workprecision.csv") if not line.startswith("#")))
-    assert len(rows) == 4 * 3 * 2
+    assert len(rows) == len(common.FORMULATIONS) * 3 * 2
     assert all(r["code"] == "success" for r in rows)
     for f in common.FORMULATIONS:
         e = {float(r["rtol"]): float(r["error"]) for r in rows if r["formulation"] == f and r["integrator"] == "dop853"}
         assert e[1e-8] < 1e-2 * e[1e-5], (f, e)
     html = (out / "index.html").read_text()
     assert "Omissions" in html and "conditioning.png" in html
+    # the car axis against the published reference: digits at rtol 1e-6 (the Rust test measured
+    # 4.57 for dop853 and 4.74 for radau5 with the same settings)
+    ts = list(csv.DictReader(line for line in open(out / "testset.csv") if not line.startswith("#")))
+    assert {r["method"] for r in ts} == {"dop853", "radau5"}
+    for r in ts:
+        assert r["code"] == "success" and 4.0 < float(r["mescd_all"]) < 6.0, r
+
+
+def test_testset_mescd_is_the_test_sets_formula():
+    from progmo_harness.bench import testset
+
+    ref = np.array([1.0, -2.0, 0.0])
+    assert testset.mescd(ref + np.array([1e-6, 0.0, 0.0]), ref) == pytest.approx(-np.log10(0.5e-6), rel=1e-9)
+    assert testset.mescd(ref + np.array([0.0, 0.0, 1e-4]), ref) == pytest.approx(4.0, rel=1e-9)
 
 
 def test_unknown_part_is_an_error(tmp_path):

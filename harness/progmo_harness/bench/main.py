@@ -19,16 +19,21 @@ from pathlib import Path
 
 import numpy as np
 
-PARTS = ("workprecision", "scipy", "conditioning", "scaling")
+PARTS = ("workprecision", "scipy", "conditioning", "scaling", "testset")
 
 # sweep sizes; --quick is the default a test or a shared 2-core machine can afford
 QUICK = dict(scenes=("double_pendulum", "chain_8"), tols=[1e-4, 1e-6, 1e-8, 1e-10], repeats=3,
-             scipy_tols=[1e-4, 1e-6, 1e-8, 1e-10], radau_min_tol=1e-8, states=3)
-FULL = dict(scenes=("double_pendulum", "chain_8"), tols=[10.0 ** -k for k in range(4, 13)], repeats=5,
-            scipy_tols=[10.0 ** -k for k in range(4, 13)], radau_min_tol=1e-10, states=5)
+             scipy_tols=[1e-4, 1e-6, 1e-8, 1e-10], radau_min_tol=1e-8, states=3,
+             testset_tols=[1e-4, 1e-6, 1e-8, 1e-10])
+# full: every bundled scene in the work-precision sweep (scipy only where a hand-written pipeline exists)
+FULL = dict(scenes=("double_pendulum", "chain_8", "example_2_1", "example_2_1_through_rd0", "example_3_1_free",
+                    "heavy_top", "planar_arm_line", "knife_edge", "appell_hamel", "slider_crank"),
+            tols=[10.0 ** -k for k in range(4, 13)], repeats=5,
+            scipy_tols=[10.0 ** -k for k in range(4, 13)], radau_min_tol=1e-10, states=5,
+            testset_tols=[10.0 ** -k for k in range(4, 13)])
 # --smoke: the smallest end-to-end run (tests): one scene, two tolerances, two chain lengths
 SMOKE = dict(scenes=("double_pendulum",), tols=[1e-5, 1e-8], repeats=1, scipy_tols=[1e-5, 1e-8],
-             radau_min_tol=1e-8, states=2, scaling_ns=[2, 7], conditioning="smoke")
+             radau_min_tol=1e-8, states=2, scaling_ns=[2, 7], conditioning="smoke", testset_tols=[1e-6])
 
 
 def parser() -> argparse.ArgumentParser:
@@ -61,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
 
     from .. import Scene
-    from . import conditioning, page, scaling, scipy_pipeline, workprecision
+    from . import conditioning, page, scaling, scipy_pipeline, testset, workprecision
     from .common import Provenance, log, scene_path, write_csv
 
     prov = Provenance(argv)
@@ -210,6 +215,23 @@ def main(argv: list[str] | None = None) -> int:
                                f"{r['progmo_kkt_s'] * 1e6:.1f} us; pin.forwardDynamics + u {r['pin_fd_u_s'] * 1e6:.1f} us "
                                f"(Python loop); ratio progmo/pin = {r['progmo_null_space_s'] / r['pin_fd_u_s']:.2f}")
         summary.append(f"scaling: Python call overhead {sc['python_overhead_s'] * 1e6:.3f} us per call (not subtracted)")
+
+    if "testset" in only:
+        try:
+            ts = testset.run(out, prov, cfg["testset_tols"], cfg["repeats"])
+        except (FileNotFoundError, ValueError) as e:
+            omissions.append(f"IVP Test Set skipped: {e}")
+            ts = None
+        if ts is not None:
+            trs = [[r["method"], f"{r['rtol']:.0e}", r["code"], f"{r['mescd_states']:.2f}", f"{r['mescd_all']:.2f}",
+                    page.num(r["cpu_s"]), r["rhs_evals"], r["steps"], r["rejected"]] for r in ts["rows"]]
+            hdr = ["method", "rtol = atol", "code", "mescd y(1:8)", "mescd y(1:10)", "CPU (s)", "RHS", "steps", "rejected"]
+            inner = (page.doc(testset.__doc__) + page.table(hdr, trs) + page.img("testset_caraxis.png")
+                     + "<p>Data: <a href='testset.csv'>testset.csv</a>.</p>")
+            sections.append(("5. IVP Test Set: car axis digits against CPU time", inner))
+            for r in ts["rows"]:
+                summary.append(f"testset caraxis {r['method']} rtol {r['rtol']:.0e}: mescd {r['mescd_all']:.2f} "
+                               f"(states {r['mescd_states']:.2f}) in {r['cpu_s'] * 1e3:.1f} ms CPU, {r['rhs_evals']} RHS")
 
     elapsed = time.perf_counter() - t_start
     page.write(out, prov, sections, omissions, elapsed)

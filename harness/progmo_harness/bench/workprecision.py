@@ -111,7 +111,7 @@ def plot(scene_name: str, rows: list[dict], ref: Reference, res_run, out: Path, 
                 if not pts:
                     continue
                 x, y = zip(*pts)
-                ax.loglog(x, np.maximum(y, 1e-17), STYLES[form], marker=MARKERS[form],
+                ax.loglog(x, np.maximum(y, 1e-17), ls=STYLES[form], marker=MARKERS[form],
                           color=COLORS[integ], ms=4, lw=1, label=f"{integ} {form}")
         ax.axhline(ref.floor, color="gray", lw=0.8, ls=":")
         ax.set_xlabel(label)
