@@ -89,6 +89,7 @@ def main(argv: list[str] | None = None) -> int:
         "rk4 (fixed step) is not part of the sweep.",
     ]
     summary: list[str] = []
+    targets: list[str] = []  # issue 5's targets, met or missed, with the measured numbers
     scenes = []
     if "workprecision" in only or "scipy" in only:
         scenes = [Scene(str(scene_path(n))) for n in cfg["scenes"]]
@@ -166,6 +167,12 @@ def main(argv: list[str] | None = None) -> int:
                 summary.append(f"scipy {name}: {label} = "
                                + (", ".join(f"{r['ratio']:.1f}x at {r['error']:.0e}" for r in sel) or "n/a (no common error range)"))
             summary.append(f"scipy {name}: scipy DOP853 + Pinocchio at 1e-12 vs progmo's dop853 reference: {agree:.1e}")
+            best = [r["ratio"] for r in rrows if r["comparison"].startswith("best")]
+            if best:
+                lo, hi = min(best), max(best)
+                verdict = "met" if lo >= 100 else f"MISSED by {100 / hi:.0f}-{100 / lo:.0f}x"
+                targets.append(f"whole solve >= 100x faster than scipy + Pinocchio at equal error, {name}: "
+                               f"{lo:.1f}-{hi:.1f}x: {verdict}")
         hdr = ["scene", "method", "rtol", "atol", "code", "error", "cpu_s", "rhs_evals", "jacobian_evals", "lu", "reference"]
         write_csv(out / "scipy.csv", prov, hdr, ([r[h] for h in hdr] for r in scipy_rows_all))
         hdr = ["scene", "comparison", "error", "cpu_scipy", "cpu_progmo", "ratio"]
@@ -211,6 +218,9 @@ def main(argv: list[str] | None = None) -> int:
         for n in scaling.MARK:
             r = scaling.at(rows, n)
             if r:
+                ratio = r["progmo_null_space_s"] / r["pin_fd_u_s"]
+                targets.append(f"one RHS <= Pinocchio forwardDynamics (+u) at n = {n}: progmo null_space / pin = "
+                               f"{ratio:.2f}: {'met' if ratio <= 1 else f'MISSED by {ratio:.2f}x'}")
                 summary.append(f"scaling n = {n}: progmo null_space {r['progmo_null_space_s'] * 1e6:.1f} us, kkt "
                                f"{r['progmo_kkt_s'] * 1e6:.1f} us; pin.forwardDynamics + u {r['pin_fd_u_s'] * 1e6:.1f} us "
                                f"(Python loop); ratio progmo/pin = {r['progmo_null_space_s'] / r['pin_fd_u_s']:.2f}")
@@ -234,9 +244,21 @@ def main(argv: list[str] | None = None) -> int:
                                f"(states {r['mescd_states']:.2f}) in {r['cpu_s'] * 1e3:.1f} ms CPU, {r['rhs_evals']} RHS")
 
     elapsed = time.perf_counter() - t_start
+    if summary:
+        import html as _html
+
+        head = ""
+        if targets:
+            head += "<h3>Targets</h3><ul>" + "".join(f"<li>{_html.escape(t)}</li>" for t in targets) + "</ul>"
+            head += ("<p>Why the scipy ratio stays near 10x: per RHS the scipy pipeline costs Pinocchio's "
+                     "forwardDynamics plus numpy J, gamma plus solve_ivp's Python step code (section 4, 'user "
+                     "pipeline'); progmo's RHS is a few times cheaper than forwardDynamics alone, so at equal "
+                     "RHS counts the ratio is bounded by (pipeline + scipy overhead) / progmo RHS.</p>")
+        head += "<h3>Key numbers</h3><pre>" + _html.escape("\n".join(summary)) + "</pre>"
+        sections.insert(0, ("Summary", head))
     page.write(out, prov, sections, omissions, elapsed)
     print(f"progmo bench: wrote {out}/index.html in {elapsed:.0f} s")
-    for line in summary:
+    for line in summary + targets:
         print(line)
     for line in prov.lines():
         print(line)
