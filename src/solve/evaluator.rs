@@ -63,6 +63,12 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
         }
     }
 
+    /// A and the constraint jet at (t, q, v): what projection needs (no forces).
+    pub fn prepare_geometry(&mut self, t: S, q: &[S], v: &[S]) {
+        self.model.mass_matrix(&mut self.mws, q, &mut self.mass);
+        self.jet.compute(self.cons, self.model.segments(), t, q, v);
+    }
+
     /// A, F = G + Q and the constraint jet at (t, q, v), without solving.
     pub fn prepare(&mut self, t: S, q: &[S], v: &[S]) {
         self.model.mass_matrix(&mut self.mws, q, &mut self.mass);

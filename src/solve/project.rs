@@ -64,7 +64,7 @@ impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
     /// Residuals at (t, q, v) of the state rows: g for position rows (and dg/dt into `rate`),
     /// f for velocity rows; acceleration rows get 0.
     pub fn residuals(&mut self, t: f64, q: &[f64], v: &[f64], res: &mut [f64], rate: &mut [f64]) {
-        self.ev.prepare(t, q, v);
+        self.ev.prepare_geometry(t, q, v);
         for i in 0..self.levels.len() {
             res[i] = match self.levels[i] {
                 Level::Acceleration => 0.0,
@@ -89,6 +89,8 @@ impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
             ..Default::default()
         };
         let nv = self.nv;
+        // A and the jet are re-evaluated only after q or v changed.
+        let mut stale = true;
         // Positions.
         self.sel.clear();
         self.sel
@@ -96,7 +98,10 @@ impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
         if !self.sel.is_empty() {
             let mut done = false;
             for _ in 0..=max_iter {
-                self.ev.prepare(t, q, v);
+                if stale {
+                    self.ev.prepare_geometry(t, q, v);
+                    stale = false;
+                }
                 let r = self.worst(|ev, i| ev.jet.value[i]);
                 if r.0 <= tol {
                     done = true;
@@ -117,6 +122,7 @@ impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
                 self.qtmp.copy_from_slice(q);
                 model::retract(&self.segments, &self.qtmp, step, q);
                 model::normalize(&self.segments, q);
+                stale = true;
             }
             if !done {
                 rep.converged = false;
@@ -130,7 +136,10 @@ impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
             let mut done = false;
             let mut it = 0;
             for _ in 0..=max_iter {
-                self.ev.prepare(t, q, v);
+                if stale {
+                    self.ev.prepare_geometry(t, q, v);
+                    stale = false;
+                }
                 let r = self.worst(|ev, i| rate_or_value(ev, i));
                 if r.0 <= tol {
                     done = true;
@@ -150,6 +159,7 @@ impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
                     v[j] += self.rhs[j];
                     rep.dv = rep.dv.max(self.rhs[j].abs());
                 }
+                stale = true;
             }
             rep.iterations += it;
             if !done {
@@ -157,7 +167,9 @@ impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
             }
         }
         // Final residuals of all state rows.
-        self.ev.prepare(t, q, v);
+        if stale {
+            self.ev.prepare_geometry(t, q, v);
+        }
         self.sel.clear();
         self.sel
             .extend((0..self.levels.len()).filter(|&i| self.levels[i] != Level::Acceleration));
