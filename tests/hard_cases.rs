@@ -586,7 +586,11 @@ fn c5_ill_conditioned_masses_all_formulations() {
             assert_partial_results_clean(&sol);
             sols.push(sol);
         }
-        let kkt = &sols[1].trajectory;
+        let ik = Formulation::ALL
+            .iter()
+            .position(|f| *f == Formulation::Kkt)
+            .unwrap();
+        let kkt = &sols[ik].trajectory;
         let amax = max_abs(kkt.a.iter().copied());
         let umax = max_abs(kkt.u.iter().copied());
         for (f, sol) in Formulation::ALL.iter().zip(&sols) {
