@@ -121,3 +121,5 @@ def chain_toml(
     t1: float = 2.0,
 ) -> str:
     """Scene text of a generated n-link planar chain (progmo::problems::chain)."""
+def drift_cost(rounds: int = 5) -> dict[str, float]:
+    """Projection on/off over 10^4 periods: minimum wall times and residuals (progmo::problems::hard)."""

@@ -473,3 +473,65 @@ pub fn ten_thousand_periods() -> Problem<DoublePendulum, ElbowProgramme> {
     p.t1 = 100.0;
     p
 }
+
+/// Extra CPU of projection over [`ten_thousand_periods`]: the runs with projection (tol 1e-12) and
+/// without (DOP853, rtol 1e-8, atol 1e-10, outputs discarded) alternate `rounds` times and the
+/// minimum wall time of each is kept (the run least disturbed by other load on a shared machine).
+/// Used by `examples/drift_cost.rs` and `progmo bench --only drift`.
+pub fn measure_drift_cost(rounds: usize) -> DriftCost {
+    use crate::solve::{solve_into, DriftControl, Sample, SampleSink, Settings};
+    struct Discard;
+    impl SampleSink for Discard {
+        fn sample(&mut self, _: &Sample<'_>) {}
+    }
+    let p = ten_thousand_periods();
+    let settings = |d| Settings {
+        rtol: 1e-8,
+        atol: 1e-10,
+        drift: d,
+        ..Settings::default()
+    };
+    let on = settings(DriftControl::Projection {
+        tol: 1e-12,
+        max_iter: 8,
+    });
+    let off = settings(DriftControl::None);
+    let max = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let mut out = DriftCost {
+        rounds: rounds.max(1),
+        projection_s: f64::INFINITY,
+        none_s: f64::INFINITY,
+        residual_projection: 0.0,
+        residual_none: 0.0,
+        steps: 0,
+    };
+    for _ in 0..out.rounds {
+        let t = std::time::Instant::now();
+        let a = solve_into(&p, &on, &mut Discard);
+        out.projection_s = out.projection_s.min(t.elapsed().as_secs_f64());
+        let t = std::time::Instant::now();
+        let b = solve_into(&p, &off, &mut Discard);
+        out.none_s = out.none_s.min(t.elapsed().as_secs_f64());
+        out.residual_projection = max(&a.max_residual);
+        out.residual_none = max(&b.max_residual);
+        out.steps = a.stats.integrator.steps;
+    }
+    out
+}
+
+/// Result of [`measure_drift_cost`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct DriftCost {
+    /// Alternating rounds measured.
+    pub rounds: usize,
+    /// Minimum wall time with projection (s).
+    pub projection_s: f64,
+    /// Minimum wall time without drift control (s).
+    pub none_s: f64,
+    /// Largest programme residual over the run with projection.
+    pub residual_projection: f64,
+    /// The same without drift control.
+    pub residual_none: f64,
+    /// Accepted steps of the run with projection.
+    pub steps: usize,
+}

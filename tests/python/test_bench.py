@@ -18,7 +18,7 @@ def test_bench_runs_end_to_end_and_every_output_names_its_rerun_command(tmp_path
     expected = ["workprecision.csv", "residual_double_pendulum.csv", "scipy.csv", "scipy_ratio.csv",
                 "conditioning.csv", "scaling.csv", "workprecision_double_pendulum.png",
                 "scipy_double_pendulum.png", "conditioning.png", "scaling.png", "index.html",
-                "testset.csv", "testset_caraxis.png"]
+                "testset.csv", "testset_caraxis.png", "drift.csv"]
     for name in expected:
         assert (out / name).stat().st_size > 0, name
     rerun = f"progmo bench --smoke --out {out}"

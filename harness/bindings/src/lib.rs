@@ -562,6 +562,23 @@ fn chain_toml(
     Ok(spec.toml())
 }
 
+/// Projection cost over 10^4 periods (`progmo::problems::hard::measure_drift_cost`): dict with
+/// rounds, projection_s, none_s (minimum wall times), residual_projection, residual_none, steps.
+/// Releases the GIL.
+#[pyfunction]
+#[pyo3(signature = (rounds=5))]
+fn drift_cost<'py>(py: Python<'py>, rounds: usize) -> PyResult<Bound<'py, PyDict>> {
+    let r = py.detach(|| progmo::problems::hard::measure_drift_cost(rounds));
+    let d = PyDict::new(py);
+    d.set_item("rounds", r.rounds)?;
+    d.set_item("projection_s", r.projection_s)?;
+    d.set_item("none_s", r.none_s)?;
+    d.set_item("residual_projection", r.residual_projection)?;
+    d.set_item("residual_none", r.residual_none)?;
+    d.set_item("steps", r.steps)?;
+    Ok(d)
+}
+
 /// Version of the core.
 #[pyfunction]
 fn version() -> &'static str {
@@ -574,5 +591,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("SceneError", m.py().get_type::<SceneError>())?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     m.add_function(wrap_pyfunction!(chain_toml, m)?)?;
+    m.add_function(wrap_pyfunction!(drift_cost, m)?)?;
     Ok(())
 }
