@@ -4,9 +4,10 @@ Speed against error: writes CSV, PNG and index.html to DIR (default out/bench) a
 numbers. The `progmo` binary forwards `progmo bench ...` to `python -m progmo_harness.bench.main ...`.
 
 Run times measured on the shared 2-core x86-64 machine (2026-11-21):
-  (full)   169 s wall (10 bundled scenes x 5 formulations x 3 integrators x 9 tolerances, 5
+  (full)   172 s wall (10 bundled scenes x 5 formulations x 3 integrators x 9 tolerances, 5
            repeats; scipy sweeps of double_pendulum and chain_8; 15 conditioning scenes up to 128
-           links; scaling n = 2 ... 128; the IVP Test Set car axis, 2 integrators x 9 tolerances)
+           links; scaling n = 2 ... 128; the IVP Test Set car axis, 2 integrators x 9 tolerances;
+           drift control over 10^4 periods, 7 alternating rounds)
   --quick  about 60 s (2 scenes, 4 tolerances, 3 repeats, chains up to 64 links)
   --smoke  about 10 s (the test's end-to-end run; its numbers mean nothing)
 """
