@@ -48,7 +48,9 @@ fn rhs(c: &mut Criterion) {
     rhs_group(c, "double_pendulum", &pendulum::double_pendulum());
     // generated tree scenes (expression rows, a body-point signal): the sizes of issue 5's targets
     for n in [7, 30] {
-        let scene = chain::ChainSpec::uniform(n).scene().expect("generated chain loads");
+        let scene = chain::ChainSpec::uniform(n)
+            .scene()
+            .expect("generated chain loads");
         progmo::with_problem!(&scene.system, p => rhs_group(c, &format!("chain_{n}"), p));
     }
 }

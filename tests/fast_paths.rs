@@ -44,7 +44,9 @@ fn scenes() -> Vec<Scene> {
         .filter(|p| p.extension().is_some_and(|e| e == "toml"))
         .map(|p| Scene::load(&p).unwrap_or_else(|e| panic!("{e}")))
         .collect();
-    out.push(Scene::load(&root.join("tests/scenes/all_signals.toml")).unwrap_or_else(|e| panic!("{e}")));
+    out.push(
+        Scene::load(&root.join("tests/scenes/all_signals.toml")).unwrap_or_else(|e| panic!("{e}")),
+    );
     for n in [2, 3, 7] {
         out.push(ChainSpec::uniform(n).scene().unwrap());
     }
@@ -63,7 +65,13 @@ fn rel(a: &[f64], b: &[f64]) -> f64 {
 
 /// States: the initial one, then random perturbations (quaternion blocks renormalized by the
 /// model's own retraction: perturb through delta on the chart).
-fn states<M: Model>(m: &M, q0: &[f64], v0: &[f64], count: usize, seed: u64) -> Vec<(f64, Vec<f64>, Vec<f64>)> {
+fn states<M: Model>(
+    m: &M,
+    q0: &[f64],
+    v0: &[f64],
+    count: usize,
+    seed: u64,
+) -> Vec<(f64, Vec<f64>, Vec<f64>)> {
     let mut rng = Rng(seed);
     let mut out = vec![(0.1, q0.to_vec(), v0.to_vec())];
     for _ in 0..count {

@@ -262,7 +262,14 @@ impl Constraints for ExprConstraints {
 }
 
 /// b[i, :] += d * (row k of N(q)), N the map v -> dq/dt of [`crate::model::qdot`].
-fn add_n_row<S: Scalar>(segments: &[Segment], q: &[S], k: usize, d: S, b: &mut DMatrix<S>, i: usize) {
+fn add_n_row<S: Scalar>(
+    segments: &[Segment],
+    q: &[S],
+    k: usize,
+    d: S,
+    b: &mut DMatrix<S>,
+    i: usize,
+) {
     for seg in segments {
         match *seg {
             Segment::Euclidean { q: iq, v: iv, len } if k >= iq && k < iq + len => {

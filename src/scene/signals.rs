@@ -9,8 +9,8 @@
 
 use crate::programme::Level;
 use crate::scalar::Scalar;
-use crate::tree::{self, TreeData};
 use crate::tree::spatial::quat_from_rot;
+use crate::tree::{self, TreeData};
 use nalgebra::{DMatrix, Vector3};
 use std::sync::Arc;
 

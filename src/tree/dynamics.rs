@@ -89,7 +89,9 @@ pub fn crba<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &[S], m: &mut D
         }
     }
     for col in 0..nv {
-        let f = data.links[model.dof_link[col]].ic.mul_motion(&data.sw_dof[col]);
+        let f = data.links[model.dof_link[col]]
+            .ic
+            .mul_motion(&data.sw_dof[col]);
         m[(col, col)] = data.sw_dof[col].dot(&f);
         let mut d = model.dof_parent[col];
         while let Some(r) = d {

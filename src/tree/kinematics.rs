@@ -386,7 +386,11 @@ pub fn point_acceleration<S: Scalar>(
 }
 
 /// World rotation and origin of a body after [`forward_kinematics`].
-pub fn body_frame<S: Scalar>(model: &Model, data: &TreeData<S>, body: usize) -> (Matrix3<S>, Vector3<S>) {
+pub fn body_frame<S: Scalar>(
+    model: &Model,
+    data: &TreeData<S>,
+    body: usize,
+) -> (Matrix3<S>, Vector3<S>) {
     let ld = &data.links[model.body_link[body]];
     (ld.rot, ld.pos)
 }

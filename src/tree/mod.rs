@@ -54,10 +54,10 @@ pub use dynamics::{
     mass_matrix, natural_forces, potential_energy, rnea, velocity_terms,
 };
 pub use kinematics::{
-    body_angular_velocity, body_frame, body_pose, body_quaternion, for_each_point_column, forward_acceleration,
-    forward_kinematics, forward_velocity, neutral, normalize_quaternions, point_acceleration,
-    point_jacobian, point_kinematics, point_position, point_velocity, qdot, PointKinematics,
-    TreeData,
+    body_angular_velocity, body_frame, body_pose, body_quaternion, for_each_point_column,
+    forward_acceleration, forward_kinematics, forward_velocity, neutral, normalize_quaternions,
+    point_acceleration, point_jacobian, point_kinematics, point_position, point_velocity, qdot,
+    PointKinematics, TreeData,
 };
 pub use model::{
     Attractor, Body, BodySpec, Fields, Joint, JointSpec, JointType, Model, ModelError, WORLD,

@@ -541,7 +541,9 @@ fn chain_toml(
     t1: f64,
 ) -> PyResult<String> {
     if n < 2 {
-        return Err(PyValueError::new_err(format!("chain_toml: n = {n}, a chain needs at least 2 links")));
+        return Err(PyValueError::new_err(format!(
+            "chain_toml: n = {n}, a chain needs at least 2 links"
+        )));
     }
     if let Some(m) = &masses {
         if m.len() != n {
