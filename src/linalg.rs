@@ -358,6 +358,12 @@ pub fn cholesky<S: Scalar>(a: &mut DMatrix<S>, n: usize) -> Result<(), Singular>
 /// Solve L L^T x = b in place, L the lower triangle of the leading `n x n` block of `l`
 /// (as left by [`cholesky`]).
 pub fn cholesky_solve<S: Scalar>(l: &DMatrix<S>, n: usize, b: &mut [S]) {
+    lower_solve(l, n, b);
+    lower_t_solve(l, n, b);
+}
+
+/// Solve L y = b in place (L the lower triangle of the leading `n x n` block), column-oriented.
+pub fn lower_solve<S: Scalar>(l: &DMatrix<S>, n: usize, b: &mut [S]) {
     let ld = l.nrows();
     let data = l.as_slice();
     for j in 0..n {
@@ -365,6 +371,12 @@ pub fn cholesky_solve<S: Scalar>(l: &DMatrix<S>, n: usize, b: &mut [S]) {
         let bj = b[j];
         axpy_neg(bj, &data[j * ld + j + 1..j * ld + n], &mut b[j + 1..n]);
     }
+}
+
+/// Solve L^T x = b in place (L as in [`lower_solve`]).
+pub fn lower_t_solve<S: Scalar>(l: &DMatrix<S>, n: usize, b: &mut [S]) {
+    let ld = l.nrows();
+    let data = l.as_slice();
     for j in (0..n).rev() {
         let col = &data[j * ld + j + 1..j * ld + n];
         b[j] = (b[j] - dot(col, &b[j + 1..n])) / data[j * ld + j];

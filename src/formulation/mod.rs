@@ -487,8 +487,7 @@ impl<S: Scalar> FormulationWork<S> {
         diag.factorizations += 1;
         // a0 = L^-T L^-1 F
         acc[..nv].copy_from_slice(&force[..nv]);
-        self.lower_solve(acc);
-        self.lower_t_solve(acc);
+        linalg::cholesky_solve(&self.k, nv, acc);
         if s == 0 {
             return Ok(());
         }
@@ -499,7 +498,7 @@ impl<S: Scalar> FormulationWork<S> {
                 self.tmp2[j] = b[(r, j)] * inv_n;
             }
             let mut col = std::mem::take(&mut self.tmp2);
-            self.lower_solve(&mut col[..nv]);
+            linalg::lower_solve(&self.k, nv, &mut col[..nv]);
             for j in 0..nv {
                 self.x[(j, r)] = col[j];
             }
@@ -528,7 +527,7 @@ impl<S: Scalar> FormulationWork<S> {
             linalg::qr_apply_q(&self.x, nv, s, &beta[..s], &mut self.tmp2[..nv]);
             // a = a0 + L^-T y
             let mut y = std::mem::take(&mut self.tmp2);
-            self.lower_t_solve(&mut y[..nv]);
+            linalg::lower_t_solve(&self.k, nv, &mut y[..nv]);
             for j in 0..nv {
                 acc[j] += y[j];
             }
@@ -548,28 +547,6 @@ impl<S: Scalar> FormulationWork<S> {
         let nv = self.nv;
         for j in 0..nv {
             self.k.column_mut(j).rows_mut(0, nv).copy_from(&a.column(j));
-        }
-    }
-
-    /// L y = x in place (L in the lower triangle of k).
-    fn lower_solve(&self, x: &mut [S]) {
-        for i in 0..self.nv {
-            let mut v = x[i];
-            for j in 0..i {
-                v -= self.k[(i, j)] * x[j];
-            }
-            x[i] = v / self.k[(i, i)];
-        }
-    }
-
-    /// L^T y = x in place.
-    fn lower_t_solve(&self, x: &mut [S]) {
-        for i in (0..self.nv).rev() {
-            let mut v = x[i];
-            for j in i + 1..self.nv {
-                v -= self.k[(j, i)] * x[j];
-            }
-            x[i] = v / self.k[(i, i)];
         }
     }
 }
