@@ -402,6 +402,63 @@ pub fn lu_inverse<S: Scalar>(
     }
 }
 
+/// Eigen-decomposition of the symmetric n x n block of `a` by cyclic Jacobi rotations (Golub & Van
+/// Loan, Matrix Computations, 4th ed., Alg. 8.5.3), in place: on return the diagonal of `a` holds
+/// the eigenvalues and the columns of `v` the eigenvectors. Allocates nothing; f64 only (it serves
+/// diagnostics, not derivatives). Returns the index of the smallest eigenvalue.
+pub fn sym_eigen(a: &mut DMatrix<f64>, n: usize, v: &mut DMatrix<f64>) -> usize {
+    for i in 0..n {
+        for j in 0..n {
+            v[(i, j)] = if i == j { 1.0 } else { 0.0 };
+        }
+    }
+    for _sweep in 0..50 {
+        let mut off = 0.0;
+        let mut diag = 0.0;
+        for i in 0..n {
+            diag += a[(i, i)] * a[(i, i)];
+            for j in i + 1..n {
+                off += a[(i, j)] * a[(i, j)];
+            }
+        }
+        if off <= f64::EPSILON * f64::EPSILON * diag || off == 0.0 {
+            break;
+        }
+        for p in 0..n {
+            for q in p + 1..n {
+                let apq = a[(p, q)];
+                if apq == 0.0 {
+                    continue;
+                }
+                // Rotation that zeroes a[p][q]: tan(2 theta) = 2 a_pq / (a_qq - a_pp).
+                let tau = (a[(q, q)] - a[(p, p)]) / (2.0 * apq);
+                let t = tau.signum() / (tau.abs() + (1.0 + tau * tau).sqrt());
+                let t = if tau == 0.0 { 1.0 } else { t };
+                let c = 1.0 / (1.0 + t * t).sqrt();
+                let s = t * c;
+                for k in 0..n {
+                    let (akp, akq) = (a[(k, p)], a[(k, q)]);
+                    a[(k, p)] = c * akp - s * akq;
+                    a[(k, q)] = s * akp + c * akq;
+                }
+                for k in 0..n {
+                    let (apk, aqk) = (a[(p, k)], a[(q, k)]);
+                    a[(p, k)] = c * apk - s * aqk;
+                    a[(q, k)] = s * apk + c * aqk;
+                }
+                for k in 0..n {
+                    let (vkp, vkq) = (v[(k, p)], v[(k, q)]);
+                    v[(k, p)] = c * vkp - s * vkq;
+                    v[(k, q)] = s * vkp + c * vkq;
+                }
+            }
+        }
+    }
+    (0..n)
+        .min_by(|&i, &j| a[(i, i)].total_cmp(&a[(j, j)]))
+        .unwrap_or(0)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -497,5 +554,33 @@ mod tests {
         let mut col = vec![0.0; n];
         lu_inverse(&lu, n, &piv, &mut inv, &mut col);
         assert!((&inv * &a0 - DMatrix::identity(n, n)).amax() < 1e-13);
+    }
+
+    #[test]
+    fn jacobi_eigen_against_nalgebra() {
+        let n = 5;
+        let b = test_matrix(n, n, 13);
+        let a0 = &b * b.transpose();
+        let mut a = a0.clone();
+        let mut v = DMatrix::zeros(n, n);
+        let k = sym_eigen(&mut a, n, &mut v);
+        let mut ours: Vec<f64> = (0..n).map(|i| a[(i, i)]).collect();
+        let mut theirs: Vec<f64> = a0.clone().symmetric_eigenvalues().iter().cloned().collect();
+        assert_eq!(
+            ours.iter().cloned().fold(f64::INFINITY, f64::min),
+            a[(k, k)]
+        );
+        ours.sort_by(f64::total_cmp);
+        theirs.sort_by(f64::total_cmp);
+        for (x, y) in ours.iter().zip(&theirs) {
+            assert!(
+                (x - y).abs() < 100.0 * f64::EPSILON * theirs[n - 1],
+                "{x} vs {y}"
+            );
+        }
+        // A v_k = lambda_k v_k
+        let vk = v.column(k).clone_owned();
+        let r = &a0 * &vk - vk * a[(k, k)];
+        assert!(r.amax() < 100.0 * f64::EPSILON * theirs[n - 1]);
     }
 }

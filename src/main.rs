@@ -146,6 +146,9 @@ struct SolveArgs {
     /// Do not write the MCAP recording.
     #[arg(long)]
     no_mcap: bool,
+    /// Stop at the first conditioning warning (exit 1) instead of reporting it and going on.
+    #[arg(long)]
+    strict: bool,
     /// Never show a progress bar (it is shown only on a terminal anyway).
     #[arg(long)]
     quiet: bool,
@@ -264,6 +267,7 @@ fn settings_from(a: &SolveArgs, base: &Settings) -> Result<Settings, String> {
     if let Some(dt) = a.output_dt {
         s.output = Output::Every(dt);
     }
+    s.strict |= a.strict;
     Ok(s)
 }
 
@@ -341,31 +345,54 @@ fn solve(a: SolveArgs) -> ExitCode {
     }
     let worst = solution.max_residual.iter().cloned().fold(0.0, f64::max);
     let st = &solution.stats.integrator;
+    for w in &solution.warnings {
+        eprintln!("{}: warning: {w}", scene.name);
+    }
+    let warned = match solution.warnings.len() {
+        0 => String::new(),
+        1 => format!(
+            ", 1 conditioning WARNING ({} at t = {:.6})",
+            solution.warnings[0].kind.name(),
+            solution.warnings[0].t
+        ),
+        k => format!(
+            ", {k} conditioning WARNINGS (first: {} at t = {:.6})",
+            solution.warnings[0].kind.name(),
+            solution.warnings[0].t
+        ),
+    };
     match &solution.code {
         ReturnCode::Success => {
             println!(
-                "{}: success, t = {:.6} .. {:.6}, max programme residual {:.2e}, {} steps ({} rejected), {} RHS evaluations, {:.3} s -> {}",
+                "{}: success, t = {:.6} .. {:.6}, max programme residual {:.2e}, {} steps ({} rejected), {} RHS evaluations, {:.3} s{warned} -> {}",
                 scene.name, t0, solution.t_end, worst, st.steps, st.rejected, st.rhs_evals, wall, out.display()
             );
         }
-        ReturnCode::InconsistentInitialState { row, residual } => {
-            let name = row.split(' ').next().unwrap_or(row);
-            eprintln!(
-                "{}",
-                scene.row_error(
-                    name,
-                    format!("the initial state violates this row by {residual:.3e} (tolerance {:.1e}); set `assemble = true` in [initial] to project it", settings.consistency_tol)
-                )
-            );
+        code if solution.stats.integrator.steps == 0
+            && solution.t_end == t0
+            && matches!(
+                code,
+                ReturnCode::InconsistentInitialState { .. } | ReturnCode::SingularProgramme { .. }
+            ) =>
+        {
+            eprintln!("{}", scene.initial_error(code, &settings));
             return ExitCode::from(2);
         }
         code => {
             eprintln!(
-                "{}: stopped at t = {:.6} with {}: {:?}; results up to there are in {}",
+                "{}: stopped at t = {:.6} ({}): {code}; results up to there are in {}",
                 scene.name,
                 solution.t_end,
                 code.name(),
-                code,
+                out.display()
+            );
+            println!(
+                "{}: {}, t = {:.6} .. {:.6}, max programme residual {:.2e}{warned} -> {}",
+                scene.name,
+                code.name(),
+                t0,
+                solution.t_end,
+                worst,
                 out.display()
             );
             return ExitCode::from(1);
@@ -388,8 +415,7 @@ fn validate(scenes: &[PathBuf]) -> ExitCode {
             }
         };
         let rows = scene.rows();
-        let check = progmo::with_problem!(&scene.system, p => progmo::solve::check_initial(p, &scene.settings));
-        match check {
+        match scene.check_initial(&scene.settings) {
             Ok((traj, corr)) => {
                 let res = traj.residual_at(0);
                 println!(
@@ -416,30 +442,9 @@ fn validate(scenes: &[PathBuf]) -> ExitCode {
                     );
                 }
             }
-            Err(ReturnCode::InconsistentInitialState { row, residual }) => {
+            Err(e) => {
                 failed = true;
-                let name = row.split(' ').next().unwrap_or(&row).to_string();
-                eprintln!(
-                    "{}",
-                    scene.row_error(&name, format!("the initial state violates this row by {residual:.3e}; set `assemble = true` in [initial] to project it"))
-                );
-            }
-            Err(ReturnCode::SingularProgramme {
-                rows: bad, rcond, ..
-            }) => {
-                failed = true;
-                let first = bad.first().cloned().unwrap_or_default();
-                eprintln!(
-                    "{}",
-                    scene.row_error(&first, format!("the programme Jacobian is singular at the initial state (rows {}; rcond {rcond:.1e})", bad.join(", ")))
-                );
-            }
-            Err(code) => {
-                failed = true;
-                eprintln!(
-                    "{}: error: the initial state cannot be used: {code:?}",
-                    path.display()
-                );
+                eprintln!("{e}");
             }
         }
     }
@@ -455,22 +460,17 @@ fn export(path: &Path, format: FormatArg, out: Option<&Path>) -> ExitCode {
         Ok(s) => s,
         Err(c) => return c,
     };
-    let progmo::scene::SceneSystem::Tree(p) = &scene.system else {
-        eprintln!(
-            "{}: error: `{}` is a lagrangian scene; only tree scenes can be exported to MJCF/URDF",
-            path.display(),
-            scene.name
-        );
-        return ExitCode::from(2);
-    };
     let options = progmo::export::ExportOptions {
         name: scene.name.clone(),
         ..Default::default()
     };
-    let result = match format {
-        FormatArg::Mjcf => progmo::export::mjcf(p.model.tree(), &options),
-        FormatArg::Urdf => progmo::export::urdf(p.model.tree(), &options),
-    };
+    let result = scene.export(
+        match format {
+            FormatArg::Mjcf => progmo::export::Format::Mjcf,
+            FormatArg::Urdf => progmo::export::Format::Urdf,
+        },
+        &options,
+    );
     let (doc, report) = match result {
         Ok(x) => x,
         Err(e) => {

@@ -242,6 +242,7 @@ fn schema_properties_and_loader_fields_agree_table_by_table() {
         "time",
         "solver",
         "tolerances.*",
+        "checks",
     ] {
         assert!(closed.contains_key(must), "schema does not close `{must}`");
     }
@@ -373,9 +374,13 @@ projection_tol = 1e-12
 baumgarte_alpha = 2.0
 baumgarte_beta = 1.0
 max_drift = 1e-3
+strict = false
 
 [tolerances]
 programme_residual = { value = 1e-6, reason = "Baumgarte keeps the drift small, not zero" }
+
+[checks]
+not_checked = { pinocchio = "an example of a declared not_checked" }
 "#;
 
 /// Every field of a lagrangian scene with a full mass matrix.

@@ -133,7 +133,7 @@ fn inconsistent_initial_state_points_at_the_row() {
 }
 
 #[test]
-fn a_singular_programme_stops_with_exit_1_and_keeps_results() {
+fn a_programme_singular_at_t0_is_refused_like_validate_and_keeps_results() {
     let dir = tmp("singular");
     let text = std::fs::read_to_string(scene("example_3_1_free")).unwrap();
     // Angular velocity along the body z axis: the programme's gradient vanishes at t0.
@@ -153,7 +153,13 @@ fn a_singular_programme_stops_with_exit_1_and_keeps_results() {
         .arg(dir.join("o"))
         .output()
         .unwrap();
-    assert_eq!(o.status.code(), Some(1));
+    // Refused at the initial state: the same located diagnosis and exit code as `validate` (issue 9).
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("degenerate.toml:") && err.contains("singular at the initial state"),
+        "{err}"
+    );
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("o/summary.json")).unwrap())
             .unwrap();

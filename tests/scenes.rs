@@ -28,6 +28,13 @@ fn every_bundled_scene_solves_within_its_tolerance() {
             .unwrap_or_else(|| panic!("{}: no programme_residual tolerance", scene.name));
         let worst = sol.max_residual.iter().cloned().fold(0.0, f64::max);
         assert!(worst <= tol, "{}: residual {worst:e} > {tol:e}", scene.name);
+        // No bundled scene comes near a programme singularity (conditioning monitor, issue 9).
+        assert!(
+            sol.warnings.is_empty(),
+            "{}: unexpected conditioning warnings: {:?}",
+            scene.name,
+            sol.warnings
+        );
         eprintln!(
             "{}: ok, residual {worst:.1e}, {} steps",
             scene.name, sol.stats.integrator.steps

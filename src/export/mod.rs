@@ -193,6 +193,20 @@ pub enum HarnessForce {
         sim_v: usize,
         nv: usize,
     },
+    /// A scene force given as world-frame components (expressions) at a body point. At every
+    /// stage the harness evaluates it from the simulator's state (`Scene.expression_forces`, entry
+    /// `index`) and applies it through the simulator's own point-force input (MuJoCo
+    /// `xfrc_applied`, Pinocchio's external forces), so the simulator maps it to its dofs.
+    PointForce {
+        index: usize,
+        body: String,
+        /// Body-frame point (m).
+        point: [f64; 3],
+        force: [String; 3],
+    },
+    /// A scene generalized force on our velocity coordinate `v_name` (expression). The harness
+    /// evaluates it (`Scene.expression_forces`) and maps it to the simulator's dofs.
+    CoordinateForce { v_name: String, expr: String },
 }
 
 /// Correspondence of one of our q or v entries with a simulator entry.

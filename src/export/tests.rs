@@ -786,6 +786,8 @@ fn urdf_complex_model() {
             HarnessForce::Damper {
                 joint, sim_v, nv, ..
             } => format!("damper {joint} {sim_v} {nv}"),
+            HarnessForce::PointForce { body, .. } => format!("point force {body}"),
+            HarnessForce::CoordinateForce { v_name, .. } => format!("coordinate force {v_name}"),
         })
         .collect();
     assert_eq!(

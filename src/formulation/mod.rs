@@ -86,6 +86,14 @@ pub struct Diagnostics {
     pub du: f64,
     /// Factorizations performed.
     pub factorizations: usize,
+    /// Smallest |B_i| / row_scale_i over the rows (1 if s = 0) and the row where it occurs: how
+    /// far a row's gradient collapsed against its reference (t0) norm.
+    pub row_ratio: f64,
+    pub row_ratio_row: usize,
+    /// |A a - F| (inf-norm): the total ideal reaction, u plus system reactions (2.12).
+    pub u_norm: f64,
+    /// max(|A a|, |F|, |A a - F|) (inf-norms): the terms u is computed from.
+    pub u_terms: f64,
 }
 
 /// Tolerances of the rank decisions.
@@ -166,6 +174,10 @@ impl<S: Scalar> FormulationWork<S> {
             system_rcond: 1.0,
             du: 0.0,
             factorizations: 0,
+            row_ratio: 1.0,
+            row_ratio_row: 0,
+            u_norm: 0.0,
+            u_terms: 0.0,
         };
         // Normalize rows: B_hat = N^-1 B, gamma_hat = N^-1 gamma.
         for i in 0..s {
@@ -183,6 +195,11 @@ impl<S: Scalar> FormulationWork<S> {
                     rows: vec![i],
                     rcond: re(n) / row_scale[i].max(f64::MIN_POSITIVE),
                 });
+            }
+            let ratio = re(n) / row_scale[i].max(f64::MIN_POSITIVE);
+            if ratio < diag.row_ratio {
+                diag.row_ratio = ratio;
+                diag.row_ratio_row = i;
             }
             self.norms[i] = n;
             let inv = n.recip();
@@ -240,13 +257,16 @@ impl<S: Scalar> FormulationWork<S> {
             }
         }
         // Scale of the terms of u = A a - F, so that du measures round-off, not cancellation.
-        let mut umax = 0.0f64;
+        let (mut umax, mut unorm) = (0.0f64, 0.0f64);
         for i in 0..nv {
+            unorm = unorm.max(re(self.tmp[i]).abs());
             umax = umax
                 .max(re(self.tmp[i]).abs())
                 .max(re(force[i]).abs())
                 .max(re(self.tmp[i] + force[i]).abs());
         }
+        diag.u_norm = unorm;
+        diag.u_terms = umax;
         linalg::qr_apply_qt(&self.bt, nv, s, &self.beta, &mut self.tmp[..nv]);
         let mut du = 0.0f64;
         for i in s..nv {

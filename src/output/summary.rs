@@ -7,7 +7,7 @@ use std::path::Path;
 use serde::Serialize;
 
 use super::OutputError;
-use crate::solve::{InitialCorrection, ReturnCode, Settings, Solution, Statistics};
+use crate::solve::{InitialCorrection, ReturnCode, Settings, Solution, Statistics, Warning};
 
 /// Format version written in `format_version`.
 const FORMAT_VERSION: u32 = 1;
@@ -40,6 +40,13 @@ struct Row<'a> {
 }
 
 #[derive(Serialize)]
+struct WarningOut<'a> {
+    #[serde(flatten)]
+    warning: &'a Warning,
+    message: String,
+}
+
+#[derive(Serialize)]
 struct Versions<'a> {
     progmo: &'static str,
     git_revision: Option<&'a str>,
@@ -53,11 +60,14 @@ struct SummaryOut<'a> {
     success: bool,
     code: &'a ReturnCode,
     code_name: &'static str,
+    /// The return code as one sentence (quantity, time, rows).
+    message: String,
     t_end: f64,
     max_residual: f64,
     max_residual_rate: f64,
     rows: Vec<Row<'a>>,
     statistics: &'a Statistics,
+    warnings: Vec<WarningOut<'a>>,
     initial_correction: &'a Option<InitialCorrection>,
     settings: &'a Settings,
     wall_seconds: f64,
@@ -110,11 +120,20 @@ fn build<'a>(input: &SummaryInput<'a>, file: &str) -> Result<SummaryOut<'a>, Out
         success: sol.code.is_success(),
         code: &sol.code,
         code_name: sol.code.name(),
+        message: sol.code.to_string(),
         t_end: sol.t_end,
         max_residual: max_nan(&sol.max_residual),
         max_residual_rate: max_nan(&sol.max_residual_rate),
         rows,
         statistics: &sol.stats,
+        warnings: sol
+            .warnings
+            .iter()
+            .map(|w| WarningOut {
+                warning: w,
+                message: w.to_string(),
+            })
+            .collect(),
         initial_correction: &sol.initial_correction,
         settings: input.settings,
         wall_seconds: input.wall_seconds,
@@ -199,6 +218,7 @@ mod tests {
                 position: 1e-9,
                 velocity: 0.0,
             }),
+            warnings: vec![],
             t_end: 1.5,
         }
     }

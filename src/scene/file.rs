@@ -43,6 +43,18 @@ pub struct SceneFile {
     pub solver: SolverFile,
     #[serde(default)]
     pub tolerances: BTreeMap<String, Spanned<ToleranceFile>>,
+    #[serde(default)]
+    pub checks: ChecksFile,
+}
+
+/// How the cross-simulator check treats the scene.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChecksFile {
+    /// Simulators the scene is declared not to be checked in (`mujoco`, `pinocchio`), each with the
+    /// reason: an expected `not_checked` does not fail a run.
+    #[serde(default)]
+    pub not_checked: BTreeMap<String, Spanned<String>>,
 }
 
 #[derive(Clone, Debug, Deserialize)]
@@ -194,6 +206,8 @@ pub struct SolverFile {
     pub baumgarte_alpha: Option<Spanned<f64>>,
     pub baumgarte_beta: Option<Spanned<f64>>,
     pub max_drift: Option<Spanned<f64>>,
+    /// Stop at the first conditioning warning.
+    pub strict: Option<bool>,
 }
 
 #[derive(Clone, Debug, Deserialize)]

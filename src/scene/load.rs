@@ -135,6 +135,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
     crate::with_problem!(&system, p => check_acceleration_rows(&src, p, &spans, n_system)?);
     let settings = solver(&src, &file)?;
     let tolerances = tolerances(&src, &file)?;
+    let expected_not_checked = expected_not_checked(&src, &file)?;
     Ok(Scene {
         name: file.name.clone(),
         description: file.description.clone(),
@@ -144,6 +145,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
         system,
         settings,
         tolerances,
+        expected_not_checked,
         source: src,
         row_spans: spans,
     })
@@ -639,12 +641,6 @@ fn rows(
                 .map(|(i, r)| (r, Role::Programme, format!("programme[{i}]"))),
         )
         .collect::<Vec<_>>();
-    if file.programme.is_empty() {
-        return Err(src.general(
-            "programme",
-            "the scene has no programme rows ([[programme]] tables)",
-        ));
-    }
     for (r, role, field) in all {
         let name = r.name.get_ref();
         if !is_identifier(name) {
@@ -949,8 +945,39 @@ fn solver(src: &Source, file: &SceneFile) -> R<Settings> {
         None => Output::Steps,
     };
     s.assemble = file.initial.get_ref().assemble;
+    s.strict = f.strict.unwrap_or(false);
     Ok(s)
 }
+
+/// Simulators the scene declares it is not checked in, with the reasons.
+fn expected_not_checked(src: &Source, file: &SceneFile) -> R<Vec<(String, String)>> {
+    let mut out = vec![];
+    for (sim, reason) in &file.checks.not_checked {
+        let field = format!("checks.not_checked.{sim}");
+        if !SIMULATORS.contains(&sim.as_str()) {
+            return Err(src.error(
+                reason.span(),
+                &field,
+                format!(
+                    "unknown simulator `{sim}`: expected one of {}",
+                    SIMULATORS.join(", ")
+                ),
+            ));
+        }
+        if reason.get_ref().trim().is_empty() {
+            return Err(src.error(
+                reason.span(),
+                &field,
+                "a declared not_checked needs a reason",
+            ));
+        }
+        out.push((sim.clone(), reason.get_ref().clone()));
+    }
+    Ok(out)
+}
+
+/// Simulators of the cross-simulator check.
+pub const SIMULATORS: [&str; 2] = ["mujoco", "pinocchio"];
 
 fn tolerances(src: &Source, file: &SceneFile) -> R<Vec<Tolerance>> {
     let mut out = vec![];

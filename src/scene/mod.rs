@@ -10,6 +10,7 @@
 //! Every error names the file, line, column and field ([`SceneError`]).
 
 mod error;
+mod export;
 pub mod file;
 pub mod lagrangian;
 pub mod layout;
@@ -73,6 +74,8 @@ pub struct Scene {
     pub settings: Settings,
     /// Check tolerances with their reasons.
     pub tolerances: Vec<Tolerance>,
+    /// `[checks] not_checked`: (simulator, reason) pairs the check expects not to run.
+    pub expected_not_checked: Vec<(String, String)>,
     /// The file's text, for locating later errors.
     pub source: Source,
     /// Byte span of each row's expression in the file (row order of the constraints).
@@ -135,6 +138,63 @@ impl Scene {
                 .source
                 .error(self.row_spans[i].clone(), &format!("row {row}"), message),
             None => self.source.general("", message),
+        }
+    }
+
+    /// The initial state as the solver will start from it, or the located error every door reports
+    /// (exit 2) when the solver refuses it: a row violated at t0, a singular programme at t0, ...
+    /// `progmo solve`, `validate`, `check` and `debug` all go through here.
+    pub fn check_initial(
+        &self,
+        settings: &Settings,
+    ) -> Result<
+        (
+            crate::solve::Trajectory,
+            Option<crate::solve::InitialCorrection>,
+        ),
+        SceneError,
+    > {
+        let r = with_problem!(&self.system, p => solve::check_initial(p, settings));
+        r.map_err(|code| self.initial_error(&code, settings))
+    }
+
+    /// The located error for a return code that stopped a solve at its initial state.
+    pub fn initial_error(&self, code: &solve::ReturnCode, settings: &Settings) -> SceneError {
+        use solve::ReturnCode as R;
+        match code {
+            R::InconsistentInitialState { row, residual } => {
+                let name = row.split(' ').next().unwrap_or(row);
+                let how = if row.ends_with("(assembly failed)") {
+                    "assembling the initial state (`assemble = true`) did not bring this row within"
+                        .to_string()
+                } else {
+                    "set `assemble = true` in [initial] to project the state onto the rows, or make \
+                     it consistent by hand; tolerance"
+                        .to_string()
+                };
+                self.row_error(
+                    name,
+                    format!(
+                        "the initial state violates this row by {residual:.3e} ({how} {:.1e})",
+                        settings.consistency_tol
+                    ),
+                )
+            }
+            R::SingularProgramme { rows, rcond, .. } => {
+                let first = rows.first().cloned().unwrap_or_default();
+                self.row_error(
+                    &first,
+                    format!(
+                        "the programme Jacobian dg/dv is singular at the initial state: rows {} \
+                         vanish or are dependent (rcond {rcond:.1e})",
+                        solve::quoted(rows)
+                    ),
+                )
+            }
+            code => self.source.general(
+                "initial",
+                format!("the initial state cannot be used: {code}"),
+            ),
         }
     }
 

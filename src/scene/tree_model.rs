@@ -95,6 +95,50 @@ impl TreeSceneModel {
     pub fn tree(&self) -> &Arc<tree::Model> {
         &self.tree
     }
+
+    /// The point forces (body, body-frame point, world-frame force expressions).
+    pub fn point_forces(&self) -> &[PointForce] {
+        &self.point_forces
+    }
+
+    /// The coordinate forces (velocity index, expression).
+    pub fn coordinate_forces(&self) -> &[(usize, Expr)] {
+        &self.coordinate_forces
+    }
+
+    /// The expression forces at (t, q, v) as a simulator must apply them: the coordinate forces
+    /// as a generalized force (nv) and each point force as (body, world point, world force).
+    /// Their sum J_p^T f + coordinate forces is the part of Q that `add_user_forces` adds.
+    #[allow(clippy::type_complexity)]
+    pub fn expression_forces(
+        &self,
+        t: f64,
+        q: &[f64],
+        v: &[f64],
+    ) -> (Vec<f64>, Vec<(usize, [f64; 3], [f64; 3])>) {
+        let mut ws = self.workspace::<f64>();
+        let l = &self.layout;
+        ws.slots[l.t] = t;
+        ws.slots[l.q..l.q + q.len()].copy_from_slice(q);
+        ws.slots[l.v..l.v + v.len()].copy_from_slice(v);
+        let mut gen = vec![0.0; self.tree.nv()];
+        for (i, e) in &self.coordinate_forces {
+            gen[*i] += e.eval(&ws.slots, &mut ws.stack);
+        }
+        let mut points = vec![];
+        for pf in &self.point_forces {
+            let f = [0, 1, 2].map(|k| pf.force[k].eval(&ws.slots, &mut ws.stack));
+            let p = tree::point_position(
+                &self.tree,
+                &mut ws.data,
+                q,
+                pf.body,
+                &Vector3::from(pf.point),
+            );
+            points.push((pf.body, [p[0], p[1], p[2]], f));
+        }
+        (gen, points)
+    }
 }
 
 impl Model for TreeSceneModel {

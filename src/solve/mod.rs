@@ -93,6 +93,128 @@ pub struct Settings {
     /// Project an inconsistent initial state onto the constraints (and report the correction)
     /// instead of refusing it. Default false.
     pub assemble: bool,
+    /// Thresholds of the conditioning monitor. Default: [`Conditioning::default`].
+    pub conditioning: Conditioning,
+    /// Turn a conditioning warning into a stop ([`ReturnCode::IllConditioned`]). Default false.
+    pub strict: bool,
+}
+
+/// Thresholds of the conditioning monitor: how close the programme may come to singular, relative
+/// to the initial state, before the solve warns. Row gradients and u are checked at every evaluation
+/// of the right-hand side (the formulation computes both anyway), the singular value at every output
+/// sample (every accepted step with the default output). Near a point where (2.6) loses rank, the reduced equations (2.8)-(2.10)
+/// and u (2.12) lose about log10(1 / ratio) digits (seed notes: Example 3.1 at p = q = 0).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Conditioning {
+    /// A row's gradient norm |dg_i/dv| below this fraction of its value at t0. Default 1e-3 (three
+    /// digits lost to the row's collapse).
+    pub row_gradient: f64,
+    /// Smallest singular value of B with each row scaled by its t0 norm, below this fraction of its
+    /// t0 value (s >= 2: rows becoming dependent). Default 1e-3.
+    pub singular_value: f64,
+    /// max(|A dv/dt|, |G + Q|) / max over the run so far of |A dv/dt - G - Q| above this: u (2.12)
+    /// is computed from terms this much larger than its own scale, so it carries that many fewer
+    /// digits. Measured against u's running maximum, so a zero crossing of u is no warning; a
+    /// programme whose u stays at round-off level (a natural motion) is not tested. Default 1e8
+    /// (half of double precision).
+    pub u_cancellation: f64,
+}
+
+impl Default for Conditioning {
+    fn default() -> Self {
+        Conditioning {
+            row_gradient: 1e-3,
+            singular_value: 1e-3,
+            u_cancellation: 1e8,
+        }
+    }
+}
+
+/// What a conditioning warning measured.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WarningKind {
+    /// A row's gradient norm relative to t0 ([`Conditioning::row_gradient`]).
+    RowGradient,
+    /// The smallest singular value of the t0-scaled B relative to t0 ([`Conditioning::singular_value`]).
+    SingularValue,
+    /// Cancellation in u = A dv/dt - G - Q ([`Conditioning::u_cancellation`]).
+    UCancellation,
+}
+
+impl WarningKind {
+    /// Machine name (`row_gradient`, ...).
+    pub fn name(self) -> &'static str {
+        match self {
+            WarningKind::RowGradient => "row_gradient",
+            WarningKind::SingularValue => "singular_value",
+            WarningKind::UCancellation => "u_cancellation",
+        }
+    }
+}
+
+/// The programme came close to singular: first crossing of a threshold and the worst value seen.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Warning {
+    pub kind: WarningKind,
+    /// Time of the first sample beyond the threshold.
+    pub t: f64,
+    /// Rows concerned (for u_cancellation: the programme and system rows with a reaction).
+    pub rows: Vec<String>,
+    /// Value at `t`.
+    pub value: f64,
+    /// Worst value over the run, and its time.
+    pub worst: f64,
+    pub t_worst: f64,
+    /// The threshold crossed.
+    pub threshold: f64,
+}
+
+impl std::fmt::Display for Warning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let rows = quoted(&self.rows);
+        match self.kind {
+            WarningKind::RowGradient => write!(
+                f,
+                "the gradient of row {rows} fell to {:.2e} of its initial norm at t = {:.6} \
+                 (threshold {:.0e}; worst {:.2e} at t = {:.6}): about {:.0} digits of dv/dt and u \
+                 are lost there",
+                self.value,
+                self.t,
+                self.threshold,
+                self.worst,
+                self.t_worst,
+                -self.worst.log10()
+            ),
+            WarningKind::SingularValue => write!(
+                f,
+                "rows {rows} came close to dependent at t = {:.6}: the smallest singular value of \
+                 the row-scaled programme Jacobian fell to {:.2e} of its initial value (threshold \
+                 {:.0e}; worst {:.2e} at t = {:.6})",
+                self.t, self.value, self.threshold, self.worst, self.t_worst
+            ),
+            WarningKind::UCancellation => write!(
+                f,
+                "the forces that the reaction of rows {rows} is computed from grew to {:.2e} times \
+                 its scale at t = {:.6} (threshold {:.0e}; worst {:.2e} at t = {:.6}): u carries \
+                 about {:.0} fewer digits there",
+                self.value, self.t, self.threshold, self.worst, self.t_worst,
+                self.worst.log10()
+            ),
+        }
+    }
+}
+
+/// Names as "`a`, `b`" for messages.
+pub fn quoted(names: &[String]) -> String {
+    if names.is_empty() {
+        return "(none)".into();
+    }
+    names
+        .iter()
+        .map(|n| format!("`{n}`"))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 impl Default for Settings {
@@ -115,6 +237,8 @@ impl Default for Settings {
             max_drift: None,
             consistency_tol: 1e-10,
             assemble: false,
+            conditioning: Conditioning::default(),
+            strict: false,
         }
     }
 }
@@ -156,6 +280,56 @@ pub enum ReturnCode {
     InconsistentInitialState { row: String, residual: f64 },
     /// Projection onto the constraints did not converge after a step.
     ProjectionFailed { t: f64, row: String, residual: f64 },
+    /// With [`Settings::strict`]: a conditioning warning stopped the solve.
+    IllConditioned { t: f64, warning: Box<Warning> },
+}
+
+impl std::fmt::Display for ReturnCode {
+    /// One sentence naming the quantity, the time and the rows.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ReturnCode::Success => write!(f, "reached the end of the time span"),
+            ReturnCode::StepTooSmall { t, h } => write!(
+                f,
+                "the step size fell to {h:.3e} at t = {t:.6}, below what the integrator can resolve"
+            ),
+            ReturnCode::SingularProgramme { t, rows, rcond } => write!(
+                f,
+                "the programme Jacobian dg/dv lost rank at t = {t:.6}: row(s) {} vanished or became \
+                 dependent (reciprocal condition {rcond:.2e} of the row-normalized Jacobian)",
+                quoted(rows)
+            ),
+            ReturnCode::SingularSystem { t, rcond } => write!(
+                f,
+                "the linear system for dv/dt became singular at t = {t:.6} (reciprocal condition \
+                 {rcond:.2e})"
+            ),
+            ReturnCode::DriftExceeded { t, row, residual } => write!(
+                f,
+                "the residual of row `{row}` reached {residual:.3e} at t = {t:.6}, beyond max_drift"
+            ),
+            ReturnCode::NonFinite { t } => write!(
+                f,
+                "the state or dv/dt became non-finite (NaN or infinite) at t = {t:.6}"
+            ),
+            ReturnCode::MaxSteps { t } => {
+                write!(f, "the step limit (max_steps) was used up at t = {t:.6}")
+            }
+            ReturnCode::InconsistentInitialState { row, residual } => write!(
+                f,
+                "the initial state violates row `{row}` by {residual:.3e} (beyond consistency_tol); \
+                 set `assemble = true` in [initial] to project it"
+            ),
+            ReturnCode::ProjectionFailed { t, row, residual } => write!(
+                f,
+                "projection onto the programme did not converge at t = {t:.6}: row `{row}` kept a \
+                 residual of {residual:.3e}"
+            ),
+            ReturnCode::IllConditioned { warning, .. } => {
+                write!(f, "strict mode stopped the solve: {warning}")
+            }
+        }
+    }
 }
 
 impl ReturnCode {
@@ -176,7 +350,39 @@ impl ReturnCode {
             ReturnCode::MaxSteps { .. } => "max_steps",
             ReturnCode::InconsistentInitialState { .. } => "inconsistent_initial_state",
             ReturnCode::ProjectionFailed { .. } => "projection_failed",
+            ReturnCode::IllConditioned { .. } => "ill_conditioned",
         }
+    }
+
+    /// The time the code refers to (None for an inconsistent initial state, which has none).
+    pub fn time(&self) -> Option<f64> {
+        match self {
+            ReturnCode::Success | ReturnCode::InconsistentInitialState { .. } => None,
+            ReturnCode::StepTooSmall { t, .. }
+            | ReturnCode::SingularProgramme { t, .. }
+            | ReturnCode::SingularSystem { t, .. }
+            | ReturnCode::DriftExceeded { t, .. }
+            | ReturnCode::NonFinite { t }
+            | ReturnCode::MaxSteps { t }
+            | ReturnCode::ProjectionFailed { t, .. }
+            | ReturnCode::IllConditioned { t, .. } => Some(*t),
+        }
+    }
+
+    /// The same code at time `t_new` (no change for codes without a time).
+    pub(crate) fn at(mut self, t_new: f64) -> Self {
+        match &mut self {
+            ReturnCode::Success | ReturnCode::InconsistentInitialState { .. } => {}
+            ReturnCode::StepTooSmall { t, .. }
+            | ReturnCode::SingularProgramme { t, .. }
+            | ReturnCode::SingularSystem { t, .. }
+            | ReturnCode::DriftExceeded { t, .. }
+            | ReturnCode::NonFinite { t }
+            | ReturnCode::MaxSteps { t }
+            | ReturnCode::ProjectionFailed { t, .. }
+            | ReturnCode::IllConditioned { t, .. } => *t = t_new,
+        }
+        self
     }
 }
 
@@ -199,6 +405,24 @@ pub struct Statistics {
     pub max_du: f64,
     /// Smallest reciprocal condition estimate of the row-normalized B seen.
     pub min_b_rcond: f64,
+    /// Smallest |dg_i/dv| / |dg_i/dv (t0)| over rows and right-hand-side evaluations (1 without rows).
+    pub min_row_gradient_ratio: f64,
+    /// Smallest singular value of the t0-row-scaled B relative to t0, over output samples (1 if s < 2).
+    pub min_singular_value_ratio: f64,
+    /// Largest cancellation ratio of u (see [`Conditioning::u_cancellation`]); 0 if never tested.
+    pub max_u_cancellation: f64,
+}
+
+impl Statistics {
+    /// Counters before a solve (ratios at their neutral values).
+    pub fn new() -> Self {
+        Statistics {
+            min_b_rcond: 1.0,
+            min_row_gradient_ratio: 1.0,
+            min_singular_value_ratio: 1.0,
+            ..Default::default()
+        }
+    }
 }
 
 /// Correction applied to the initial state when it was assembled.
@@ -357,7 +581,9 @@ pub struct Solution {
     pub max_residual_rate: Vec<f64>,
     /// Correction applied to the initial state, if it was assembled.
     pub initial_correction: Option<InitialCorrection>,
-    /// Last time reached.
+    /// Conditioning warnings (see [`Conditioning`]), in the order first raised.
+    pub warnings: Vec<Warning>,
+    /// Last time reached: on an early stop the time of the last output sample and of the code.
     pub t_end: f64,
 }
 
@@ -379,13 +605,11 @@ pub fn solve_into<M: Model, C: Constraints>(
     let mut sol = Solution {
         code: ReturnCode::Success,
         trajectory: Trajectory::default(),
-        stats: Statistics {
-            min_b_rcond: 1.0,
-            ..Default::default()
-        },
+        stats: Statistics::new(),
         max_residual: vec![0.0; s],
         max_residual_rate: vec![0.0; s],
         initial_correction: None,
+        warnings: vec![],
         t_end: problem.t0,
     };
     let mut ode = match ode::MotionOde::new(problem, settings, sink) {
@@ -409,6 +633,7 @@ pub fn solve_into<M: Model, C: Constraints>(
     let mut y = ode.initial_y();
     let (outcome, istats) = integrator.integrate(&mut ode, problem.t0, problem.t1, &mut y);
     sol.code = ode.finish(outcome);
+    sol.warnings = ode.warnings.clone();
     sol.stats = ode.stats.clone();
     sol.stats.integrator = istats;
     sol.max_residual = ode.max_residual.clone();

@@ -10,7 +10,7 @@ use super::evaluator::{Baumgarte, Evaluator};
 use super::project::Projector;
 use super::{
     is_state_row, DriftControl, InitialCorrection, Output, Problem, ReturnCode, Sample, SampleSink,
-    Settings, Statistics,
+    Settings, Statistics, Warning, WarningKind,
 };
 use crate::formulation::{FormulationError, RankTolerances};
 use crate::integrate::{Accept, DenseOutput, OdeProblem, Outcome};
@@ -25,8 +25,16 @@ use num_dual::Dual64;
 pub(crate) enum Stop {
     Formulation(FormulationError),
     NonFinite,
-    Drift { row: usize, residual: f64 },
-    Projection { row: usize, residual: f64 },
+    Drift {
+        row: usize,
+        residual: f64,
+    },
+    Projection {
+        row: usize,
+        residual: f64,
+    },
+    /// Strict mode: the warning of this index was raised.
+    IllConditioned(usize),
 }
 
 pub(crate) struct MotionOde<'a, M: Model, C: Constraints> {
@@ -59,6 +67,18 @@ pub(crate) struct MotionOde<'a, M: Model, C: Constraints> {
     pub max_residual_rate: Vec<f64>,
     pub t_last: f64,
     pub initial_correction: Option<InitialCorrection>,
+    /// Conditioning warnings raised so far.
+    pub warnings: Vec<Warning>,
+    /// Smallest singular value of the t0-scaled B at t0 (s >= 2).
+    sigma0: Option<f64>,
+    /// Largest |u| so far above round-off of its terms (the scale of the cancellation test).
+    u_scale: f64,
+    gram: DMatrix<f64>,
+    eigv: DMatrix<f64>,
+    /// The last accepted state (at `t_last`) and the time of the last sample handed to the sink.
+    acc_q: Vec<f64>,
+    acc_v: Vec<f64>,
+    last_sample_t: f64,
 }
 
 impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
@@ -180,15 +200,22 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
             rank: settings.rank(),
             baumgarte,
             out_index: 0,
-            stats: Statistics {
-                min_b_rcond: 1.0,
-                ..Default::default()
-            },
+            stats: Statistics::new(),
             max_residual: vec![0.0; s],
             max_residual_rate: vec![0.0; s],
             t_last: t0,
             initial_correction,
+            warnings: vec![],
+            sigma0: None,
+            u_scale: 0.0,
+            gram: DMatrix::zeros(s, s),
+            eigv: DMatrix::zeros(s, s),
+            acc_q: vec![],
+            acc_v: vec![],
+            last_sample_t: f64::NEG_INFINITY,
         };
+        me.acc_q = me.q.clone();
+        me.acc_v = me.v.clone();
         let (q0, v0) = (me.q.clone(), me.v.clone());
         if let Err(stop) = me.emit(t0, &q0, &v0) {
             return Err(me.code_of(stop, t0));
@@ -222,7 +249,51 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
         self.stats.factorizations += d.factorizations;
         self.stats.max_du = self.stats.max_du.max(d.du);
         self.stats.min_b_rcond = self.stats.min_b_rcond.min(d.b_rcond);
+        // Conditioning monitor, part 1 (every evaluation: free from the formulation's own work).
+        let c = self.settings.conditioning;
+        self.stats.min_row_gradient_ratio = self.stats.min_row_gradient_ratio.min(d.row_ratio);
+        // u's scale: the largest |u| seen that is not round-off of its terms (a programme that is
+        // a natural motion has u = 0 to round-off and nothing to lose).
+        if d.u_norm > 1e-12 * d.u_terms {
+            self.u_scale = self.u_scale.max(d.u_norm);
+        }
+        let cancellation = if self.u_scale > 0.0 {
+            d.u_terms / self.u_scale
+        } else {
+            0.0
+        };
+        self.stats.max_u_cancellation = self.stats.max_u_cancellation.max(cancellation);
+        if d.row_ratio < c.row_gradient {
+            let k = self.raise(
+                WarningKind::RowGradient,
+                vec![d.row_ratio_row],
+                t,
+                d.row_ratio,
+                c.row_gradient,
+            );
+            self.strict_stop(k)?;
+        }
+        if cancellation > c.u_cancellation {
+            let s = self.levels.len();
+            let rows = (0..s).filter(|&i| self.ev.lambda[i] != 0.0).collect();
+            let k = self.raise(
+                WarningKind::UCancellation,
+                rows,
+                t,
+                cancellation,
+                c.u_cancellation,
+            );
+            self.strict_stop(k)?;
+        }
         Ok(())
+    }
+
+    /// In strict mode a newly raised warning stops the solve.
+    fn strict_stop(&self, raised: Option<usize>) -> Result<(), Stop> {
+        match raised {
+            Some(k) if self.settings.strict => Err(Stop::IllConditioned(k)),
+            _ => Ok(()),
+        }
     }
 
     /// Evaluate at (t, q, v) and hand the sample to the sink.
@@ -266,7 +337,85 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
         }
         self.res = hbuf;
         self.out_index += 1;
+        self.last_sample_t = t;
+        self.conditioning(t)
+    }
+
+    /// Conditioning monitor, part 2 (every output sample): the smallest singular value of
+    /// diag(1/|B_i(t0)|) B against its t0 value, i.e. rows becoming dependent (s >= 2).
+    fn conditioning(&mut self, t: f64) -> Result<(), Stop> {
+        let s = self.levels.len();
+        if s < 2 {
+            return Ok(());
+        }
+        let nv = self.nv;
+        let b = &self.ev.jet.b;
+        let scale = &self.ev.row_scale;
+        for i in 0..s {
+            for j in 0..=i {
+                let g = (0..nv).map(|k| b[(i, k)] * b[(j, k)]).sum::<f64>()
+                    / (scale[i] * scale[j]).max(f64::MIN_POSITIVE);
+                self.gram[(i, j)] = g;
+                self.gram[(j, i)] = g;
+            }
+        }
+        let k = crate::linalg::sym_eigen(&mut self.gram, s, &mut self.eigv);
+        let sigma = self.gram[(k, k)].max(0.0).sqrt();
+        let sigma0 = *self.sigma0.get_or_insert(sigma);
+        let ratio = if sigma0 > 0.0 { sigma / sigma0 } else { 1.0 };
+        self.stats.min_singular_value_ratio = self.stats.min_singular_value_ratio.min(ratio);
+        let threshold = self.settings.conditioning.singular_value;
+        if ratio < threshold {
+            let big = (0..s).map(|i| self.eigv[(i, k)].abs()).fold(0.0, f64::max);
+            let rows = (0..s)
+                .filter(|&i| self.eigv[(i, k)].abs() >= 0.3 * big)
+                .collect();
+            let raised = self.raise(WarningKind::SingularValue, rows, t, ratio, threshold);
+            self.strict_stop(raised)?;
+        }
         Ok(())
+    }
+
+    /// Record a threshold crossing; returns the index of its warning (new or updated). In strict mode
+    /// every crossing is an error, so the integrator's step shrinking localizes the first one.
+    fn raise(
+        &mut self,
+        kind: WarningKind,
+        rows: Vec<usize>,
+        t: f64,
+        value: f64,
+        threshold: f64,
+    ) -> Option<usize> {
+        let names: Vec<String> = rows
+            .iter()
+            .map(|&i| self.problem.constraints.rows()[i].name.clone())
+            .collect();
+        let worse = |a: f64, b: f64| match kind {
+            WarningKind::UCancellation => a > b,
+            _ => a < b,
+        };
+        if let Some(k) = self
+            .warnings
+            .iter()
+            .position(|w| w.kind == kind && w.rows == names)
+        {
+            let w = &mut self.warnings[k];
+            if worse(value, w.worst) {
+                w.worst = value;
+                w.t_worst = t;
+            }
+            return Some(k);
+        }
+        self.warnings.push(Warning {
+            kind,
+            t,
+            rows: names,
+            value,
+            worst: value,
+            t_worst: t,
+            threshold,
+        });
+        Some(self.warnings.len() - 1)
     }
 
     /// Residuals of the state rows at the current (q, v); stop on drift beyond `max_drift`.
@@ -328,18 +477,31 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
                 row: names(&[row])[0].clone(),
                 residual,
             },
+            Stop::IllConditioned(k) => ReturnCode::IllConditioned {
+                t,
+                warning: Box::new(self.warnings[k].clone()),
+            },
         }
     }
 
-    /// Map the integrator's outcome to a return code.
-    pub fn finish(&self, outcome: Outcome<Stop>) -> ReturnCode {
-        match outcome {
-            Outcome::Finished => ReturnCode::Success,
+    /// Map the integrator's outcome to a return code. On an early stop the last accepted state
+    /// is written as the final sample (if it was not), and the code, `t_last` and that sample
+    /// name one instant: the last state the solve stands behind.
+    pub fn finish(&mut self, outcome: Outcome<Stop>) -> ReturnCode {
+        let code = match outcome {
+            Outcome::Finished => return ReturnCode::Success,
             Outcome::StepTooSmall { t, h } => ReturnCode::StepTooSmall { t, h },
             Outcome::MaxSteps { t } => ReturnCode::MaxSteps { t },
             Outcome::NonFinite { t } => ReturnCode::NonFinite { t },
             Outcome::Problem { t, error } => self.code_of(error, t),
+        };
+        if self.last_sample_t < self.t_last {
+            let (q, v) = (self.acc_q.clone(), self.acc_v.clone());
+            // A failure here leaves the previous sample as the last one.
+            let _ = self.emit(self.t_last, &q, &v);
         }
+        self.t_last = self.last_sample_t;
+        code.at(self.t_last)
     }
 
     /// q = base (+) delta into `self.q`.
@@ -479,6 +641,8 @@ impl<'a, M: Model, C: Constraints> OdeProblem for MotionOde<'a, M, C> {
             }
             if !rep.converged && !(rep.residual <= 1e3 * tol) {
                 self.t_last = t1;
+                self.acc_q.copy_from_slice(&self.q);
+                self.acc_v.copy_from_slice(&self.v);
                 return Err(Stop::Projection {
                     row: rep.row,
                     residual: rep.residual,
@@ -495,6 +659,8 @@ impl<'a, M: Model, C: Constraints> OdeProblem for MotionOde<'a, M, C> {
             changed = true;
         }
         self.t_last = t1;
+        self.acc_q.copy_from_slice(&self.q);
+        self.acc_v.copy_from_slice(&self.v);
         self.monitor(t1)?;
         let at_output = match self.settings.output {
             Output::Steps => true,

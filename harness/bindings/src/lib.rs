@@ -24,6 +24,13 @@ create_exception!(
     "A scene file is invalid; the message names file, line, column and field."
 );
 
+create_exception!(
+    _core,
+    ExportUnsupported,
+    PyValueError,
+    "The scene holds an element the simulator format cannot carry; the message names it."
+);
+
 fn scene_error(e: progmo::scene::SceneError) -> PyErr {
     SceneError::new_err(e.to_string())
 }
@@ -157,7 +164,7 @@ impl PyScene {
     /// integrator ("dop853", "dopri5", "radau5", "rk4" with step), formulation ("null_space",
     /// "kkt", "range_space", "udwadia_kalaba"), drift ("projection", "baumgarte", "none").
     /// Returns a dict of numpy arrays and the return code.
-    #[pyo3(signature = (*, output_dt=None, t1=None, rtol=None, atol=None, integrator=None, step=None, formulation=None, drift=None))]
+    #[pyo3(signature = (*, output_dt=None, t1=None, rtol=None, atol=None, integrator=None, step=None, formulation=None, drift=None, strict=None))]
     #[allow(clippy::too_many_arguments)]
     fn solve<'py>(
         &self,
@@ -170,8 +177,12 @@ impl PyScene {
         step: Option<f64>,
         formulation: Option<&str>,
         drift: Option<&str>,
+        strict: Option<bool>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let mut s = self.scene.settings.clone();
+        if let Some(x) = strict {
+            s.strict = x;
+        }
         if let Some(dt) = output_dt {
             positive("output_dt", dt)?;
             s.output = Output::Every(dt);
@@ -420,6 +431,57 @@ impl PyScene {
         out.map_err(|e| PyRuntimeError::new_err(format!("{formulation}: {e}")))
     }
 
+    /// The located error the solver's refusal of the initial state gives (the same message and
+    /// exit code 2 as `progmo solve`): raises SceneError, returns None when the state is usable.
+    fn check_initial(&self) -> PyResult<()> {
+        self.scene
+            .check_initial(&self.scene.settings)
+            .map(|_| ())
+            .map_err(scene_error)
+    }
+
+    /// `[checks] not_checked` of the scene: {simulator: reason}.
+    #[getter]
+    fn expected_not_checked(&self) -> Vec<(String, String)> {
+        self.scene.expected_not_checked.clone()
+    }
+
+    /// The scene's expression forces at (t, q, v) as a simulator applies them: a dict with
+    /// "generalized" (nv, the coordinate forces) and "points": one (body, world point (3),
+    /// world force (3)) per point force, in the order of the export report's `point_force` entries.
+    fn expression_forces<'py>(
+        &self,
+        py: Python<'py>,
+        t: f64,
+        q: PyReadonlyArray1<'py, f64>,
+        v: PyReadonlyArray1<'py, f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let (q, v) = (q.as_slice()?.to_vec(), v.as_slice()?.to_vec());
+        let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
+        if q.len() != nq || v.len() != nv {
+            return Err(PyValueError::new_err(format!(
+                "q needs {nq} entries, v {nv}"
+            )));
+        }
+        let d = PyDict::new(py);
+        let points = PyList::empty(py);
+        match &self.scene.system {
+            SceneSystem::Tree(p) => {
+                let (gen, pts) = p.model.expression_forces(t, &q, &v);
+                let bodies = p.model.tree().bodies();
+                for (b, pw, fw) in pts {
+                    points.append((bodies[b].name.clone(), pw.to_vec(), fw.to_vec()))?;
+                }
+                d.set_item("generalized", PyArray1::from_vec(py, gen))?;
+            }
+            SceneSystem::Lagrangian(_) => {
+                d.set_item("generalized", PyArray1::from_vec(py, vec![0.0; nv]))?;
+            }
+        }
+        d.set_item("points", points)?;
+        Ok(d)
+    }
+
     /// Export a tree scene's model: `format` "mjcf" or "urdf". Returns (document, report dict) —
     /// the report lists mass floors applied, forces the harness must apply itself (attractors;
     /// springs/dampers in URDF), gravity, the root joint to pass to Pinocchio, and q/v maps.
@@ -430,28 +492,25 @@ impl PyScene {
         format: &str,
         timestep: f64,
     ) -> PyResult<(String, Bound<'py, PyAny>)> {
-        let SceneSystem::Tree(p) = &self.scene.system else {
-            return Err(PyValueError::new_err(format!(
-                "{} is a lagrangian scene: nothing to export",
-                self.scene.name
-            )));
-        };
         let options = progmo::export::ExportOptions {
             name: self.scene.name.clone(),
             timestep,
             ..Default::default()
         };
-        let r = match format {
-            "mjcf" => progmo::export::mjcf(p.model.tree(), &options),
-            "urdf" => progmo::export::urdf(p.model.tree(), &options),
+        let format = match format {
+            "mjcf" => progmo::export::Format::Mjcf,
+            "urdf" => progmo::export::Format::Urdf,
             other => {
                 return Err(PyValueError::new_err(format!(
                     "unknown export format {other:?} (mjcf, urdf)"
                 )))
             }
         };
-        let (doc, report) = r.map_err(|e| {
-            PyValueError::new_err(format!("cannot export {}: {e}", self.scene.name))
+        let (doc, report) = self.scene.export(format, &options).map_err(|e| match e {
+            progmo::export::ExportError::Unsupported { .. } => {
+                ExportUnsupported::new_err(format!("cannot export {}: {e}", self.scene.name))
+            }
+            e => PyValueError::new_err(format!("cannot export {}: {e}", self.scene.name)),
         })?;
         Ok((doc, json_to_py(py, &report)?))
     }
@@ -502,6 +561,14 @@ fn solution_dict<'py>(
     d.set_item("success", sol.code.is_success())?;
     d.set_item("code_name", sol.code.name())?;
     d.set_item("code", json_to_py(py, &sol.code)?)?;
+    d.set_item("message", sol.code.to_string())?;
+    let warnings = PyList::empty(py);
+    for w in &sol.warnings {
+        let wd = json_to_py(py, w)?;
+        wd.set_item("message", w.to_string())?;
+        warnings.append(wd)?;
+    }
+    d.set_item("warnings", warnings)?;
     d.set_item("t_end", sol.t_end)?;
     d.set_item("t", PyArray1::from_vec(py, tr.t.clone()))?;
     d.set_item("q", matrix(py, &tr.q, nq)?)?;
@@ -591,6 +658,7 @@ fn version() -> &'static str {
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyScene>()?;
     m.add("SceneError", m.py().get_type::<SceneError>())?;
+    m.add("ExportUnsupported", m.py().get_type::<ExportUnsupported>())?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     m.add_function(wrap_pyfunction!(chain_toml, m)?)?;
     m.add_function(wrap_pyfunction!(drift_cost, m)?)?;
