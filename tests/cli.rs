@@ -251,3 +251,90 @@ fn every_bundled_scene_solves_from_the_command_line() {
     }
     assert!(n >= 10, "{n} scenes");
 }
+
+fn test_scene(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(format!("tests/scenes/{name}.toml"))
+}
+
+#[test]
+fn conditioning_warnings_reach_every_output_and_strict_stops() {
+    // Example 3.1's programme through its degenerate point (tests/conditioning.rs has the numbers).
+    let out = tmp("warn");
+    let o = progmo()
+        .args([
+            "solve",
+            test_scene("precession_degenerate").to_str().unwrap(),
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let line = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        line.contains("1 conditioning WARNING (row_gradient at t = 2.2"),
+        "{line}"
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("warning: the gradient of row `precession`"),
+        "{err}"
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let w = &summary["warnings"][0];
+    assert_eq!(w["kind"], "row_gradient");
+    assert_eq!(w["rows"][0], "precession");
+    assert!(w["message"].as_str().unwrap().contains("initial norm"));
+    // The MCAP has the warning channel with one message.
+    let bytes = std::fs::read(out.join("recording.mcap")).unwrap();
+    let mut n = 0;
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        if m.channel.topic == "/progmo/warning" {
+            let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+            assert_eq!(v["kind"], "row_gradient");
+            n += 1;
+        }
+    }
+    assert_eq!(n, 1);
+
+    // --strict: the warning stops the solve (exit 1); code, t_end and the last sample agree.
+    let o = progmo()
+        .args([
+            "solve",
+            test_scene("precession_degenerate").to_str().unwrap(),
+            "--strict",
+            "--out",
+        ])
+        .arg(out.join("strict"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("ill_conditioned") && !err.contains('{'),
+        "{err}"
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("strict/summary.json")).unwrap())
+            .unwrap();
+    assert_eq!(summary["code_name"], "ill_conditioned");
+    let t_end = summary["t_end"].as_f64().unwrap();
+    assert_eq!(summary["code"]["t"].as_f64().unwrap(), t_end);
+    let csv = std::fs::read_to_string(out.join("strict/trajectory.csv")).unwrap();
+    let last: f64 = csv
+        .lines()
+        .last()
+        .unwrap()
+        .split(',')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert_eq!(last, t_end);
+    assert!(summary["message"]
+        .as_str()
+        .unwrap()
+        .contains("`precession`"));
+}

@@ -13,6 +13,23 @@ F64 = npt.NDArray[np.float64]
 class SceneError(ValueError):
     """A scene file is invalid; the message names file, line, column and field."""
 
+class ExportUnsupported(ValueError):
+    """The scene holds an element the simulator format cannot carry; the message names it."""
+
+class Warning(TypedDict):
+    kind: Literal["row_gradient", "singular_value", "u_cancellation"]
+    t: float  # first crossing of the threshold
+    rows: list[str]
+    value: float
+    worst: float
+    t_worst: float
+    threshold: float
+    message: str  # one sentence: quantity, time, rows
+
+class ExpressionForces(TypedDict):
+    generalized: F64  # (nv,) the scene's coordinate forces
+    points: list[tuple[str, list[float], list[float]]]  # (body, world point, world force) per point force
+
 class Row(TypedDict):
     name: str
     level: Literal["position", "velocity", "acceleration"]
@@ -22,7 +39,9 @@ class SolveResult(TypedDict):
     success: bool
     code_name: str  # success, step_too_small, singular_programme, ...
     code: dict[str, Any]  # {"code": name, ...fields}
-    t_end: float
+    message: str  # the return code as one sentence (quantity, time, rows)
+    warnings: list[Warning]  # conditioning warnings
+    t_end: float  # on an early stop: the time of the code and of the last sample
     t: F64  # (n,)
     q: F64  # (n, nq)
     v: F64  # (n, nv)
@@ -92,7 +111,15 @@ class Scene:
         step: float | None = None,
         formulation: Literal["null_space", "null_space_stacked", "kkt", "range_space", "udwadia_kalaba"] | None = None,
         drift: Literal["projection", "baumgarte", "none"] | None = None,
+        strict: bool | None = None,
     ) -> SolveResult: ...
+    def check_initial(self) -> None:
+        """Raises SceneError with the located message `progmo solve` gives when the solver refuses
+        the initial state."""
+    @property
+    def expected_not_checked(self) -> list[tuple[str, str]]:
+        """[checks] not_checked of the scene: (simulator, reason)."""
+    def expression_forces(self, t: float, q: F64, v: F64) -> ExpressionForces: ...
     def residuals(self, t: F64, q: F64, v: F64, a: F64 | None = None) -> F64: ...
     def dynamics(self, t: float, q: F64, v: F64) -> Dynamics: ...
     def accelerations(

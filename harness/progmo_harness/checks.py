@@ -3,31 +3,31 @@
 Interface used by the nightly command (``cli.py``) and the report:
 
 ``run_check(scene_path, simulator, options) -> CheckResult`` where ``simulator`` is ``"mujoco"`` or
-``"pinocchio"``; it never raises for a scene or simulator problem: a scene the simulator cannot
-represent gives ``status="skipped"`` with the reason, a missing package or a simulator failure gives
-``status="error"`` with the reason (see ``results.py``).
+``"pinocchio"``; it never raises. Statuses (``results.py``): a scene element the simulator cannot
+reproduce gives ``not_checked`` naming it (expected when the scene declares it in
+``[checks] not_checked``), a missing package, a refused scene, a stopped solve or a simulator failure
+gives ``error`` with the reason.
 
-What a check does (back-ends in ``simulators/``):
+A check is a sequence of small steps over a typed back-end (``simulators.Backend``):
 
-1. **Model parity** at ``options.samples`` states along the solver's trajectory: the exported model's
-   mass matrix and its non-control generalized forces (``-bias + passive + harness forces``, i.e. all
-   field forces the simulator sees, mapped to our coordinates) against our ``A`` and ``G + Q``.
-   Metrics ``parity_mass``, ``parity_bias`` (relative to max |A|, max |G + Q|). When parity breaches
-   its budget the replay is not run: a model mismatch must not be blamed on the dynamics.
-2. **Open-loop replay** of the solver's u(t) (solved at output_dt = h/2, so u is exact at every RK4
-   stage) from the scene's initial state. Metrics ``replay_residual`` (max |row| of the core's own
-   evaluator on the replayed states, acceleration rows with the simulator's accelerations) and
-   ``replay_deviation`` (max |dq|, |dv| against the solver, quaternions up to sign), and
-   ``replay_growth_rate`` (log-linear fit of the deviation, 1/s; reported, not budgeted).
-3. **Instantaneous u** at the sample states: Pinocchio's constrained forward dynamics (u = J^T lambda)
-   or MuJoCo's inverse dynamics (qfrc_inverse minus harness forces), relative to max |u|: ``instant_u``.
-4. ``solver_residual``: max |row| of the reference solve, against the scene's ``programme_residual``.
-
-Budgets come from the scene's ``[tolerances]``: an entry named like a metric (``parity_mass``,
-``parity_bias``, ``replay_residual``, ``replay_deviation``, ``instant_u``) is its budget; an entry
-``<metric>_mujoco`` / ``<metric>_pinocchio`` overrides it for one simulator. ``replay_step`` fixes the
-step (else a convergence check picks it) and ``replay_horizon`` shortens the replayed span (for
-unstable programmes, whose open-loop error grows exponentially: the growth rate is reported).
+1. **Scene**: load it; the solver's verdict on the initial state (the located message ``progmo
+   solve`` gives); a declared ``not_checked``.
+2. **Export** (``Scene.export``): refused for what no simulator document carries (lagrangian models,
+   system constraints) -> ``not_checked``; every force the back-end must apply itself is in the
+   report, and a back-end that cannot apply one says so (``Unsupported``) -> ``not_checked``.
+3. **Budgets**: every metric gets one, the scene's ``[tolerances]`` entry or the documented default
+   of :func:`default_budgets`; ``replay_horizon`` shortens the replayed span (recorded in ``span``).
+4. **Reference solve** at every RK4 stage time (output_dt = h/2) with rtol <= 1e-12; the replay step
+   from ``replay_step`` or a convergence check. Its conditioning warnings are kept.
+5. **Model parity** at ``options.samples`` states: the exported model's mass matrix and every
+   non-control generalized force the simulator sees (``-bias + passive + harness forces``, the
+   scene's point and coordinate forces included) against our ``A`` and ``G + Q``: ``parity_mass``,
+   ``parity_bias``. **Instantaneous u** from the simulator's own constrained/inverse dynamics:
+   ``instant_u``. When parity breaches its budget the replay is not run: a model mismatch must not
+   be blamed on the dynamics.
+6. **Open-loop replay** of the solver's u(t): ``replay_residual`` (max |row| of the core's own
+   evaluator on the replayed states) and ``replay_deviation`` (max |dq|, |dv| against the solver,
+   quaternions up to sign); the growth rate of the deviation is ``info``, not judged.
 """
 
 from __future__ import annotations
@@ -44,14 +44,66 @@ from .results import Budget, CheckResult, Series, judge
 
 SIMULATORS = ("mujoco", "pinocchio")
 
-#: metrics with budgets from the tolerance table (``programme_residual`` judges ``solver_residual``)
-BUDGETED = ("parity_mass", "parity_bias", "replay_residual", "replay_deviation", "instant_u")
+#: metrics with budgets (``programme_residual`` in a scene's table judges ``solver_residual``)
+BUDGETED = ("solver_residual", "parity_mass", "parity_bias", "instant_u", "replay_residual",
+            "replay_deviation")
+#: the scene-table name of a metric's budget where it differs
+TABLE_NAME = {"solver_residual": "programme_residual"}
 
 #: the reference solve is tighter than the scene's settings, so that the replay measures the
 #: simulator and the per-stage feed of u rather than the solver's own tolerance
 REF_RTOL, REF_ATOL = 1e-12, 1e-14
 
 _PACKAGES = {"mujoco": ("mujoco", "mjcf"), "pinocchio": ("pinocchio", "urdf")}
+
+
+def default_budgets(settings: dict[str, Any]) -> dict[str, tuple[float, str]]:
+    """The budget of every metric a scene's ``[tolerances]`` does not give, with its reason
+    (documented in src/scene/FORMAT.md, "Default budgets"). ``settings`` is ``Scene.settings``."""
+    drift = settings.get("drift", {})
+    if drift.get("kind") == "projection":
+        tol = float(drift["tol"])
+        residual = (100 * tol, f"default: 100 x projection_tol ({tol:g}): the projection holds every "
+                               "state row to projection_tol after each step; x100 for samples between "
+                               "steps and acceleration rows solved to round-off")
+    else:
+        residual = (1e4 * REF_RTOL, f"default: drift control {drift.get('kind', '?')}: rows drift with "
+                                    f"the integration error of the reference solve (rtol {REF_RTOL:g}); "
+                                    "1e4 x rtol")
+    return {
+        "solver_residual": residual,
+        "parity_mass": (1e-11, "default (algebraic identity): exported M vs ours relative to max|A|: "
+                               "round-off (catalog <= 2e-15) plus MuJoCo's 1e-14 inertia floor"),
+        "parity_bias": (1e-11, "default (algebraic identity): every non-control force the simulator "
+                               "applies vs our G + Q, relative to max|G + Q|: round-off (catalog <= 3e-15)"),
+        "instant_u": (1e-9, "default (algebraic, through a constraint solve): u from the simulator's "
+                            "own dynamics vs ours, relative to max|u| (catalog <= 2e-14; room for the "
+                            "condition of B)"),
+        "replay_residual": (1e-6, "default (cross-simulator): programme rows on the open-loop replay at "
+                                  "the convergence-checked RK4 step (catalog 5e-14 .. 6e-9); an unstable "
+                                  "programme needs a replay_horizon and its own budget"),
+        "replay_deviation": (1e-6, "default (cross-simulator): max |dq|, |dv| of the replay from the "
+                                   "solver (catalog 4e-13 .. 2e-9); an unstable programme needs a "
+                                   "replay_horizon and its own budget"),
+    }
+
+
+def budgets_for(tolerances: dict[str, tuple[float, str]], settings: dict[str, Any],
+                simulator: str) -> list[Budget]:
+    """One budget per metric of ``BUDGETED``: ``<name>_<simulator>``, else ``<name>`` from the
+    scene's table, else the default."""
+    defaults = default_budgets(settings)
+    out = []
+    for m in BUDGETED:
+        name = TABLE_NAME.get(m, m)
+        key = next((k for k in (f"{name}_{simulator}", name) if k in tolerances), None)
+        if key is not None:
+            v, why = tolerances[key]
+            out.append(Budget(m, v, why if key == m else f"{key}: {why}", "scene"))
+        else:
+            v, why = defaults[m]
+            out.append(Budget(m, v, why, "default"))
+    return out
 
 
 @dataclass
@@ -82,255 +134,317 @@ class Recording:
     row_names: list = field(default_factory=list)
 
 
+@dataclass
+class _Check:
+    """The state of one check as its steps fill it in."""
+
+    path: str
+    simulator: str
+    options: CheckOptions
+    res: CheckResult
+    corrupt_u: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+    corrupt_export: Callable[[str], str] | None = None
+    withhold: tuple[str, ...] = ()
+    frame_every: int = 0
+    record: Recording | None = None
+    scene: Any = None
+    backend: Any = None
+    tol: dict[str, tuple[float, str]] = field(default_factory=dict)
+    horizon: float = 0.0
+    ref: Any = None
+    first: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+
+
+class _Stop(Exception):
+    """Ends a check with a status and a reason."""
+
+    def __init__(self, status: str, reason: str, expected: bool = False):
+        super().__init__(reason)
+        self.status, self.reason, self.expected = status, reason, expected
+
+
 def run_check(scene_path: str, simulator: str, options: CheckOptions | None = None) -> CheckResult:
     """Check one scene in one simulator; never raises (see the module docs)."""
     return _run(scene_path, simulator, options)[0]
 
 
-def _load_backend(simulator: str):
-    """Import the simulator's package and back-end; ImportError names the missing package."""
-    pkg, fmt = _PACKAGES[simulator]
-    importlib.import_module(pkg)
-    mod = importlib.import_module(f".simulators.{simulator}_sim", __package__)
-    return mod, fmt
-
-
 def _run(scene_path: str, simulator: str, options: CheckOptions | None = None, *,
          corrupt_u: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+         corrupt_export: Callable[[str], str] | None = None,
+         withhold: tuple[str, ...] = (),
          frame_every: int = 0, record: Recording | None = None) -> tuple[CheckResult, Recording | None]:
-    """The check. ``corrupt_u(t, u) -> u'`` replaces the replayed (and instantaneous-reference)
-    control forces: the negative control. ``frame_every`` > 0 records body frames every that many
-    replay steps; ``record`` is filled with the trajectories."""
+    """The check. Negative controls: ``corrupt_u(t, u) -> u'`` replaces the replayed (and
+    instantaneous-reference) control forces; ``corrupt_export(doc) -> doc'`` alters the exported
+    document; ``withhold`` names harness-force kinds the back-end must not apply. ``frame_every``
+    > 0 records body frames every that many replay steps; ``record`` is filled with the
+    trajectories."""
     t_start = _time.perf_counter()
-    options = options or CheckOptions()
-    res = CheckResult(scene=str(scene_path), simulator=simulator, status="error")
+    c = _Check(str(scene_path), simulator, options or CheckOptions(),
+               CheckResult(scene=str(scene_path), simulator=simulator, status="error"),
+               corrupt_u, corrupt_export, tuple(withhold), frame_every, record)
     try:
-        _check(res, scene_path, simulator, options, corrupt_u, frame_every, record)
+        for step in (_scene, _export, _budgets, _reference, _parity, _replay):
+            step(c)
+    except _Stop as e:
+        c.res.status, c.res.reason, c.res.expected = e.status, e.reason, e.expected
     except Exception as e:  # never raise out of a check
-        res.status = "error"
-        res.reason = res.reason or f"{type(e).__name__}: {e}"
-    res.wall_seconds = _time.perf_counter() - t_start
-    return res, record
+        c.res.status = "error"
+        c.res.reason = c.res.reason or f"{type(e).__name__}: {e}"
+    c.res.wall_seconds = _time.perf_counter() - t_start
+    return c.res, record
 
 
-def _fail(res: CheckResult, status: str, reason: str) -> None:
-    res.status, res.reason = status, reason
+# --- steps ---------------------------------------------------------------------------------------
+def _scene(c: _Check) -> None:
+    """Load the scene; the solver's verdict on its initial state; a declared not_checked."""
+    from . import Scene, SceneError  # the Rust core
+
+    if c.simulator not in SIMULATORS:
+        raise _Stop("error", f"unknown simulator {c.simulator!r} (one of {', '.join(SIMULATORS)})")
+    try:
+        c.scene = Scene(c.path)
+    except Exception as e:
+        raise _Stop("error", f"cannot load scene: {e}") from None
+    c.res.scene = c.scene.name
+    try:
+        c.scene.check_initial()
+    except SceneError as e:
+        raise _Stop("error", f"the solver refuses the scene: {e}") from None
+    declared = dict(c.scene.expected_not_checked)
+    if c.simulator in declared:
+        raise _Stop("not_checked", f"declared in the scene ([checks] not_checked): {declared[c.simulator]}",
+                    expected=True)
 
 
-class _Stop(Exception):
-    pass
+def _export(c: _Check) -> None:
+    """The simulator's model of the scene and its back-end."""
+    from ._core import ExportUnsupported
+    from .simulators import Unsupported
+
+    pkg, fmt = _PACKAGES[c.simulator]
+    try:
+        importlib.import_module(pkg)
+        mod = importlib.import_module(f".simulators.{c.simulator}_sim", __package__)
+    except ImportError as e:
+        raise _Stop("error", f"simulator package for {c.simulator} is not importable: {e}") from None
+    try:
+        doc, report = c.scene.export(fmt)
+    except ExportUnsupported as e:
+        raise _Stop("not_checked", f"{fmt.upper()} export: {e}") from None
+    except ValueError as e:
+        raise _Stop("error", f"export failed: {e}") from None
+    if c.corrupt_export is not None:
+        doc = c.corrupt_export(doc)
+    cls = mod.MujocoBackend if c.simulator == "mujoco" else mod.PinocchioBackend
+    try:
+        c.backend = cls(doc, report, c.scene, c.withhold)
+    except Unsupported as e:
+        raise _Stop("not_checked", str(e)) from None
+    except Exception as e:
+        raise _Stop("error", f"{c.simulator} rejected the exported model: {type(e).__name__}: {e}") from None
+    c.res.notes += c.backend.notes()
+    if c.withhold:
+        c.res.notes.append("NEGATIVE CONTROL: withheld from the simulator: " + ", ".join(c.withhold))
 
 
-def _check(res, scene_path, simulator, options, corrupt_u, frame_every, record):
-    from . import Scene  # the Rust core
-    from .simulators import BlowUp
+def _budgets(c: _Check) -> None:
+    """Every metric's budget and the replayed span."""
+    c.tol = {k: (float(v[0]), str(v[1])) for k, v in dict(c.scene.tolerances).items()}
+    c.res.budgets = budgets_for(c.tol, dict(c.scene.settings), c.simulator)
+    full = c.scene.t1 - c.scene.t0
+    horizon = c.options.horizon or (c.tol["replay_horizon"][0] if "replay_horizon" in c.tol else full)
+    c.horizon = min(horizon, full)
+    c.res.span = [c.horizon, full]
+    if c.horizon < full:
+        why = c.tol["replay_horizon"][1] if "replay_horizon" in c.tol and not c.options.horizon else "given by the options"
+        c.res.notes.append(f"replay horizon {c.horizon:g} s of {full:g} s ({why})")
+
+
+def _solve_reference(c: _Check, h: float):
+    """The solver's motion at every RK4 stage time of step h (output_dt = h/2)."""
     from .simulators.replay import Reference
 
-    if simulator not in SIMULATORS:
-        return _fail(res, "error", f"unknown simulator {simulator!r} (one of {', '.join(SIMULATORS)})")
+    n = int(round(c.horizon / h))
+    if n < 2 or abs(n * h - c.horizon) > 1e-9 * max(1.0, c.horizon):
+        raise _Stop("error", f"replay step {h:g} does not divide the replayed span {c.horizon:g} s")
+    t0s = _time.perf_counter()
+    scene = c.scene
+    st = scene.settings
+    sol = scene.solve(output_dt=h / 2, t1=scene.t0 + n * h,
+                      rtol=min(st["rtol"], REF_RTOL), atol=min(st["atol"], REF_ATOL))
+    c.res.warnings = [w["message"] for w in sol["warnings"]]
+    if not sol["success"]:
+        raise _Stop("error", f"the reference solve stopped ({sol['code_name']}): {sol['message']}")
+    t = np.asarray(sol["t"])
+    if len(t) != 2 * n + 1 or np.abs(t - (scene.t0 + 0.5 * h * np.arange(2 * n + 1))).max() > 1e-9:
+        raise _Stop("error", f"solver output grid does not match the stages of h = {h:g} "
+                             f"({len(t)} outputs for {2 * n + 1} stage times)")
+    u = np.array(sol["u"])
+    if c.corrupt_u is not None:
+        u = np.array([c.corrupt_u(tk, uk) for tk, uk in zip(t, u)])
+    return Reference(t, np.asarray(sol["q"]), np.asarray(sol["v"]), np.asarray(sol["a"]), u,
+                     np.asarray(sol["residual"]), h, n, scene.t0, _time.perf_counter() - t0s)
+
+
+def _replay_of(c: _Check, ref):
+    fe = c.frame_every if c.frame_every >= 0 else max(1, -(-ref.steps // 1000))  # -1: <= ~1000 samples
+    return c.backend.replay(ref, fe)
+
+
+def _replay_residual(c: _Check, ref, rp) -> np.ndarray:
+    accel = any(r["level"] == "acceleration" for r in c.scene.rows)
+    return np.asarray(c.scene.residuals(rp.t, rp.q, rp.v, rp.a if accel else None))
+
+
+def _max_abs(R: np.ndarray) -> float:
+    return float(np.abs(R).max()) if R.size else 0.0
+
+
+def _reference(c: _Check) -> None:
+    """The replay step and the reference solve at its stage times."""
+    from .simulators import BlowUp
+
+    if c.options.step:
+        h, why = c.options.step, "given by the options"
+        c.ref = _solve_reference(c, h)
+    elif "replay_step" in c.tol:
+        h, why = c.tol["replay_step"][0], f"scene tolerance replay_step: {c.tol['replay_step'][1]}"
+        c.ref = _solve_reference(c, h)
+    else:
+        # halve from 1e-2 while the residual still improves like a 4th-order method (>= 8x per
+        # halving, i.e. 16x up to a factor 2); stop at round-off or after 5 halvings. A scene
+        # without rows has no residual: its deviation from the solver decides.
+        def err(ref) -> float:
+            try:
+                rp = _replay_of(c, ref)
+            except BlowUp:
+                return math.inf
+            R = _replay_residual(c, ref, rp)
+            if R.size:
+                return _max_abs(R)
+            return float(np.abs(rp.q - ref.q[::2][: ref.steps + 1]).max())
+        h = min(1e-2, c.horizon / 100)
+        c.ref = _solve_reference(c, h)
+        prev = err(c.ref)
+        seq = [f"{h:g}: {prev:.1e}"]
+        for _ in range(5):
+            if not prev > 1e-13:
+                break
+            ref2 = _solve_reference(c, h / 2)
+            cur = err(ref2)
+            seq.append(f"{h / 2:g}: {cur:.1e}")
+            improved = cur < prev / 8
+            h, c.ref, prev = h / 2, ref2, cur
+            if not improved:
+                break
+        why = "convergence check, error by step " + ", ".join(seq)
+    c.res.notes.append(f"replay step h = {h:g} ({why}); RK4 with u at every stage "
+                       f"(solver output_dt = h/2, solve {c.ref.solve_seconds:.2f} s)")
+    c.res.info["replay_step"] = h
+    c.res.metrics["solver_residual"] = _max_abs(c.ref.residual)
+    for w in c.res.warnings:
+        c.res.notes.append(f"solver warning: {w}")
+
+
+def _parity(c: _Check) -> None:
+    """Model parity and instantaneous u at sample states along the reference."""
+    scene, ref, be = c.scene, c.ref, c.backend
+    idx = np.unique(np.linspace(0, 2 * ref.steps, max(1, c.options.samples)).round().astype(int))
+    times = ref.t[idx]
+    sM = sR = 0.0
+    dmt, drt, dU = [], [], []
+    for k in idx:
+        tk, qk, vk, ak = ref.t[k], ref.q[k], ref.v[k], ref.a[k]
+        dyn = scene.dynamics(tk, qk, vk)
+        A = np.asarray(dyn["mass"])
+        rhs = np.asarray(dyn["velocity_terms"]) + np.asarray(dyn["applied_forces"])
+        Ms, rs = be.model_terms(tk, qk, vk)
+        dmt.append(float(np.abs(Ms - A).max()))
+        drt.append(float(np.abs(rs - rhs).max()))
+        sM, sR = max(sM, float(np.abs(A).max())), max(sR, float(np.abs(rhs).max()))
+        us = be.instant_u(tk, qk, vk, ak, np.asarray(dyn["B"]), np.asarray(dyn["gamma"]))
+        dU.append(float(np.abs(us - ref.u[k]).max()))
+    sR = sR if sR > 0 else 1.0
+    # u relative to its own scale; without a programme (u = 0) relative to the forces.
+    uabs = float(np.abs(ref.u).max()) if ref.u.size else 0.0
+    sU = uabs if uabs > 0 else sR
+    pm, pb, iu = np.array(dmt) / max(sM, 1e-300), np.array(drt) / sR, np.array(dU) / sU
+    c.res.metrics.update(parity_mass=float(pm.max()), parity_bias=float(pb.max()), instant_u=float(iu.max()))
+    c.res.notes.append(f"parity scales: max|A| {sM:.3g}, max|G+Q| {sR:.3g}; instant_u scale "
+                       f"{'max|u|' if uabs > 0 else 'max|G+Q| (u = 0)'} {sU:.3g}; {len(idx)} sample states")
+    c.first = {"parity_mass": (times, pm), "parity_bias": (times, pb), "instant_u": (times, iu)}
+    bval = {b.metric: b.value for b in c.res.budgets}
+    bad = [m for m in ("parity_mass", "parity_bias") if not (c.res.metrics[m] <= bval[m])]
+    if bad:
+        c.res.notes.append("model parity failed (" + ", ".join(bad) + "): the exported model differs "
+                           "from ours, the replay was not run and nothing is blamed on the dynamics")
+        # Judge what was measured; the replay's budgets stay listed, unmeasured and unjudged.
+        budgets = c.res.budgets
+        c.res.budgets = [b for b in budgets if b.metric in c.res.metrics]
+        c.res.status = "pass"  # judge() decides
+        judge(c.res, _first_times(c.first, bval))
+        c.res.budgets = budgets
+        c.res.reason = "model parity: " + "; ".join(
+            f"{b.metric} {b.value:.3g} > {b.budget:.3g}" for b in c.res.breaches
+            if b.metric in ("parity_mass", "parity_bias")) + "; replay not run"
+        raise _Stop(c.res.status, c.res.reason)
+
+
+def _replay(c: _Check) -> None:
+    """Open-loop replay of u in the simulator, its metrics and the verdict."""
+    from .simulators import BlowUp
+    from .simulators.replay import downsample, growth_rate, quat_aware_diff
+
+    scene, ref, be, res = c.scene, c.ref, c.backend, c.res
+    t0r = _time.perf_counter()
     try:
-        scene = Scene(str(scene_path))
-    except Exception as e:
-        return _fail(res, "error", f"cannot load scene: {e}")
-    res.scene = scene.name
-    if scene.kind != "tree":
-        return _fail(res, "skipped", f"{scene.kind} scene: only kinematic trees can be exported to "
-                                     f"{simulator} (no MJCF/URDF for a mass-matrix-and-constraints model)")
-    try:
-        mod, fmt = _load_backend(simulator)
-    except ImportError as e:
-        return _fail(res, "error", f"simulator package for {simulator} is not importable: {e}")
-    try:
-        doc, report = scene.export(fmt)
-    except ValueError as e:
-        msg = str(e)
-        if "unsupported" in msg.lower():
-            return _fail(res, "skipped", f"{fmt.upper()} cannot represent the scene: {msg}")
-        return _fail(res, "error", f"export failed: {msg}")
-    try:
-        be = (mod.MujocoBackend if simulator == "mujoco" else mod.PinocchioBackend)(doc, report)
-    except Exception as e:
-        return _fail(res, "error", f"{simulator} rejected the exported model: {type(e).__name__}: {e}")
-    res.notes += be.notes()
-
-    tol = {k: (float(v[0]), str(v[1])) for k, v in dict(scene.tolerances).items()}
-    T_full = scene.t1 - scene.t0
-    horizon = options.horizon or (tol["replay_horizon"][0] if "replay_horizon" in tol else T_full)
-    horizon = min(horizon, T_full)
-    if horizon < T_full:
-        res.notes.append(f"replay horizon {horizon:g} s of {T_full:g} s"
-                         + (f" ({tol['replay_horizon'][1]})" if "replay_horizon" in tol and not options.horizon else ""))
-    accel_rows = any(r["level"] == "acceleration" for r in scene.rows)
-
-    def reference(h: float) -> Reference:
-        n = int(round(horizon / h))
-        if n < 2 or abs(n * h - horizon) > 1e-9 * max(1.0, horizon):
-            raise _Stop(f"replay step {h:g} does not divide the horizon {horizon:g}")
-        t0s = _time.perf_counter()
-        st = scene.settings
-        sol = scene.solve(output_dt=h / 2, t1=scene.t0 + n * h,
-                          rtol=min(st["rtol"], REF_RTOL), atol=min(st["atol"], REF_ATOL))
-        if not sol["success"]:
-            raise _Stop(f"solve failed: {sol['code_name']} at t = {sol['t_end']}")
-        t = np.asarray(sol["t"])
-        if len(t) != 2 * n + 1 or np.abs(t - (scene.t0 + 0.5 * h * np.arange(2 * n + 1))).max() > 1e-9:
-            raise _Stop(f"solver output grid does not match the stages of h = {h:g} "
-                        f"({len(t)} outputs for {2 * n + 1} stage times)")
-        u = np.array(sol["u"])
-        if corrupt_u is not None:
-            u = np.array([corrupt_u(tk, uk) for tk, uk in zip(t, u)])
-        return Reference(t, np.asarray(sol["q"]), np.asarray(sol["v"]), np.asarray(sol["a"]), u,
-                         np.asarray(sol["residual"]), h, n, scene.t0, _time.perf_counter() - t0s)
-
-    def replay(ref):
-        fe = frame_every if frame_every >= 0 else max(1, -(-ref.steps // 1000))  # -1: <= ~1000 samples
-        return be.replay(ref, fe)
-
-    def replay_residual(ref, rp):
-        r = np.asarray(scene.residuals(rp.t, rp.q, rp.v, rp.a if accel_rows else None))
-        return r
-
-    try:
-        # ---- step
-        if options.step:
-            h, why = options.step, "given by the options"
-            ref = reference(h)
-        elif "replay_step" in tol:
-            h, why = tol["replay_step"][0], f"scene tolerance replay_step: {tol['replay_step'][1]}"
-            ref = reference(h)
-        else:
-            # halve from 1e-2 while the residual still improves like a 4th-order method (>= 8x
-            # per halving, i.e. 16x up to a factor 2); stop at round-off or after 5 halvings
-            h = min(1e-2, horizon / 100)
-            ref = reference(h)
-            prev = float(np.abs(replay_residual(ref, replay(ref))).max())
-            seq = [f"{h:g}: {prev:.1e}"]
-            for _ in range(5):
-                if not prev > 1e-13:
-                    break
-                ref2 = reference(h / 2)
-                cur = float(np.abs(replay_residual(ref2, replay(ref2))).max())
-                seq.append(f"{h / 2:g}: {cur:.1e}")
-                improved = cur < prev / 8
-                h, ref, prev = h / 2, ref2, cur
-                if not improved:
-                    break
-            why = "convergence check, residual by step " + ", ".join(seq)
-        res.notes.append(f"replay step h = {h:g} ({why}); RK4 with u at every stage "
-                         f"(solver output_dt = h/2, solve {ref.solve_seconds:.2f} s)")
-        res.metrics["replay_step"] = h
-        res.metrics["solver_residual"] = float(np.nanmax(np.abs(ref.residual))) if ref.residual.size else 0.0
-
-        # ---- sample states, parity
-        ns = max(1, options.samples)
-        idx = np.unique(np.linspace(0, 2 * ref.steps, ns).round().astype(int))
-        times = ref.t[idx]
-        sM = sR = 0.0
-        dmt, drt, dU = [], [], []
-        sU = max(float(np.abs(ref.u).max()), 1e-300)
-        for k in idx:
-            tk, qk, vk, ak = ref.t[k], ref.q[k], ref.v[k], ref.a[k]
-            dyn = scene.dynamics(tk, qk, vk)
-            A = np.asarray(dyn["mass"])
-            rhs = np.asarray(dyn["velocity_terms"]) + np.asarray(dyn["applied_forces"])
-            Ms, rs = be.model_terms(tk, qk, vk)
-            dmt.append(float(np.abs(Ms - A).max()))
-            drt.append(float(np.abs(rs - rhs).max()))
-            sM, sR = max(sM, float(np.abs(A).max())), max(sR, float(np.abs(rhs).max()))
-            us = be.instant_u(tk, qk, vk, ak, np.asarray(dyn["B"]), np.asarray(dyn["gamma"]))
-            dU.append(float(np.abs(us - ref.u[k]).max()))
-        sR = sR if sR > 0 else 1.0
-        pm = np.array(dmt) / max(sM, 1e-300)
-        pb = np.array(drt) / sR
-        iu = np.array(dU) / sU
-        res.metrics["parity_mass"] = float(pm.max())
-        res.metrics["parity_bias"] = float(pb.max())
-        res.metrics["instant_u"] = float(iu.max())
-        res.notes.append(f"parity scales: max|A| {sM:.3g}, max|G+Q| {sR:.3g}; instant_u scale max|u| {sU:.3g}; "
-                         f"{len(idx)} sample states")
-        first = {"parity_mass": (times, pm), "parity_bias": (times, pb), "instant_u": (times, iu)}
-
-        budgets = _budgets(tol, simulator)
-        res.budgets = budgets
-        bval = {b.metric: b.value for b in budgets}
-        parity_bad = [m for m in ("parity_mass", "parity_bias")
-                      if m in bval and not (res.metrics[m] <= bval[m])]
-        if parity_bad:
-            res.notes.append("model parity failed (" + ", ".join(parity_bad) + "): the exported model "
-                             "differs from ours, the replay was not run and nothing is blamed on the dynamics")
-            res.budgets = [b for b in budgets if b.metric in ("parity_mass", "parity_bias")]
-            res.status = "pass"  # judge() leaves error/skipped alone
-            judge(res, _first_times(first, bval))
-            res.reason = "model parity: " + ", ".join(f"{b.metric} {b.value:.3g} > {b.budget:.3g}"
-                                                      for b in res.breaches)
-            return
-
-        # ---- replay
-        t0r = _time.perf_counter()
-        try:
-            rp = replay(ref)
-        except BlowUp as e:
-            return _fail(res, "error", f"{simulator} replay: {e}")
-        res.notes.append(f"replay of {ref.steps} steps took {_time.perf_counter() - t0r:.2f} s")
-        R = replay_residual(ref, rp)
-        from .simulators.replay import quat_aware_diff, growth_rate, downsample
-        rabs = np.abs(R).max(axis=1) if R.shape[1] else np.zeros(len(rp.t))
-        rq, rv = ref.q[::2][: ref.steps + 1], ref.v[::2][: ref.steps + 1]
-        dq = quat_aware_diff(be.cm, rp.q, rq).max(axis=1)
-        dv = np.abs(rp.v - rv).max(axis=1)
-        dev = np.maximum(dq, dv)
-        if not np.all(np.isfinite(rabs)):
-            return _fail(res, "error", f"{simulator} replay: non-finite programme residual at "
-                                       f"t = {rp.t[np.argmax(~np.isfinite(rabs))]:.6g}")
-        res.metrics["replay_residual"] = float(rabs.max())
-        res.metrics["replay_deviation"] = float(dev.max())
-        g = growth_rate(rp.t, dev)
-        res.metrics["replay_growth_rate"] = g
-        if math.isfinite(g) and g * horizon > math.log(100):
-            res.notes.append(f"open-loop deviation grows like exp({g:.3g} t): x{math.exp(g * horizon):.2g} "
-                             f"over the replayed {horizon:g} s (unstable programme"
-                             + (f"; the scene's budgets are stated for {tol['replay_horizon'][0]:g} s)"
-                                if "replay_horizon" in tol else ")"))
-        first.update({"replay_residual": (rp.t, rabs), "replay_deviation": (rp.t, dev)})
-
-        sel = downsample(len(rp.t))
-        res.series.append(Series("replay_residual", rp.t[sel].tolist(), rabs[sel].tolist(), "row units"))
-        res.series.append(Series("replay_deviation", rp.t[sel].tolist(), dev[sel].tolist(), "q/v units"))
-        selu = downsample(len(ref.t))
-        for j, name in enumerate(scene.v_names):
-            res.series.append(Series(f"u.{name}", ref.t[selu].tolist(), ref.u[selu, j].tolist(), "N or N m"))
-        if record is not None:
-            record.scene, record.ref, record.replay = scene, ref, rp
-            record.residual, record.deviation = R, dev
-            record.sample_times = times.tolist()
-            record.q_names, record.v_names = list(scene.q_names), list(scene.v_names)
-            record.row_names = [r["name"] for r in scene.rows]
-        res.status = "pass"
-        judge(res, _first_times(first, bval))
-        if res.status == "fail":
-            res.reason = "; ".join(
-                f"{b.metric} {b.value:.3g} > {b.budget:.3g}"
-                + (f" first at t = {b.first_time:.6g}" if b.first_time is not None else "")
-                for b in res.breaches)
-    except _Stop as e:
-        return _fail(res, "error", str(e))
-
-
-def _budgets(tol: dict, simulator: str) -> list[Budget]:
-    out = []
-    if "programme_residual" in tol:
-        v, why = tol["programme_residual"]
-        out.append(Budget("solver_residual", v, f"programme_residual: {why}"))
-    for m in BUDGETED:
-        key = f"{m}_{simulator}" if f"{m}_{simulator}" in tol else m
-        if key in tol:
-            v, why = tol[key]
-            out.append(Budget(m, v, why))
-    return out
+        rp = _replay_of(c, ref)
+    except BlowUp as e:
+        raise _Stop("error", f"{c.simulator} replay: {e}") from None
+    res.notes.append(f"replay of {ref.steps} steps took {_time.perf_counter() - t0r:.2f} s")
+    R = _replay_residual(c, ref, rp)
+    rabs = np.abs(R).max(axis=1) if R.shape[1] else np.zeros(len(rp.t))
+    rq, rv = ref.q[::2][: ref.steps + 1], ref.v[::2][: ref.steps + 1]
+    dev = np.maximum(quat_aware_diff(be.cm, rp.q, rq).max(axis=1), np.abs(rp.v - rv).max(axis=1))
+    if not np.all(np.isfinite(rabs)):
+        raise _Stop("error", f"{c.simulator} replay: non-finite programme residual at "
+                             f"t = {rp.t[np.argmax(~np.isfinite(rabs))]:.6g}")
+    res.metrics["replay_residual"] = float(rabs.max())
+    res.metrics["replay_deviation"] = float(dev.max())
+    g = growth_rate(rp.t, dev)
+    res.info["replay_growth_rate"] = g
+    if math.isfinite(g) and g * c.horizon > math.log(100):
+        res.notes.append(f"open-loop deviation grows like exp({g:.3g} t): x{math.exp(g * c.horizon):.2g} "
+                         f"over the replayed {c.horizon:g} s (unstable programme"
+                         + (f"; the scene's budgets are stated for {c.tol['replay_horizon'][0]:g} s)"
+                            if "replay_horizon" in c.tol else ")"))
+    c.first.update({"replay_residual": (rp.t, rabs), "replay_deviation": (rp.t, dev)})
+    sel = downsample(len(rp.t))
+    res.series.append(Series("replay_residual", rp.t[sel].tolist(), rabs[sel].tolist(), "row units"))
+    res.series.append(Series("replay_deviation", rp.t[sel].tolist(), dev[sel].tolist(), "q/v units"))
+    selu = downsample(len(ref.t))
+    for j, name in enumerate(scene.v_names):
+        res.series.append(Series(f"u.{name}", ref.t[selu].tolist(), ref.u[selu, j].tolist(), "N or N m"))
+    if c.record is not None:
+        rec = c.record
+        rec.scene, rec.ref, rec.replay = scene, ref, rp
+        rec.residual, rec.deviation = R, dev
+        rec.sample_times = c.first["parity_mass"][0].tolist()
+        rec.q_names, rec.v_names = list(scene.q_names), list(scene.v_names)
+        rec.row_names = [r["name"] for r in scene.rows]
+    res.status = "pass"
+    bval = {b.metric: b.value for b in res.budgets}
+    judge(res, _first_times(c.first, bval))
+    if res.status == "fail":
+        res.reason = "; ".join(
+            f"{b.metric} {b.value:.3g} > {b.budget:.3g}"
+            + (f" first at t = {b.first_time:.6g}" if b.first_time is not None else "")
+            for b in res.breaches)
 
 
 def _first_times(first: dict, bval: dict) -> dict:
     from .simulators.replay import first_time_above
+
     out = {}
     for m, (t, x) in first.items():
         if m in bval:

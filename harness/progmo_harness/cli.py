@@ -3,9 +3,12 @@
 The Rust ``progmo`` command forwards ``progmo check ...`` and ``progmo debug ...`` here, so the
 help speaks of ``progmo``. Exit codes of ``check`` (stable; the nightly job branches on them):
 
-* 0: every check passed or was skipped, and no metric regressed against its baseline;
-* 1: a check failed (a metric beyond its budget), errored, did not run, or regressed;
-* 2: bad usage, an unknown scene or simulator, a scene file that does not load, or an unreadable
+* 0: every check passed (or is a not_checked the scene declares), at least one passed, and no metric
+  regressed against its baseline;
+* 1: a check failed (a metric beyond its budget), errored, was not checked without the scene
+  declaring it, did not run, or regressed;
+* 2: bad usage, an unknown scene or simulator, a scene file that does not load or whose initial
+  state the solver refuses (the same located message as ``progmo solve``), or an unreadable
   baseline (the other scenes still run; 2 wins over 1);
 * 130: interrupted (the results so far and the report are still written).
 """
@@ -30,8 +33,9 @@ from .results import CheckResult, save
 EXIT_OK, EXIT_FAIL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 EPILOG = """\
-exit codes: 0 all pass/skipped and no regression; 1 a fail, error or regression;
-2 bad usage or a scene that does not load (the rest still runs); 130 interrupted.
+exit codes: 0 all pass (or declared not_checked) and no regression; 1 a fail, error,
+undeclared not_checked or regression; 2 bad usage, or a scene that does not load or that the
+solver refuses (the rest still runs); 130 interrupted.
 Outputs in --out: results.json (every CheckResult), run.json, report.html (self-contained),
 summary.md, summary.csv; written even when the run fails or is interrupted.
 Baselines: references/baselines/<scene>.<simulator>.json, see references/baselines/README.md."""
@@ -140,7 +144,7 @@ def _say(msg: str) -> None:
 
 
 def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
-    from . import Scene
+    from . import Scene, SceneError
     from .checks import SIMULATORS, CheckOptions
 
     t_start = time.perf_counter()
@@ -175,6 +179,16 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
             if name in scenes:
                 raise ValueError(f"scene name {name!r} already used by {scenes[name]['path']}")
             scenes[name] = {"path": _rel(f, root), "description": sc.description, "purpose": sc.purpose}
+            try:
+                sc.check_initial()
+            except SceneError as e:
+                # the solver refuses the scene: the located message of `progmo solve`, exit 2
+                _say(str(e))
+                notes.append(f"{_rel(f, root)}: the solver refuses the scene: {last_line(e)}")
+                usage_problem = True
+                results += [error_result(Task(str(f), name, m), f"the solver refuses the scene: {e}")
+                            for m in sims]
+                continue
             tasks += [Task(str(f), name, m) for m in sims]
         except Exception as e:  # noqa: BLE001 - SceneError or worse: report it, run the rest
             msg = f"scene does not load: {last_line(e)}"
@@ -233,9 +247,7 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
         except Exception as e:  # noqa: BLE001 - keep results.json; say what broke
             report_ok = False
             _say(f"progmo check: error: writing the report failed: {last_line(e)}")
-    tot = run.totals()
-    summary = ", ".join(f"{n} {k}" for k, n in tot.items() if n) or "nothing checked"
-    print(f"progmo check: {'PASS' if run.ok() else 'FAIL'}: {summary}")
+    print(f"progmo check: {run.coverage()}")
     if report_ok:
         print(f"report: {paths['html']}  (summary: {paths['md']}, {paths['csv']}; results: {out / 'results.json'})")
     if interrupted:
@@ -268,6 +280,10 @@ def _progress(i: int, n: int, r: CheckResult, run: rp.Run) -> str:
         why = "; ".join(f"{c['metric']} {rp.fmt(c['value'])} > {rp.fmt(c['threshold'])}" for c in run.regressed(r))
     if why and v != "pass":
         line += f": {why[:200]}"
+    if r.span and r.span[0] < r.span[1]:
+        line += f" [checked {r.span_text()}]"
+    if r.warnings:
+        line += f" [{len(r.warnings)} solver warning(s)]"
     return line
 
 

@@ -190,6 +190,13 @@ def main(argv: list[str] | None = None) -> int:
     if (a.step is not None and not a.step > 0) or (a.horizon is not None and not a.horizon > 0):
         print("progmo debug: error: --step and --horizon must be positive", file=sys.stderr)
         return 2
+    # A scene that does not load or that the solver refuses: the located message of `progmo solve`.
+    from . import Scene, SceneError
+    try:
+        Scene(a.scene).check_initial()
+    except SceneError as e:
+        print(str(e), file=sys.stderr)
+        return 2
     try:
         import mcap.writer  # noqa: F401
     except ImportError as e:
@@ -226,12 +233,14 @@ def main(argv: list[str] | None = None) -> int:
     breaches = []
     bad = False
     for sim, r, rec in results:
-        m = r.metrics
+        m = {**r.metrics, **r.info}
         print(f"{sim:9s} {r.status:7s} " + "  ".join(
             f"{k} {m[k]:.3g}" for k in ("parity_mass", "parity_bias", "replay_residual", "replay_deviation",
                                         "replay_growth_rate", "instant_u", "replay_step") if k in m)
               + (f"  ({r.reason})" if r.reason else ""))
-        if r.status == "error":
+        for w in r.warnings:
+            print(f"  solver warning: {w}")
+        if r.status == "error" or (r.status == "not_checked" and not r.expected):
             bad = True
         for b in r.breaches:
             breaches.append((sim, b, _value_at(rec, r, b.metric, b.first_time)))

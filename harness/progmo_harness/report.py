@@ -32,8 +32,17 @@ from typing import Any
 from . import baselines as bl
 from .results import CheckResult
 
-#: Order of attention: the first problems first.
-RANK = {"error": 0, "fail": 1, "regression": 2, "not run": 3, "pass": 4, "skipped": 5}
+#: Verdicts in order of attention, the first problems first. ``not_checked`` is a simulator that
+#: could not reproduce the scene (fails the run); ``declared`` a not_checked the scene declares.
+RANK = {"error": 0, "fail": 1, "regression": 2, "not_checked": 3, "not run": 4, "pass": 5, "declared": 6}
+#: verdicts that do not fail a run
+OK_VERDICTS = ("pass", "declared")
+#: how a verdict reads
+LABEL = {"not_checked": "not checked", "declared": "not checked (declared)"}
+
+
+def label(verdict: str) -> str:
+    return LABEL.get(verdict, verdict)
 
 
 @dataclass
@@ -97,6 +106,8 @@ class Run:
             return "not run"
         if r.status == "pass" and self.regressed(r) and (r.scene, r.simulator) not in self.accepted:
             return "regression"
+        if r.status == "not_checked" and r.expected:
+            return "declared"
         return r.status
 
     def scene_names(self) -> list[str]:
@@ -112,8 +123,29 @@ class Run:
 
     def ok(self) -> bool:
         t = self.totals()
-        checked = sum(t.values()) > 0  # a run that checked nothing proves nothing
-        return checked and t["error"] == t["fail"] == t["regression"] == t["not run"] == 0
+        checked = t["pass"] > 0  # a run that checked nothing proves nothing
+        return checked and all(n == 0 for k, n in t.items() if k not in OK_VERDICTS)
+
+    def coverage(self) -> str:
+        """What the verdict covers, in one line: counts of every (scene x simulator) cell, the
+        declared not_checked cells, shortened replay spans and conditioning warnings."""
+        t = self.totals()
+        cells = sum(t.values())
+        head = ("PASS" if self.ok() else "FAIL") + f": {t['pass']} of {cells} (scene x simulator) passed"
+        rest = [f"{n} {label(k)}" for k, n in t.items() if n and k not in ("pass", "declared")]
+        declared = [f"{r.scene}/{r.simulator}" for r in self.results if self.verdict(r) == "declared"]
+        if declared:
+            rest.append(f"{len(declared)} not checked as declared ({', '.join(declared)})")
+        short = sorted({f"{r.scene} {r.span_text()}" for r in self.results
+                        if r.span and r.span[0] < r.span[1] and r.status in ("pass", "fail")})
+        if short:
+            rest.append("replayed over a shortened span: " + ", ".join(short))
+        warned = sorted({r.scene for r in self.results if r.warnings})
+        if warned:
+            rest.append("solver conditioning warnings: " + ", ".join(warned))
+        if not t["pass"]:
+            rest.append("nothing was checked")
+        return head + ("; " + "; ".join(rest) if rest else "")
 
 
 # --- provenance ----------------------------------------------------------------------------------
@@ -193,6 +225,7 @@ def rows_of(run: Run, r: CheckResult) -> list[dict[str, Any]]:
                 "value": v,
                 "budget": b.value if b else None,
                 "budget_reason": b.reason if b else "",
+                "budget_source": b.source if b else "",
                 "use": (v / b.value) if (b and v is not None and b.value > 0 and math.isfinite(v)) else None,
                 "within_budget": (None if b is None else m not in breaches),
                 "baseline": c.get("baseline"),
@@ -200,6 +233,10 @@ def rows_of(run: Run, r: CheckResult) -> list[dict[str, Any]]:
                 "baseline_state": c.get("state", ""),
             }
         )
+    for m, v in r.info.items():
+        out.append({"metric": m, "value": v, "budget": None, "budget_reason": "information, not judged",
+                    "budget_source": "", "use": None, "within_budget": None, "baseline": None,
+                    "threshold": None, "baseline_state": ""})
     return out
 
 
@@ -312,8 +349,10 @@ th{background:#f0f0f0;font-weight:600}
 td.num{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}
 .v{display:inline-block;min-width:64px;text-align:center;border-radius:4px;padding:1px 8px;color:#fff;font-weight:600;font-size:12px}
 .v-pass{background:var(--pass)} .v-fail{background:var(--fail)} .v-error{background:var(--error)}
-.v-skipped{background:var(--skip)} .v-regression{background:var(--reg)} .v-not-run{background:#bbb}
-td.c-fail,td.c-error{background:#fdecea} td.c-regression{background:#fdf0e6} td.c-skipped{background:#f4f4f4}
+.v-declared{background:var(--skip)} .v-regression{background:var(--reg)} .v-not-run{background:#bbb}
+.v-not_checked{background:var(--error)}
+td.c-fail,td.c-error,td.c-not_checked{background:#fdecea} td.c-regression{background:#fdf0e6} td.c-declared{background:#f4f4f4}
+.reason.warnbox{background:#fff8e6;border-color:#e6a100}
 .small{font-size:12px;color:#555}
 .reason{font-family:ui-monospace,SFMono-Regular,Menlo,Consolas,monospace;font-size:12px;background:#fff6f5;border-left:3px solid var(--fail);padding:4px 8px;white-space:pre-wrap;word-break:break-word}
 .reason.skip{background:#f5f5f5;border-color:var(--skip)}
@@ -332,7 +371,7 @@ a{color:#1a5fa8;text-decoration:none} a:hover{text-decoration:underline}
 
 
 def _badge(verdict: str) -> str:
-    return f'<span class="v v-{verdict.replace(" ", "-")}">{_e(verdict)}</span>'
+    return f'<span class="v v-{verdict.replace(" ", "-")}">{_e(label(verdict))}</span>'
 
 
 def _bar(use: float | None) -> str:
@@ -358,7 +397,7 @@ def _attention(run: Run) -> list[tuple[str, str, str, str]]:
         for m in run.simulators:
             r = run.result(s, m)
             v = run.verdict(r)
-            if v in ("pass", "skipped"):
+            if v in OK_VERDICTS:
                 continue
             if r is None:
                 why = "this check did not run (interrupted or cancelled)"
@@ -385,8 +424,7 @@ def render_html(run: Run) -> str:
     a("<h1>progmo cross-simulator check</h1>")
     a(f"<p class='sub'>Open-loop replay of the control forces u in {', '.join(_e(m) for m in run.simulators)}; "
       f"{_e(p.get('date', ''))}, revision <code>{_e(str(p.get('git_revision', 'unknown'))[:12])}</code>.</p>")
-    counts = ", ".join(f"{n} {k}" for k, n in tot.items() if n)
-    a(f"<div class='banner {'b-ok' if ok else 'b-bad'}' id='overall'>{'PASS' if ok else 'FAIL'}: {_e(counts) or 'nothing checked'}</div>")
+    a(f"<div class='banner {'b-ok' if ok else 'b-bad'}' id='overall'>{_e(run.coverage())}</div>")
     if run.notes:
         a("<ul class='notes'>" + "".join(f"<li>{_e(n)}</li>" for n in run.notes) + "</ul>")
 
@@ -395,10 +433,10 @@ def render_html(run: Run) -> str:
     a("<table id='verdicts'><thead><tr><th>scene</th>")
     for m in run.simulators:
         a(f"<th>{_e(m)}</th>")
-    a("<th>max residual</th><th>worst budget use</th></tr></thead><tbody>")
+    a("<th>checked span</th><th>max residual</th><th>worst budget use</th><th>warnings</th></tr></thead><tbody>")
     for s in run.scene_names():
         a(f"<tr><td><a href='#{_anchor(s)}'>{_e(s)}</a></td>")
-        res, use = [], []
+        res, use, spans, warns = [], [], [], set()
         for m in run.simulators:
             r = run.result(s, m)
             v = run.verdict(r)
@@ -408,17 +446,28 @@ def render_html(run: Run) -> str:
                     res.append(max_residual(r))
                 if budget_use(r) is not None:
                     use.append(budget_use(r))
+                if r.span_text():
+                    spans.append(r.span_text())
+                warns.update(r.warnings)
+        a(f"<td class='num'>{_e(' / '.join(dict.fromkeys(spans)))}</td>")
         a(f"<td class='num'>{fmt(max(res)) if res else ''}</td>")
         u = max(use) if use else None
-        a(f"<td class='num'>{_bar(u)}{_use_text(u)}</td></tr>")
+        a(f"<td class='num'>{_bar(u)}{_use_text(u)}</td>")
+        a(f"<td class='num{' warn' if warns else ''}'>{len(warns) or ''}</td></tr>")
     a("</tbody><tfoot><tr><th>total</th>")
     for m in run.simulators:
         c: dict[str, int] = {}
         for s in run.scene_names():
             v = run.verdict(run.result(s, m))
             c[v] = c.get(v, 0) + 1
-        a("<td class='small'>" + _e(", ".join(f"{n} {k}" for k, n in sorted(c.items(), key=lambda kv: RANK[kv[0]]))) + "</td>")
-    a("<td></td><td></td></tr></tfoot></table>")
+        a("<td class='small'>" + _e(", ".join(f"{n} {label(k)}" for k, n in sorted(c.items(), key=lambda kv: RANK[kv[0]]))) + "</td>")
+    a("<td></td><td></td><td></td><td></td></tr></tfoot></table>")
+    a("<p class='small'>Statuses: <b>pass</b> every metric within its budget; <b>fail</b> a metric beyond "
+      "it; <b>regression</b> a pass worse than its accepted baseline; <b>error</b> the check could not "
+      "run; <b>not checked</b> the simulator cannot reproduce an element of the scene (fails the run); "
+      "<b>not checked (declared)</b> the scene declares it with a reason (does not fail the run). "
+      "Budgets marked <i>default</i> are the documented defaults for a scene that gives none "
+      "(src/scene/FORMAT.md).</p>")
 
     att = _attention(run)
     if att:
@@ -451,9 +500,9 @@ def render_html(run: Run) -> str:
               ("pinocchio", "Pinocchio"), ("numpy", "numpy"), ("matplotlib", "matplotlib"), ("python", "Python"),
               ("platform", "platform"), ("cpu_count", "host CPUs"), ("jobs", "parallel jobs"),
               ("wall_seconds", "wall time [s]"), ("baselines", "baselines")]
-    for k, label in labels:
+    for k, name in labels:
         if k in p:
-            a(f"<tr><th>{_e(label)}</th><td><code>{_e(p[k])}</code></td></tr>")
+            a(f"<tr><th>{_e(name)}</th><td><code>{_e(p[k])}</code></td></tr>")
     a("</table>")
     a("<p class='small'>Budgets come from each scene's <code>[tolerances]</code> (with their reasons); "
       f"a regression is a value above max({bl.FACTOR:g} &times; baseline, baseline + floor), floor "
@@ -470,11 +519,14 @@ def _sim_block(run: Run, s: str, m: str) -> str:
     if r is None:
         h.append(" <span class='small'>not run</span></div>")
         return "".join(h)
-    h.append(f" <span class='small'>{r.wall_seconds:.2f} s</span>")
+    h.append(f" <span class='small'>{r.wall_seconds:.2f} s"
+             + (f"; checked span {_e(r.span_text())}" if r.span_text() else "") + "</span>")
     if (s, m) in run.accepted:
         h.append(" <span class='small good'>baseline accepted by this run</span>")
     if r.reason:
-        h.append(f"<div class='reason{' skip' if r.status == 'skipped' else ''}'>{_e(r.reason)}</div>")
+        h.append(f"<div class='reason{' skip' if v == 'declared' else ''}'>{_e(r.reason)}</div>")
+    for w in r.warnings:
+        h.append(f"<div class='reason warnbox'>solver warning: {_e(w)}</div>")
     rows = rows_of(run, r)
     if rows:
         h.append("<table class='metrics'><tr><th>metric</th><th>value</th><th>budget</th><th>use</th>"
@@ -490,7 +542,7 @@ def _sim_block(run: Run, s: str, m: str) -> str:
                 f"<tr><td>{_e(row['metric'])}</td><td class='num {vcls}'>{fmt(row['value'])}</td>"
                 f"<td class='num'>{fmt(row['budget']) if row['budget'] is not None else ''}</td>"
                 f"<td class='num'>{_bar(row['use'])}{_use_text(row['use'])}</td>"
-                f"<td class='small'>{_e(row['budget_reason'])}</td>"
+                f"<td class='small'>{'<i>default</i> ' if row.get('budget_source') == 'default' else ''}{_e(row['budget_reason'])}</td>"
                 f"<td class='num'>{fmt(row['baseline']) if row['baseline'] is not None else ''}</td>"
                 f"<td class='num'>{fmt(row['threshold']) if row['threshold'] is not None else ''}</td>"
                 f"<td class='{scls}'>{_e(st)}</td></tr>"
@@ -521,24 +573,38 @@ def render_markdown(run: Run) -> str:
     p = run.provenance
     tot = run.totals()
     lines = [f"# progmo check: {'PASS' if run.ok() else 'FAIL'}", ""]
-    lines.append(", ".join(f"{n} {k}" for k, n in tot.items() if n) or "nothing checked")
+    lines.append(run.coverage())
     lines.append("")
     for n in run.notes:
         lines.append(f"- {_md(n)}")
     if run.notes:
         lines.append("")
-    lines.append("| scene | " + " | ".join(_md(m) for m in run.simulators) + " | max residual |")
-    lines.append("|---|" + "---|" * len(run.simulators) + "---:|")
-    icons = {"pass": "✅", "fail": "❌", "error": "💥", "skipped": "⏭️", "regression": "📈", "not run": "⬜"}
+    lines.append("| scene | " + " | ".join(_md(m) for m in run.simulators) + " | checked span | max residual | warnings |")
+    lines.append("|---|" + "---|" * len(run.simulators) + "---|---:|---:|")
+    icons = {"pass": "✅", "fail": "❌", "error": "💥", "not_checked": "🚫", "declared": "⏭️",
+             "regression": "📈", "not run": "⬜"}
     for s in run.scene_names():
-        cells, res = [], []
+        cells, res, spans, warns = [], [], [], set()
         for m in run.simulators:
             r = run.result(s, m)
             v = run.verdict(r)
-            cells.append(f"{icons[v]} {v}")
-            if r is not None and max_residual(r) is not None:
-                res.append(max_residual(r))
-        lines.append(f"| {_md(s)} | " + " | ".join(cells) + f" | {fmt(max(res)) if res else ''} |")
+            cells.append(f"{icons[v]} {label(v)}")
+            if r is not None:
+                if max_residual(r) is not None:
+                    res.append(max_residual(r))
+                if r.span_text():
+                    spans.append(r.span_text())
+                warns.update(r.warnings)
+        lines.append(f"| {_md(s)} | " + " | ".join(cells) + f" | {_md(' / '.join(dict.fromkeys(spans)))} | "
+                     f"{fmt(max(res)) if res else ''} | {len(warns) or ''} |")
+    declared = [(r.scene, r.simulator, r.reason) for r in run.results if run.verdict(r) == "declared"]
+    if declared:
+        lines += ["", "## Not checked, as declared by the scene", ""]
+        lines += [f"- **{_md(s)} / {_md(m)}**: {_md(why)}" for s, m, why in declared]
+    warned = {(r.scene, w) for r in run.results for w in r.warnings}
+    if warned:
+        lines += ["", "## Solver conditioning warnings", ""]
+        lines += [f"- **{_md(s)}**: {_md(w)}" for s, w in sorted(warned)]
     att = _attention(run)
     if att:
         lines += ["", "## Needs attention", ""]
@@ -550,8 +616,9 @@ def render_markdown(run: Run) -> str:
     return "\n".join(lines) + "\n"
 
 
-CSV_FIELDS = ["scene", "simulator", "verdict", "status", "metric", "value", "budget", "within_budget",
-              "baseline", "regression_above", "vs_baseline", "reason", "wall_seconds"]
+CSV_FIELDS = ["scene", "simulator", "verdict", "status", "metric", "value", "budget", "budget_source",
+              "within_budget", "baseline", "regression_above", "vs_baseline", "checked_span", "reason",
+              "wall_seconds"]
 
 
 def write_csv(run: Run, path: Path) -> None:
@@ -564,16 +631,16 @@ def write_csv(run: Run, path: Path) -> None:
                 r = run.result(s, m)
                 v = run.verdict(r)
                 if r is None:
-                    w.writerow([s, m, v, "", "", "", "", "", "", "", "", "not run", ""])
+                    w.writerow([s, m, v, "", "", "", "", "", "", "", "", "", "", "not run", ""])
                     continue
                 base = [s, m, v, r.status]
-                tail = [r.reason, f"{r.wall_seconds:.3f}"]
+                tail = [r.span_text(), r.reason, f"{r.wall_seconds:.3f}"]
                 rows = rows_of(run, r)
                 if not rows:
-                    w.writerow(base + [""] * 7 + tail)
+                    w.writerow(base + [""] * 8 + tail)
                 for row in rows:
                     w.writerow(base + [
-                        row["metric"], _csvnum(row["value"]), _csvnum(row["budget"]),
+                        row["metric"], _csvnum(row["value"]), _csvnum(row["budget"]), row["budget_source"],
                         "" if row["within_budget"] is None else str(row["within_budget"]).lower(),
                         _csvnum(row["baseline"]), _csvnum(row["threshold"]), row["baseline_state"],
                     ] + tail)

@@ -4,13 +4,20 @@ A nightly check produces one :class:`CheckResult` per (scene, simulator). Everyt
 (numbers, strings, lists) so a result serializes to JSON (``to_json``/``from_json``) and the report
 can be rebuilt from saved results.
 
-Verdicts (``status``):
+Statuses (``status``); the run's verdict adds ``regression`` (a pass worse than its baseline):
 
-* ``pass``: every metric within its budget;
+* ``pass``: every budgeted metric within its budget (every metric has one: the scene's, or the
+  documented default of ``checks.default_budgets``);
 * ``fail``: at least one metric beyond its budget (``breaches`` says which, by how much, and when);
-* ``skipped``: the simulator cannot represent the scene (``reason`` says why) — not a failure;
-* ``error``: the check itself could not run (missing package, simulator blew up): a failure of the
-  nightly job, with ``reason``.
+* ``not_checked``: the simulator cannot reproduce the scene (``reason`` names the element: a
+  lagrangian model, system constraints, a force the back-end cannot apply). A failure of the run
+  unless the scene declares it (``[checks] not_checked``, then ``expected`` is true and ``reason``
+  quotes the declaration);
+* ``error``: the check itself could not run (missing package, a solve that stopped, a simulator
+  that blew up): a failure of the run, with ``reason``.
+
+``span`` is the replayed time span against the scene's (a shortened ``replay_horizon`` is visible
+in every verdict); ``warnings`` are the solver's conditioning warnings on the reference solve.
 """
 
 from __future__ import annotations
@@ -21,7 +28,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-STATUSES = ("pass", "fail", "skipped", "error")
+STATUSES = ("pass", "fail", "not_checked", "error")
 
 
 @dataclass
@@ -31,6 +38,8 @@ class Budget:
     metric: str
     value: float
     reason: str
+    #: "scene" (the scene's [tolerances]) or "default" (checks.default_budgets)
+    source: str = "scene"
 
 
 @dataclass
@@ -72,10 +81,25 @@ class CheckResult:
     #: Free-form facts worth printing (step used, export adjustments, versions of simulators).
     notes: list[str] = field(default_factory=list)
     wall_seconds: float = 0.0
+    #: not_checked declared by the scene ([checks] not_checked): does not fail the run
+    expected: bool = False
+    #: [replayed span, scene span] in seconds (None before the replay horizon is known)
+    span: list[float] | None = None
+    #: conditioning warnings of the reference solve (sentences with time and rows)
+    warnings: list[str] = field(default_factory=list)
+    #: facts that are not judged (replay step, growth rate of the open-loop deviation, ...)
+    info: dict[str, float] = field(default_factory=dict)
 
     def ok(self) -> bool:
         """True unless the nightly job must fail on this result."""
-        return self.status in ("pass", "skipped")
+        return self.status == "pass" or (self.status == "not_checked" and self.expected)
+
+    def span_text(self) -> str:
+        """"1 of 2 s" (or "" when unknown)."""
+        if not self.span:
+            return ""
+        a, b = self.span
+        return f"{a:g} s" if abs(a - b) <= 1e-12 * max(1.0, abs(b)) else f"{a:g} of {b:g} s"
 
     def to_json(self) -> dict[str, Any]:
         return _clean(dataclasses.asdict(self))
@@ -86,13 +110,15 @@ class CheckResult:
         d["budgets"] = [Budget(**b) for b in d.get("budgets", [])]
         d["breaches"] = [Breach(**b) for b in d.get("breaches", [])]
         d["series"] = [Series(**s) for s in d.get("series", [])]
+        if d.get("status") == "skipped":  # results saved before not_checked existed
+            d["status"] = "not_checked"
         return CheckResult(**d)
 
 
 def judge(result: CheckResult, first_times: dict[str, float] | None = None) -> CheckResult:
     """Set ``status`` and ``breaches`` of ``result`` from its metrics and budgets (a metric that is
     missing or NaN breaches its budget: a check that produced no number did not pass)."""
-    if result.status in ("skipped", "error"):
+    if result.status in ("not_checked", "error"):
         return result
     result.breaches = []
     for b in result.budgets:

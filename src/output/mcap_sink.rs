@@ -34,6 +34,7 @@ pub struct McapSink<W: Write + Seek> {
     residual: u16,
     reaction: Option<u16>,
     tf: Option<u16>,
+    warning_channel: Option<McapChannel>,
     sequence: BTreeMap<u16, u32>,
     q_keys: Vec<String>,
     v_keys: Vec<String>,
@@ -183,6 +184,7 @@ impl<W: Write + Seek> McapSink<W> {
             residual: 0,
             reaction: None,
             tf: None,
+            warning_channel: None,
             sequence: BTreeMap::new(),
             q_keys: keys(&layout.q_names),
             v_keys: keys(&layout.v_names),
@@ -401,12 +403,53 @@ impl<W: Write + Seek> McapSink<W> {
     }
 }
 
+/// Topic of the solver's conditioning warnings (schema `progmo.Warning`), one message per warning
+/// at the time of its first crossing.
+pub const WARNING_TOPIC: &str = "/progmo/warning";
+
 impl<W: Write + Seek> SampleSink for McapSink<W> {
     fn sample(&mut self, s: &Sample<'_>) {
         if self.error.is_some() || self.writer.is_none() {
             return;
         }
         self.write_sample(s);
+    }
+
+    fn warning(&mut self, w: &crate::solve::Warning) {
+        if self.error.is_some() || self.writer.is_none() {
+            return;
+        }
+        let ch = match self.warning_channel {
+            Some(c) => c,
+            None => {
+                let schema = object_schema(
+                    "progmo.Warning",
+                    &[
+                        ("kind", json!({"type": "string"})),
+                        (
+                            "rows",
+                            json!({"type": "array", "items": {"type": "string"}}),
+                        ),
+                        ("value", json!({"type": "number"})),
+                        ("threshold", json!({"type": "number"})),
+                        ("message", json!({"type": "string"})),
+                    ],
+                );
+                match self.add_json_channel(WARNING_TOPIC, "progmo.Warning", &schema) {
+                    Ok(c) => {
+                        self.warning_channel = Some(c);
+                        c
+                    }
+                    Err(e) => {
+                        self.error = Some(e);
+                        return;
+                    }
+                }
+            }
+        };
+        let msg = json!({"kind": w.kind.name(), "t": w.t, "rows": w.rows, "value": w.value,
+                         "threshold": w.threshold, "message": w.to_string()});
+        self.write_json(ch, w.t, &msg);
     }
 }
 

@@ -70,6 +70,7 @@
 //! | `/progmo/residual`  | `progmo.Residual`   | `{"t", "residual": {row name: ..}, "residual_rate": {row name: ..}}` |
 //! | `/progmo/reaction`  | `progmo.Reaction`   | `{"t", "reaction": {v name: ..}}`; only if `SampleLayout::reactions` |
 //! | `/progmo/tf` (opt.) | `foxglove.FrameTransform` | see [`McapSink::frame_transform`]              |
+//! | `/progmo/warning`   | `progmo.Warning`    | `{"t", "kind", "rows": [row names], "value", "threshold", "message"}`: one per conditioning warning, at its first crossing; only when there is one |
 //!
 //! One message per sample on each of the first three (four) channels. In Foxglove, plot e.g.
 //! `/progmo/state.q.theta` or `/progmo/residual.residual.speed`. Further channels can be added
@@ -90,9 +91,16 @@
 //!   `success` {}; `step_too_small` {`t`, `h`}; `singular_programme` {`t`, `rows` (array of row
 //!   names), `rcond`}; `singular_system` {`t`, `rcond`}; `drift_exceeded` {`t`, `row`,
 //!   `residual`}; `non_finite` {`t`}; `max_steps` {`t`}; `inconsistent_initial_state` {`row`,
-//!   `residual`}; `projection_failed` {`t`, `row`, `residual`}.
+//!   `residual`}; `projection_failed` {`t`, `row`, `residual`}; `ill_conditioned` {`t`,
+//!   `warning` (as in `warnings`)}.
 //! - `code_name`: the machine name, one of the codes above.
-//! - `t_end`: last time reached.
+//! - `message`: the code as one sentence naming the quantity, the time and the rows.
+//! - `t_end`: last time reached. On an early stop it is the code's `t` and the time of the last
+//!   CSV/MCAP sample (the last accepted state the solve stands behind).
+//! - `warnings`: array of conditioning warnings ([`Warning`](crate::solve::Warning); thresholds
+//!   [`Conditioning`](crate::solve::Conditioning)), each `{"kind": "row_gradient" |
+//!   "singular_value" | "u_cancellation", "t" (first crossing), "rows", "value", "worst",
+//!   "t_worst", "threshold", "message"}`; empty when the programme stayed well conditioned.
 //! - `max_residual`: largest |residual| over all rows and accepted steps (0 when there is no row).
 //! - `max_residual_rate`: largest |dg/dt| over all position rows and accepted steps.
 //! - `rows`: array, one object per constraint row in solver order:
@@ -101,14 +109,16 @@
 //!   `integrator` {`steps`, `rejected`, `rhs_evals`, `jacobian_evals`, `lu_decompositions`,
 //!   `newton_iterations`}, `factorizations`, `projections`,
 //!   `projection_iterations`, `max_position_correction`, `max_velocity_correction`, `max_du`,
-//!   `min_b_rcond`).
+//!   `min_b_rcond`, `min_row_gradient_ratio`, `min_singular_value_ratio`, `max_u_cancellation`).
 //! - `initial_correction`: `null`, or `{"position", "velocity"}` when the initial state was
 //!   assembled.
 //! - `settings`: the [`Settings`](crate::solve::Settings) as serialized by serde, e.g. the
 //!   default: `{"formulation": "null_space", "integrator": "dop853", "rtol": 1e-10,
 //!   "atol": 1e-12, "h_max": null, "max_steps": 10000000, "drift": {"kind": "projection",
 //!   "tol": 1e-12, "max_iter": 8}, "rank_dependent": 1e-10, "rank_vanishing": 1e-12,
-//!   "output": "steps", "max_drift": null, "consistency_tol": 1e-10, "assemble": false}`
+//!   "output": "steps", "max_drift": null, "consistency_tol": 1e-10, "assemble": false,
+//!   "conditioning": {"row_gradient": 0.001, "singular_value": 0.001, "u_cancellation": 1e8},
+//!   "strict": false}`
 //!   (`h_max: null` is the unlimited default; `output` is `"steps"` or `{"every": dt}`).
 //! - `wall_seconds`: wall-clock duration of the run, as measured by the caller.
 //! - `versions`: `{"progmo": crate version, "git_revision": string or null}`.

@@ -102,6 +102,9 @@ impl<S: SampleSink> Progress<S> {
 }
 
 impl<S: SampleSink> SampleSink for Progress<S> {
+    fn warning(&mut self, w: &crate::solve::Warning) {
+        self.inner.warning(w);
+    }
     fn sample(&mut self, s: &Sample<'_>) {
         self.inner.sample(s);
         if !self.show {

@@ -27,6 +27,10 @@ impl<A: SampleSink, B: SampleSink> SampleSink for Tee<A, B> {
         self.a.sample(s);
         self.b.sample(s);
     }
+    fn warning(&mut self, w: &crate::solve::Warning) {
+        self.a.warning(w);
+        self.b.warning(w);
+    }
 }
 
 impl<A: OutputSink, B: OutputSink> OutputSink for Tee<A, B> {

@@ -550,6 +550,9 @@ pub struct Sample<'a> {
 pub trait SampleSink {
     /// Take one sample.
     fn sample(&mut self, s: &Sample<'_>);
+    /// A conditioning warning was raised (once per warning, at its first crossing). Default:
+    /// ignored (it is in [`Solution::warnings`] anyway).
+    fn warning(&mut self, _w: &Warning) {}
 }
 
 impl SampleSink for Trajectory {

@@ -406,7 +406,7 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
             }
             return Some(k);
         }
-        self.warnings.push(Warning {
+        let w = Warning {
             kind,
             t,
             rows: names,
@@ -414,7 +414,9 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
             worst: value,
             t_worst: t,
             threshold,
-        });
+        };
+        self.sink.warning(&w);
+        self.warnings.push(w);
         Some(self.warnings.len() - 1)
     }
 

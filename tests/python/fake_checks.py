@@ -1,6 +1,7 @@
 """A fake ``run_check`` for the orchestration and report tests: no simulator, instant, and a
 verdict chosen per (scene, simulator) by the JSON plan in $FAKE_CHECKS_PLAN (read at call time,
-so it also reaches spawned worker processes). Plan values: "pass", "fail", "skipped", "error",
+so it also reaches spawned worker processes). Plan values: "pass", "fail", "declared" (a not_checked the scene
+declares), "not_checked" (undeclared), "error",
 "raise", "interrupt", "die", "sleep:SECONDS", "regress" (a pass whose residual is 20x the usual),
 default "pass"."""
 
@@ -17,8 +18,11 @@ PLAN_ENV = "FAKE_CHECKS_PLAN"
 
 
 def make_result(scene: str, simulator: str, kind: str = "pass") -> CheckResult:
-    if kind == "skipped":
-        return CheckResult(scene, simulator, "skipped", reason="the simulator cannot represent a <knife edge> & co")
+    if kind == "declared":
+        return CheckResult(scene, simulator, "not_checked", expected=True,
+                           reason="the simulator cannot represent a <knife edge> & co (declared in the scene)")
+    if kind == "not_checked":
+        return CheckResult(scene, simulator, "not_checked", reason="MJCF export: system constraints (`c`)")
     if kind == "error":
         return CheckResult(scene, simulator, "error", reason="pinocchio not importable: ModuleNotFoundError")
     scale = {"pass": 1.0, "fail": 1e4, "regress": 20.0}[kind]

@@ -67,7 +67,7 @@ def test_new_metric_info_metric_and_improvement():
 
 
 def test_skipped_and_error_results_are_not_compared():
-    assert bl.compare(result("skipped"), {"metrics": {"replay_residual": 1e-12}}) == []
+    assert bl.compare(result("not_checked"), {"metrics": {"replay_residual": 1e-12}}) == []
     assert bl.compare(result("error"), {"metrics": {"replay_residual": 1e-12}}) == []
 
 
@@ -92,7 +92,7 @@ def test_accept_writes_the_documented_format_and_reports_changes(tmp_path):
 
 
 def test_only_passing_results_are_accepted(tmp_path):
-    for status in ("fail", "error", "skipped"):
+    for status in ("fail", "error", "not_checked"):
         assert bl.accept(tmp_path, result(status, replay_residual=1.0), {}) is None
     assert list(tmp_path.iterdir()) == []
 

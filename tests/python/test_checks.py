@@ -1,5 +1,6 @@
 """The per-scene checks (checks.run_check) in MuJoCo and Pinocchio: parity, replay, negative
-control, skips and errors. Budgets come from the scenes' [tolerances]."""
+control, not_checked and errors. Budgets come from the scenes' [tolerances] (defaults:
+test_verdicts.py)."""
 
 import pathlib
 import sys
@@ -38,11 +39,11 @@ def test_parity(full, name, sim):
 def test_replay_double_pendulum(full, sim):
     r = full[("double_pendulum", sim)]
     assert r.status == "pass", (r.reason, r.breaches)
-    assert r.metrics["replay_step"] == 1e-3
+    assert r.info["replay_step"] == 1e-3
     # simulator notes: ~1e-12..1e-11 at h = 1e-3 over 10 s with u fed at every RK4 stage
     assert 0 < r.metrics["replay_residual"] < 1e-11
     assert r.metrics["replay_deviation"] < 5e-11
-    assert np.isfinite(r.metrics["replay_growth_rate"])
+    assert np.isfinite(r.info["replay_growth_rate"])
     names = {s.name for s in r.series}
     assert {"replay_residual", "replay_deviation", "u.q1", "u.q2"} <= names
     res = next(s for s in r.series if s.name == "replay_residual")
@@ -92,10 +93,10 @@ def test_negative_control_bias(sim):
 
 
 @pytest.mark.parametrize("sim", BOTH)
-def test_lagrangian_scene_skipped(sim):
+def test_lagrangian_scene_not_checked_as_declared(sim):
     r = run_check(scene("slider_crank"), sim)
-    assert r.status == "skipped" and r.ok()
-    assert "lagrangian" in r.reason
+    assert r.status == "not_checked" and r.expected and r.ok()
+    assert "lagrangian" in r.reason and "declared" in r.reason
 
 
 @pytest.mark.parametrize("sim,pkg", [("mujoco", "mujoco"), ("pinocchio", "pinocchio")])
@@ -133,7 +134,7 @@ def test_step_by_convergence_check(tmp_path):
     r = run_check(p, "mujoco")
     assert r.status == "pass", r.reason
     assert any("convergence check" in n for n in r.notes)
-    assert r.metrics["replay_step"] < 1e-2
+    assert r.info["replay_step"] < 1e-2
 
 
 def test_parity_breach_does_not_blame_the_dynamics(tmp_path, monkeypatch):
@@ -302,9 +303,10 @@ def test_springs_and_dampers(tmp_path, sim):
     assert r.metrics["parity_bias"] < 1e-14  # measured 1.2e-16: springs and dampers included
 
 
-def test_ball_below_root_skipped_in_pinocchio(tmp_path):
+def test_ball_below_root_not_checked_in_pinocchio(tmp_path):
     p = tmp_path / "ball.toml"
     p.write_text(BALL_BELOW_ROOT)
     r = run_check(str(p), "pinocchio")
-    assert r.status == "skipped" and "URDF" in r.reason and "ball" in r.reason
+    assert r.status == "not_checked" and not r.expected and not r.ok()
+    assert "URDF" in r.reason and "ball" in r.reason
     assert run_check(str(p), "mujoco").status in ("pass", "fail")  # MuJoCo can represent it

@@ -55,9 +55,20 @@ def test_default_is_every_bundled_scene_in_both_simulators(env):
     assert len(statuses(env.out)) == 2 * len(list(SCENES.glob("*.toml")))
 
 
-def test_skipped_is_not_a_failure(env):
-    assert env(*TWO, plan={"heavy_top/mujoco": "skipped"}) == 0
-    assert statuses(env.out)[("heavy_top", "mujoco")] == "skipped"
+def test_declared_not_checked_is_not_a_failure(env):
+    assert env(*TWO, plan={"heavy_top/mujoco": "declared"}) == 0
+    assert statuses(env.out)[("heavy_top", "mujoco")] == "not_checked"
+    assert "1 not checked as declared (heavy_top/mujoco)" in (env.out / "summary.md").read_text()
+
+
+def test_undeclared_not_checked_fails_the_run(env):
+    assert env(*TWO, plan={"heavy_top/mujoco": "not_checked"}) == 1
+    md = (env.out / "summary.md").read_text()
+    assert md.startswith("# progmo check: FAIL") and "1 not checked" in md
+
+
+def test_a_run_that_checked_nothing_fails(env):
+    assert env(*TWO, plan={"heavy_top": "declared", "double_pendulum": "declared"}) == 1
 
 
 def test_fail_exits_1(env):

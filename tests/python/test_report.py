@@ -22,7 +22,7 @@ def mixed_run(plots=True) -> rp.Run:
         make_result("calm", "mujoco"),
         make_result("calm", "pinocchio"),
         make_result("broken", "mujoco", "fail"),
-        make_result("broken", "pinocchio", "skipped"),
+        make_result("broken", "pinocchio", "declared"),
         make_result("drifting", "mujoco", "regress"),
         make_result(EVIL, "pinocchio", "error"),
     ]
@@ -55,13 +55,13 @@ def test_verdicts_and_failures_first():
     assert run.scene_names() == [EVIL, "broken", "drifting", "calm"]
     assert not run.ok()
     t = run.totals()
-    assert (t["pass"], t["fail"], t["error"], t["skipped"], t["regression"], t["not run"]) == (2, 1, 1, 1, 1, 2)
+    assert (t["pass"], t["fail"], t["error"], t["declared"], t["regression"], t["not run"]) == (2, 1, 1, 1, 1, 2)
 
 
 def test_html_content_escaping_and_self_containment(written):
     html = written["html"].read_text()
     assert "<table id='verdicts'>" in html and "id='attention'" in html
-    for v in ("pass", "fail", "error", "skipped", "regression", "not-run"):
+    for v in ("pass", "fail", "error", "declared", "regression", "not-run"):
         assert f"v-{v}" in html, v
     # Escaped, never raw.
     assert EVIL not in html and "&lt;script&gt;alert(&#x27;x&#x27;)&lt;/script&gt;" in html
@@ -83,7 +83,7 @@ def test_html_content_escaping_and_self_containment(written):
 
 def test_a_passing_run_says_pass():
     run = rp.Run([make_result("calm", "mujoco")], ["mujoco"], {"command": "progmo check calm"}, plots=False)
-    assert run.ok() and "PASS: 1 pass" in rp.render_html(run)
+    assert run.ok() and "PASS: 1 of 1 (scene x simulator) passed" in rp.render_html(run)
     assert rp.render_markdown(run).startswith("# progmo check: PASS")
 
 
@@ -92,7 +92,7 @@ def test_markdown_and_csv(tmp_path):
     paths = rp.write(run, tmp_path)
     md = paths["md"].read_text()
     assert md.startswith("# progmo check: FAIL")
-    assert "| broken | ❌ fail | ⏭️ skipped |" in md and "progmo check --jobs 2 calm broken" in md
+    assert "| broken | ❌ fail | ⏭️ not checked (declared) |" in md and "progmo check --jobs 2 calm broken" in md
     assert "<script>alert('x')</script>" in md  # Markdown escaping is about | and newlines only
     rows = list(csv.DictReader(paths["csv"].open()))
     assert list(rows[0]) == rp.CSV_FIELDS

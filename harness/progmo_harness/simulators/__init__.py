@@ -1,14 +1,27 @@
 """Simulator back-ends of the checks: MuJoCo 4.0 (``mujoco_sim``) and Pinocchio 4.1
 (``pinocchio_sim``), with the shared coordinate maps and metrics in ``replay``.
 
-Each back-end is a class built from a scene's export (document + report) with:
+Every back-end implements :class:`Backend`, built from a scene's export (document + report) and the
+scene itself (to evaluate its expression forces at the simulator's own states):
 
 * ``model_terms(t, q, v) -> (M, rhs)`` in OUR coordinates, ``rhs`` = every non-control generalized
-  force the simulator's equations contain (``-bias + passive + harness forces``), to compare with
-  our ``G + Q``;
+  force the simulator's equations contain (``-bias + passive + harness forces``, including the
+  scene's point and coordinate forces as the simulator applies them), to compare with our ``G + Q``;
 * ``instant_u(t, q, v, a, B, gamma) -> u`` the control force the simulator itself derives;
 * ``replay(ref, record_frames) -> Replay`` open-loop replay of ``ref.u`` (u at each RK4 stage).
+
+A back-end that meets a harness force it cannot apply raises :class:`Unsupported` naming it, and
+the check becomes ``not_checked``: a model the simulator does not share never passes.
 """
+
+from __future__ import annotations
+
+from typing import Any, Protocol
+
+import numpy as np
+
+#: Harness-force kinds of the export report (``src/export/mod.rs``, ``HarnessForce``).
+FORCE_KINDS = ("attractor", "spring", "damper", "point_force", "coordinate_force")
 
 
 class BlowUp(RuntimeError):
@@ -17,3 +30,56 @@ class BlowUp(RuntimeError):
     def __init__(self, time: float, what: str):
         super().__init__(f"simulator blew up at t = {time:.6g}: {what}")
         self.time = time
+
+
+class Unsupported(RuntimeError):
+    """The back-end cannot reproduce an element of the scene; the message names it."""
+
+
+class Backend(Protocol):
+    """What the checks need of a simulator."""
+
+    name: str
+    cm: Any  # replay.CoordMap
+
+    def notes(self) -> list[str]: ...
+
+    def model_terms(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def instant_u(self, t: float, q: np.ndarray, v: np.ndarray, a: np.ndarray, B: np.ndarray,
+                  gamma: np.ndarray) -> np.ndarray: ...
+
+    def replay(self, ref: Any, frame_every: int = 0) -> Any: ...
+
+
+def require_forces(report: dict, supported: tuple[str, ...], simulator: str) -> None:
+    """Raise :class:`Unsupported` for the first harness force of the report that the back-end
+    cannot apply."""
+    for hf in report.get("harness_forces", []):
+        if hf["kind"] not in supported:
+            what = hf.get("body") or hf.get("joint") or hf.get("v_name") or ""
+            raise Unsupported(f"{simulator} cannot apply the scene's {hf['kind'].replace('_', ' ')}"
+                              + (f" on {what}" if what else ""))
+
+
+class ExpressionForces:
+    """The scene's point and coordinate forces (expressions of t, q, v), evaluated by the core at
+    a simulator's state (``Scene.expression_forces``). ``withhold`` drops kinds on purpose: the
+    negative control of a check that must then fail."""
+
+    def __init__(self, scene: Any, report: dict, withhold: tuple[str, ...] = ()):
+        kinds = {hf["kind"] for hf in report.get("harness_forces", [])}
+        self.scene = scene
+        self.points = "point_force" in kinds and "point_force" not in withhold
+        self.generalized = "coordinate_force" in kinds and "coordinate_force" not in withhold
+        self.active = scene is not None and (self.points or self.generalized)
+
+    def at(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray | None, list]:
+        """(generalized force in our coordinates or None, [(body, world point, world force)])."""
+        if not self.active:
+            return None, []
+        d = self.scene.expression_forces(float(t), np.ascontiguousarray(q, float),
+                                         np.ascontiguousarray(v, float))
+        gen = np.asarray(d["generalized"]) if self.generalized else None
+        pts = [(b, np.asarray(p), np.asarray(f)) for b, p, f in d["points"]] if self.points else []
+        return gen, pts

@@ -1,12 +1,14 @@
 """MuJoCo 4.0 back-end: the scene's MJCF export, RK4 with u fed at every stage through
-``mjcb_control`` (process-global: always cleared in ``finally``)."""
+``mjcb_control`` (process-global: always cleared in ``finally``). The scene's point forces go
+through ``xfrc_applied`` (force at the body's CoM plus the moment of its lever arm), its coordinate
+forces and the attractors through ``qfrc_applied``, all evaluated from the stage's own state."""
 
 from __future__ import annotations
 
 import numpy as np
 import mujoco
 
-from . import BlowUp
+from . import BlowUp, ExpressionForces, require_forces
 from .replay import CoordMap, Reference, Replay
 
 #: |qacc| beyond this is treated as a blow-up (MuJoCo returns huge values at singularities)
@@ -19,12 +21,19 @@ def version() -> str:
     return mujoco.__version__
 
 
+#: harness forces this back-end applies (springs and dampers are in the MJCF itself)
+SUPPORTED = ("attractor", "point_force", "coordinate_force")
+
+
 class MujocoBackend:
     name = NAME
 
-    def __init__(self, doc: str, report: dict):
+    def __init__(self, doc: str, report: dict, scene=None, withhold: tuple[str, ...] = ()):
+        require_forces(report, SUPPORTED, "MuJoCo")
         self.report = report
         self.cm = CoordMap(report)
+        self.expr = ExpressionForces(scene, report, withhold)
+        self._withhold_attractors = "attractor" in withhold
         self.m = mujoco.MjModel.from_xml_string(doc)
         self.d = mujoco.MjData(self.m)
         m = self.m
@@ -43,6 +52,7 @@ class MujocoBackend:
                 pass
         self._jac = np.zeros((3, m.nv))
         self.body_names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, i) for i in range(m.nbody)]
+        self.body_id = {n: i for i, n in enumerate(self.body_names)}
 
     def notes(self) -> list[str]:
         ch = self.report.get("mass_changes", [])
@@ -55,6 +65,8 @@ class MujocoBackend:
     def harness(self) -> np.ndarray:
         """Generalized attractor forces from MuJoCo's own state (needs kinematics)."""
         f = np.zeros(self.m.nv)
+        if self._withhold_attractors:
+            return f
         for point, mu, bodies in self.attractors:
             for bid, mass in bodies:
                 r = self.d.xipos[bid] - point
@@ -62,6 +74,35 @@ class MujocoBackend:
                 mujoco.mj_jacBodyCom(self.m, self.d, self._jac, None, bid)
                 f += self._jac.T @ force
         return f
+
+    def expression(self, t: float) -> np.ndarray:
+        """The scene's expression forces at MuJoCo's current state (needs kinematics): point forces
+        written to ``xfrc_applied`` (at the CoM ``xipos``, with the moment (p - xipos) x f), the
+        coordinate forces returned as a generalized force in MuJoCo's dofs."""
+        d, cm = self.d, self.cm
+        d.xfrc_applied[:] = 0.0
+        f = np.zeros(self.m.nv)
+        if not self.expr.active:
+            return f
+        q = cm.q_from_sim(d.qpos)
+        gen, pts = self.expr.at(t, q, cm.v_from_sim(q, d.qvel))
+        if gen is not None:
+            f += cm.f_to_sim(q, gen)
+        for body, pw, fw in pts:
+            b = self.body_id[body]
+            d.xfrc_applied[b, :3] += fw
+            d.xfrc_applied[b, 3:] += np.cross(pw - d.xipos[b], fw)
+        return f
+
+    def _xfrc_generalized(self) -> np.ndarray:
+        """J^T of the current ``xfrc_applied`` (MuJoCo's own mapping, mj_applyFT at the CoM)."""
+        m, d = self.m, self.d
+        out = np.zeros(m.nv)
+        for b in range(1, m.nbody):
+            w = d.xfrc_applied[b]
+            if np.any(w):
+                mujoco.mj_applyFT(m, d, w[:3].copy(), w[3:].copy(), d.xipos[b].copy(), b, out)
+        return out
 
     def _set(self, t, q, v):
         self.d.time = t
@@ -77,7 +118,8 @@ class MujocoBackend:
         mujoco.mj_forward(m, d)
         M = np.zeros((m.nv, m.nv))
         mujoco.mj_fullM(m, d, M)
-        rhs_sim = -d.qfrc_bias + d.qfrc_passive + self.harness()
+        rhs_sim = -d.qfrc_bias + d.qfrc_passive + self.harness() + self.expression(t) \
+            + self._xfrc_generalized()
         P = cm.P(q)
         return P.T @ M @ P, P.T @ (rhs_sim - M @ cm.Pdot_v(q, v))
 
@@ -87,7 +129,7 @@ class MujocoBackend:
         self._set(t, q, v)
         d.qacc[:] = cm.a_to_sim(q, v, a)
         mujoco.mj_inverse(m, d)
-        f = d.qfrc_inverse.copy() - self.harness()
+        f = d.qfrc_inverse.copy() - self.harness() - self.expression(t) - self._xfrc_generalized()
         return cm.f_from_sim(q, f)
 
     def replay(self, ref: Reference, frame_every: int = 0) -> Replay:
@@ -103,7 +145,7 @@ class MujocoBackend:
 
         def control(model, data):
             u = ref.u_at(data.time)
-            data.qfrc_applied[:] = cm.f_to_sim(cur_q[0], u) + self.harness()
+            data.qfrc_applied[:] = cm.f_to_sim(cur_q[0], u) + self.harness() + self.expression(data.time)
 
         self._set(t0, ref.q[0], ref.v[0])
         mujoco.set_mjcb_control(control)

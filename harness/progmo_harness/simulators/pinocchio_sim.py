@@ -1,7 +1,9 @@
 """Pinocchio 4.1 back-end: the scene's URDF export, a harness RK4 with ``pin.aba`` as the
 acceleration oracle, Lie-group-correct (RKMK4 with ``dexpinv = inv(dIntegrate(.., ARG1))``) when the
 model has ball or free joints; springs, dampers and attractors applied by the harness from
-Pinocchio's own state as the export report prescribes."""
+Pinocchio's own state as the export report prescribes; the scene's point forces as Pinocchio
+external forces (``fext``, one spatial force per joint in its local frame) through ``aba`` and
+``rnea``, its coordinate forces added to tau."""
 
 from __future__ import annotations
 
@@ -12,7 +14,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pinocchio as pin
 
-from . import BlowUp
+from . import BlowUp, ExpressionForces, require_forces
 from .replay import CoordMap, Reference, Replay
 
 ACC_LIMIT = 1e8
@@ -29,12 +31,18 @@ def version() -> str:
     return pin.__version__
 
 
+SUPPORTED = ("attractor", "spring", "damper", "point_force", "coordinate_force")
+
+
 class PinocchioBackend:
     name = NAME
 
-    def __init__(self, doc: str, report: dict):
+    def __init__(self, doc: str, report: dict, scene=None, withhold: tuple[str, ...] = ()):
+        require_forces(report, SUPPORTED, "Pinocchio")
         self.report = report
         self.cm = CoordMap(report)
+        self.expr = ExpressionForces(scene, report, withhold)
+        self._withhold = withhold
         rj = report.get("root_joint")
         fd, path = tempfile.mkstemp(suffix=".urdf")
         try:
@@ -77,9 +85,13 @@ class PinocchioBackend:
                 self.springs.append((hf["sim_q"], hf["sim_v"], hf["stiffness"], hf["spring_ref"]))
             elif hf["kind"] == "damper":
                 self.dampers.append((hf["sim_v"], hf["nv"], hf["damping"]))
+        if "attractor" in withhold:
+            self.attractors = []
         self.data = model.createData()
         self.body_frames = [(f.name, i) for i, f in enumerate(model.frames)
                             if f.type == pin.FrameType.BODY and f.name != "universe"]
+        #: our body name -> the Pinocchio joint that carries its link
+        self.body_joint = {name: model.frames[i].parentJoint for name, i in self.body_frames}
 
     def notes(self) -> list[str]:
         s = f"Pinocchio {pin.__version__}, harness RK4{' (RKMK4, Lie group)' if self.lie else ''} with pin.aba"
@@ -105,13 +117,42 @@ class PinocchioBackend:
                     f += J[:3].T @ force
         return f
 
+    def expression(self, t, qs, vs):
+        """The scene's expression forces at Pinocchio's state: (fext or None, generalized force of
+        the coordinate forces in Pinocchio's dofs). A world force f at world point p is the spatial
+        force (f, p x f) about the world origin, moved into each joint's local frame (oMi^-1)."""
+        f = np.zeros(self.model.nv)
+        if not self.expr.active:
+            return None, f
+        q = self.cm.q_from_sim(qs)
+        gen, pts = self.expr.at(t, q, self.cm.v_from_sim(q, vs))
+        if gen is not None:
+            f += self.cm.f_to_sim(q, gen)
+        if not pts:
+            return None, f
+        pin.forwardKinematics(self.model, self.data, qs)
+        fext = [pin.Force.Zero() for _ in range(self.model.njoints)]
+        for body, pw, fw in pts:
+            j = self.body_joint[body]
+            fext[j] += self.data.oMi[j].actInv(pin.Force(fw, np.cross(pw, fw)))
+        return fext, f
+
+    def _external(self, t, qs, vs):
+        """Generalized force of the expression forces, by Pinocchio's own mapping: the difference of
+        rnea with and without fext, plus the coordinate forces."""
+        fext, f = self.expression(t, qs, vs)
+        if fext is not None:
+            z = np.zeros(self.model.nv)
+            f = f + pin.rnea(self.model, self.data, qs, vs, z) - pin.rnea(self.model, self.data, qs, vs, z, fext)
+        return f
+
     def model_terms(self, t, q, v):
         model, data, cm = self.model, self.data, self.cm
         qs, vs = cm.q_to_sim(q), cm.v_to_sim(q, v)
         M = pin.crba(model, data, qs)
         M = np.triu(M) + np.triu(M, 1).T
         b = pin.rnea(model, data, qs, vs, np.zeros(model.nv))
-        rhs_sim = -b + self.harness(qs, vs)
+        rhs_sim = -b + self.harness(qs, vs) + self._external(t, qs, vs)
         P = cm.P(q)
         return P.T @ M @ P, P.T @ (rhs_sim - M @ cm.Pdot_v(q, v))
 
@@ -123,15 +164,19 @@ class PinocchioBackend:
         P = cm.P(q)
         J = np.ascontiguousarray(B @ P.T)
         g = -(gamma + J @ cm.Pdot_v(q, v))
-        tau0 = self.harness(qs, vs)
+        tau0 = self.harness(qs, vs) + self._external(t, qs, vs)
         pin.forwardDynamics(model, data, qs, vs, tau0, J, g, 0.0)
         lam = np.array(data.lambda_c).copy()
         return cm.f_from_sim(q, J.T @ lam)
 
     def _acc(self, t, qs, vs, ref):
         q = self.cm.q_from_sim(qs)
-        tau = self.cm.f_to_sim(q, ref.u_at(t)) + self.harness(qs, vs)
-        a = pin.aba(self.model, self.data, qs, vs, tau)
+        fext, fc = self.expression(t, qs, vs)
+        tau = self.cm.f_to_sim(q, ref.u_at(t)) + self.harness(qs, vs) + fc
+        if fext is None:
+            a = pin.aba(self.model, self.data, qs, vs, tau)
+        else:
+            a = pin.aba(self.model, self.data, qs, vs, tau, fext)
         if not np.all(np.abs(a) < ACC_LIMIT):
             raise BlowUp(t, f"|ddq| = {np.abs(a).max():.3g} > {ACC_LIMIT:g} (or non-finite)")
         return np.array(a)
