@@ -214,7 +214,7 @@ def rows_of(run: Run, r: CheckResult) -> list[dict[str, Any]]:
     breaches = {b.metric for b in r.breaches}
     comps = {c["metric"]: c for c in run.comparisons.get((r.scene, r.simulator), [])}
     names = list(r.metrics) + [m for m in budgets if m not in r.metrics]
-    names += [m for m in comps if m not in names]
+    names += [m for m in comps if m not in names and m not in r.info]
     out = []
     for m in names:
         b, c = budgets.get(m), comps.get(m, {})
@@ -234,9 +234,10 @@ def rows_of(run: Run, r: CheckResult) -> list[dict[str, Any]]:
             }
         )
     for m, v in r.info.items():
+        c = comps.get(m, {})
         out.append({"metric": m, "value": v, "budget": None, "budget_reason": "information, not judged",
-                    "budget_source": "", "use": None, "within_budget": None, "baseline": None,
-                    "threshold": None, "baseline_state": ""})
+                    "budget_source": "", "use": None, "within_budget": None, "baseline": c.get("baseline"),
+                    "threshold": None, "baseline_state": "info" if c else ""})
     return out
 
 
