@@ -31,21 +31,48 @@ pub fn quat_rate<S: Scalar>(q: &[S], w: &[S]) -> [S; 4] {
     ]
 }
 
-/// Exp(delta) as a unit quaternion.
+/// Exp(delta) as a unit quaternion: the rotation by the rotation vector delta. The series branch
+/// reaches |delta| = 0.02 so that dual parts (whose direct formula cancels like 1/|delta|^2) stay
+/// accurate to about 1e-12 just above it; its truncation error is below 1e-20.
 pub fn quat_exp<S: Scalar>(d: &[S]) -> [S; 4] {
-    let th2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-    let (cw, s) = if re(th2) < 1e-8 {
-        // cos(th/2) = 1 - th^2/8 + th^4/384; sin(th/2)/th = 1/2 - th^2/48 + th^4/3840.
-        (
-            c::<S>(1.0) - th2 / 8.0 + th2 * th2 / 384.0,
-            c::<S>(0.5) - th2 / 48.0 + th2 * th2 / 3840.0,
-        )
+    let x2 = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) * c::<S>(0.25);
+    let (w, s) = if re(x2) < 1e-4 {
+        // cos x and sin(x)/x as series in x², truncation error < 1e-20
+        let cw =
+            c::<S>(1.0) - x2 * (c::<S>(0.5) - x2 * (c::<S>(1.0 / 24.0) - x2 * c::<S>(1.0 / 720.0)));
+        let sc = c::<S>(1.0)
+            - x2 * (c::<S>(1.0 / 6.0) - x2 * (c::<S>(1.0 / 120.0) - x2 * c::<S>(1.0 / 5040.0)));
+        (cw, sc)
     } else {
-        let th = th2.sqrt();
-        let half = th * 0.5;
-        (half.cos(), half.sin() / th)
+        let x = x2.sqrt();
+        (x.cos(), x.sin() / x)
     };
-    [cw, d[0] * s, d[1] * s, d[2] * s]
+    let h = s * c::<S>(0.5);
+    [w, d[0] * h, d[1] * h, d[2] * h]
+}
+
+/// Rotation vector `δ` with `exp(δ) = q / |q|`, taking the shorter way (`w >= 0`); `q` need not be
+/// unit.
+pub fn quat_log<S: Scalar>(q: &[S; 4]) -> [S; 3] {
+    let sign = if re(q[0]) < 0.0 {
+        c::<S>(-1.0)
+    } else {
+        c::<S>(1.0)
+    };
+    let (w, u) = (q[0] * sign, [q[1] * sign, q[2] * sign, q[3] * sign]);
+    let s2 = u[0] * u[0] + u[1] * u[1] + u[2] * u[2];
+    let f = if re(w) > 0.0 && re(s2 / (w * w)) < 1e-4 {
+        // 2 atan(t)/(t w) with t = s/w as a series in t², truncation error < 1e-20
+        let t2 = s2 / (w * w);
+        let at = c::<S>(1.0)
+            - t2 * (c::<S>(1.0 / 3.0)
+                - t2 * (c::<S>(0.2) - t2 * (c::<S>(1.0 / 7.0) - t2 * c::<S>(1.0 / 9.0))));
+        at * c::<S>(2.0) / w
+    } else {
+        let s = s2.sqrt();
+        s.atan2(w) * c::<S>(2.0) / s
+    };
+    [u[0] * f, u[1] * f, u[2] * f]
 }
 
 /// d(delta)/dt = J_r^-1(delta) omega.

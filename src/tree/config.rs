@@ -4,51 +4,10 @@
 
 use super::kinematics::ensure_vec;
 use super::model::{JointKind, Model};
-use super::spatial::quat_mul;
-use crate::scalar::{c, Scalar};
+use crate::model::lie::quat_mul;
+pub use crate::model::lie::{quat_exp, quat_log};
+use crate::scalar::Scalar;
 use nalgebra::DVector;
-
-/// `exp((0, δ/2))`: quaternion (w, x, y, z) of the rotation by the rotation vector `δ`.
-pub fn quat_exp<S: Scalar>(d: &[S]) -> [S; 4] {
-    let x2 = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) * c::<S>(0.25);
-    let (w, s) = if x2.re() < 1e-4 {
-        // cos x and sin(x)/x as series in x², truncation error < 1e-20
-        let cw =
-            c::<S>(1.0) - x2 * (c::<S>(0.5) - x2 * (c::<S>(1.0 / 24.0) - x2 * c::<S>(1.0 / 720.0)));
-        let sc = c::<S>(1.0)
-            - x2 * (c::<S>(1.0 / 6.0) - x2 * (c::<S>(1.0 / 120.0) - x2 * c::<S>(1.0 / 5040.0)));
-        (cw, sc)
-    } else {
-        let x = x2.sqrt();
-        (x.cos(), x.sin() / x)
-    };
-    let h = s * c::<S>(0.5);
-    [w, d[0] * h, d[1] * h, d[2] * h]
-}
-
-/// Rotation vector `δ` with `exp(δ) = q / |q|`, taking the shorter way (`w >= 0`); `q` need not be
-/// unit.
-pub fn quat_log<S: Scalar>(q: &[S; 4]) -> [S; 3] {
-    let sign = if q[0].re() < 0.0 {
-        c::<S>(-1.0)
-    } else {
-        c::<S>(1.0)
-    };
-    let (w, u) = (q[0] * sign, [q[1] * sign, q[2] * sign, q[3] * sign]);
-    let s2 = u[0] * u[0] + u[1] * u[1] + u[2] * u[2];
-    let f = if w.re() > 0.0 && (s2 / (w * w)).re() < 1e-4 {
-        // 2 atan(t)/(t w) with t = s/w as a series in t², truncation error < 1e-20
-        let t2 = s2 / (w * w);
-        let at = c::<S>(1.0)
-            - t2 * (c::<S>(1.0 / 3.0)
-                - t2 * (c::<S>(0.2) - t2 * (c::<S>(1.0 / 7.0) - t2 * c::<S>(1.0 / 9.0))));
-        at * c::<S>(2.0) / w
-    } else {
-        let s = s2.sqrt();
-        s.atan2(w) * c::<S>(2.0) / s
-    };
-    [u[0] * f, u[1] * f, u[2] * f]
-}
 
 /// `out = q ⊕ δ`: hinge/slide `q + δ`; ball `quat ⊗ exp(δ)` (δ a body-frame rotation vector); free
 /// `p + δ_lin` (world frame), `quat ⊗ exp(δ_ang)`. `d/dε (q ⊕ ε v)` at 0 equals [`super::qdot`].

@@ -57,16 +57,6 @@ pub fn rot_quat<S: Scalar>(w: S, x: S, y: S, z: S) -> Matrix3<S> {
     Matrix3::identity() + (k * w + k * k) * s
 }
 
-/// Hamilton product `p ⊗ q` of quaternions `(w, x, y, z)`.
-pub fn quat_mul<S: Scalar>(p: &[S; 4], q: &[S; 4]) -> [S; 4] {
-    [
-        p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3],
-        p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2],
-        p[0] * q[2] - p[1] * q[3] + p[2] * q[0] + p[3] * q[1],
-        p[0] * q[3] + p[1] * q[2] - p[2] * q[1] + p[3] * q[0],
-    ]
-}
-
 /// Unit quaternion `(w, x, y, z)` with `w >= 0` of a rotation matrix (Shepperd's method: the
 /// largest of the four squared components is taken through a square root, the others by division).
 pub fn quat_from_rot<S: Scalar>(r: &Matrix3<S>) -> [S; 4] {

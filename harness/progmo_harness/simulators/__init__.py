@@ -52,6 +52,13 @@ class Backend(Protocol):
     def replay(self, ref: Any, frame_every: int = 0) -> Any: ...
 
 
+def attractor_force(point: np.ndarray, mu: float, mass: float, com: np.ndarray) -> np.ndarray:
+    """World-frame Newtonian attraction on a body of mass ``mass`` whose CoM is at ``com``:
+    -mu m r / |r|^3, r = com - point (the export report's formula, ``HarnessForce::Attractor``)."""
+    r = com - point
+    return -mu * mass * r / np.linalg.norm(r) ** 3
+
+
 def require_forces(report: dict, supported: tuple[str, ...], simulator: str) -> None:
     """Raise :class:`Unsupported` for the first harness force of the report that the back-end
     cannot apply."""

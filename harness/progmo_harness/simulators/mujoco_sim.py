@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import mujoco
 
-from . import BlowUp, ExpressionForces, require_forces
+from . import BlowUp, ExpressionForces, attractor_force, require_forces
 from .replay import CoordMap, Reference, Replay
 
 #: |qacc| beyond this is treated as a blow-up (MuJoCo returns huge values at singularities)
@@ -69,8 +69,7 @@ class MujocoBackend:
             return f
         for point, mu, bodies in self.attractors:
             for bid, mass in bodies:
-                r = self.d.xipos[bid] - point
-                force = -mu * mass * r / np.linalg.norm(r) ** 3
+                force = attractor_force(point, mu, mass, self.d.xipos[bid])
                 mujoco.mj_jacBodyCom(self.m, self.d, self._jac, None, bid)
                 f += self._jac.T @ force
         return f

@@ -14,7 +14,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pinocchio as pin
 
-from . import BlowUp, ExpressionForces, require_forces
+from . import BlowUp, ExpressionForces, attractor_force, require_forces
 from .replay import CoordMap, Reference, Replay
 
 ACC_LIMIT = 1e8
@@ -111,8 +111,7 @@ class PinocchioBackend:
             pin.updateFramePlacements(model, data)
             for point, mu, bodies in self.attractors:
                 for fid, mass in bodies:
-                    r = data.oMf[fid].translation - point
-                    force = -mu * mass * r / np.linalg.norm(r) ** 3
+                    force = attractor_force(point, mu, mass, data.oMf[fid].translation)
                     J = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
                     f += J[:3].T @ force
         return f
