@@ -5,6 +5,10 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 bash harness/setup.sh
+echo "== static checks: cargo fmt, mypy, stubtest (the .pyi against the built extension) ==" >&2
+cargo fmt --all -- --check
+.venv/bin/python -m mypy
+.venv/bin/python -m mypy.stubtest progmo_harness._core --allowlist harness/stubtest-allowlist.txt
 echo "== cargo test (Rust core, pure Rust) ==" >&2
 cargo test --release
 echo "== headless Chromium for the report test ==" >&2

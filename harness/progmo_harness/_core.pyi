@@ -3,7 +3,7 @@
 Shapes: n = number of samples, nq / nv = sizes of q / v, s = number of constraint rows.
 """
 
-from typing import Sequence, Any, Literal, TypedDict
+from typing import Sequence, Any, Literal, TypedDict, final
 
 import numpy as np
 import numpy.typing as npt
@@ -66,10 +66,13 @@ class Dynamics(TypedDict):
     B: F64  # (s, nv) constraint Jacobian
     gamma: F64  # (s,) B dv/dt = gamma
 
+__all__ = ["Scene", "SceneError", "ExportUnsupported", "version", "chain_toml", "drift_cost"]
+
+@final
 class Scene:
     """A loaded, validated scene file."""
 
-    def __init__(self, path: str) -> None: ...
+    def __new__(cls, path: str) -> "Scene": ...
     @property
     def name(self) -> str: ...
     @property

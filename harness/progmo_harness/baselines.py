@@ -96,7 +96,7 @@ def compare(result: CheckResult, baseline: dict[str, Any] | None) -> list[Compar
             state = "info"
         elif b is None or not math.isfinite(b):
             state = "new"
-        elif v is None or not math.isfinite(v) or v > thr:
+        elif v is None or not math.isfinite(v) or thr is None or v > thr:
             state = "regression"
         elif v * FACTOR < b and b - v > floor:
             state = "improved"

@@ -265,7 +265,10 @@ def _accept(run: rp.Run, base_dir: Path, prov: dict) -> None:
             if r.status in ("fail", "error"):
                 print(f"accept: {r.scene} / {r.simulator}: {r.status}, baseline not updated")
             continue
-        path, changes = bl.accept(base_dir, r, keep)
+        accepted = bl.accept(base_dir, r, keep)
+        if accepted is None:  # pragma: no cover - accept() writes every pass
+            continue
+        path, changes = accepted
         run.accepted.append((r.scene, r.simulator))
         print(f"accept: {r.scene} / {r.simulator} -> {path}: " + ("; ".join(changes) if changes else "unchanged"))
     if run.accepted:

@@ -246,7 +246,7 @@ def main(argv: list[str] | None = None) -> int:
             breaches.append((sim, b, _value_at(rec, r, b.metric, b.first_time)))
     if breaches:
         timed = [x for x in breaches if x[1].first_time is not None]
-        sim, b, at = min(timed, key=lambda x: x[1].first_time) if timed else breaches[0]
+        sim, b, at = min(timed, key=lambda x: float(x[1].first_time or 0.0)) if timed else breaches[0]
         when = f"t = {b.first_time:.6g} s" if b.first_time is not None else "(no time)"
         there = f"value there {at:.3g}, " if at is not None else ""
         print(f"first tolerance breach: {sim} {b.metric} at {when}: {there}worst {b.value:.3g} "

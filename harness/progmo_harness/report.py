@@ -437,16 +437,20 @@ def render_html(run: Run) -> str:
     a("<th>checked span</th><th>max residual</th><th>worst budget use</th><th>warnings</th></tr></thead><tbody>")
     for s in run.scene_names():
         a(f"<tr><td><a href='#{_anchor(s)}'>{_e(s)}</a></td>")
-        res, use, spans, warns = [], [], [], set()
+        res: list[float] = []
+        use: list[float] = []
+        spans: list[str] = []
+        warns: set[str] = set()
         for m in run.simulators:
             r = run.result(s, m)
             v = run.verdict(r)
             a(f"<td class='c-{v.replace(' ', '-')}'>{_badge(v)}</td>")
             if r is not None:
-                if max_residual(r) is not None:
-                    res.append(max_residual(r))
-                if budget_use(r) is not None:
-                    use.append(budget_use(r))
+                mr, bu = max_residual(r), budget_use(r)
+                if mr is not None:
+                    res.append(mr)
+                if bu is not None:
+                    use.append(bu)
                 if r.span_text():
                     spans.append(r.span_text())
                 warns.update(r.warnings)
@@ -585,14 +589,18 @@ def render_markdown(run: Run) -> str:
     icons = {"pass": "✅", "fail": "❌", "error": "💥", "not_checked": "🚫", "declared": "⏭️",
              "regression": "📈", "not run": "⬜"}
     for s in run.scene_names():
-        cells, res, spans, warns = [], [], [], set()
+        cells: list[str] = []
+        res: list[float] = []
+        spans: list[str] = []
+        warns: set[str] = set()
         for m in run.simulators:
             r = run.result(s, m)
             v = run.verdict(r)
             cells.append(f"{icons[v]} {label(v)}")
             if r is not None:
-                if max_residual(r) is not None:
-                    res.append(max_residual(r))
+                mr = max_residual(r)
+                if mr is not None:
+                    res.append(mr)
                 if r.span_text():
                     spans.append(r.span_text())
                 warns.update(r.warnings)

@@ -12,7 +12,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
@@ -119,7 +119,7 @@ def save_figure(fig, path: Path, prov: Provenance) -> Path:
 # Timing
 
 
-def cpu_time(fn: Callable[[], object], repeats: int, budget_s: float = 1.0) -> tuple[float, object]:
+def cpu_time(fn: Callable[[], Any], repeats: int, budget_s: float = 1.0) -> tuple[float, Any]:
     """Median process CPU time of up to `repeats` calls of fn (fewer once `budget_s` of CPU is
     spent: slow solves are timed once or twice), and the last result."""
     times = []

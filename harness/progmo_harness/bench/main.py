@@ -14,6 +14,8 @@ Run times measured on the shared 2-core x86-64 machine (2026-11-21):
 
 from __future__ import annotations
 
+from typing import Any
+
 import argparse
 import sys
 import time
@@ -24,17 +26,17 @@ import numpy as np
 PARTS = ("workprecision", "scipy", "conditioning", "scaling", "testset", "drift")
 
 # sweep sizes; --quick is the default a test or a shared 2-core machine can afford
-QUICK = dict(scenes=("double_pendulum", "chain_8"), tols=[1e-4, 1e-6, 1e-8, 1e-10], repeats=3,
+QUICK: dict[str, Any] = dict(scenes=("double_pendulum", "chain_8"), tols=[1e-4, 1e-6, 1e-8, 1e-10], repeats=3,
              scipy_tols=[1e-4, 1e-6, 1e-8, 1e-10], radau_min_tol=1e-8, states=3,
              testset_tols=[1e-4, 1e-6, 1e-8, 1e-10], drift_rounds=3)
 # full: every bundled scene in the work-precision sweep (scipy only where a hand-written pipeline exists)
-FULL = dict(scenes=("double_pendulum", "chain_8", "example_2_1", "example_2_1_through_rd0", "example_3_1_free",
+FULL: dict[str, Any] = dict(scenes=("double_pendulum", "chain_8", "example_2_1", "example_2_1_through_rd0", "example_3_1_free",
                     "heavy_top", "planar_arm_line", "knife_edge", "appell_hamel", "slider_crank"),
             tols=[10.0 ** -k for k in range(4, 13)], repeats=5,
             scipy_tols=[10.0 ** -k for k in range(4, 13)], radau_min_tol=1e-10, states=5,
             testset_tols=[10.0 ** -k for k in range(4, 13)], drift_rounds=7)
 # --smoke: the smallest end-to-end run (tests): one scene, two tolerances, two chain lengths
-SMOKE = dict(scenes=("double_pendulum",), tols=[1e-5, 1e-8], repeats=1, scipy_tols=[1e-5, 1e-8],
+SMOKE: dict[str, Any] = dict(scenes=("double_pendulum",), tols=[1e-5, 1e-8], repeats=1, scipy_tols=[1e-5, 1e-8],
              radau_min_tol=1e-8, states=2, scaling_ns=[2, 7], conditioning="smoke", testset_tols=[1e-6], drift_rounds=1)
 
 
@@ -222,14 +224,14 @@ def main(argv: list[str] | None = None) -> int:
                  + page.table(hdr, trs) + page.img("scaling.png") + "<p>Data: <a href='scaling.csv'>scaling.csv</a>.</p>")
         sections.append(("4. Scaling: one RHS vs chain length", inner))
         for n in scaling.MARK:
-            r = scaling.at(rows, n)
-            if r:
-                ratio = r["progmo_null_space_s"] / r["pin_fd_u_s"]
+            at_n = scaling.at(rows, n)
+            if at_n:
+                ratio = at_n["progmo_null_space_s"] / at_n["pin_fd_u_s"]
                 targets.append(f"one RHS <= Pinocchio forwardDynamics (+u) at n = {n}: progmo null_space / pin = "
                                f"{ratio:.2f}: {'met' if ratio <= 1 else f'MISSED by {ratio:.2f}x'}")
-                summary.append(f"scaling n = {n}: progmo null_space {r['progmo_null_space_s'] * 1e6:.1f} us, kkt "
-                               f"{r['progmo_kkt_s'] * 1e6:.1f} us; pin.forwardDynamics + u {r['pin_fd_u_s'] * 1e6:.1f} us "
-                               f"(Python loop); ratio progmo/pin = {r['progmo_null_space_s'] / r['pin_fd_u_s']:.2f}")
+                summary.append(f"scaling n = {n}: progmo null_space {at_n['progmo_null_space_s'] * 1e6:.1f} us, kkt "
+                               f"{at_n['progmo_kkt_s'] * 1e6:.1f} us; pin.forwardDynamics + u "
+                               f"{at_n['pin_fd_u_s'] * 1e6:.1f} us (Python loop); ratio progmo/pin = {ratio:.2f}")
         summary.append(f"scaling: Python call overhead {sc['python_overhead_s'] * 1e6:.3f} us per call (not subtracted)")
 
     if "testset" in only:

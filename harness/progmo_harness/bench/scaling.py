@@ -49,7 +49,7 @@ def measure(scene, formulations=("null_space", "kkt"), budget_s: float = 0.05, r
     from .scipy_pipeline import pipeline_for
 
     t, q, v = scene.t0, np.array(scene.q0), np.array(scene.v0)
-    row = dict(n=len(v))
+    row: dict[str, float] = dict(n=len(v))
     # iterations sized so each loop takes about budget_s
     probe = scene.rhs_benchmark(10, "null_space")
     iters = int(max(20, min(200000, budget_s / max(probe, 1e-9))))

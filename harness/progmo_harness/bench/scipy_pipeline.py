@@ -23,7 +23,7 @@ integrator's tolerance (a user adding Baumgarte terms or projection would pay mo
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
@@ -43,7 +43,7 @@ class Pipeline:
 
     name: str
     model: object
-    data: object
+    data: Any  # pinocchio.Data
     rows: list[Row]
     nq: int
     J: np.ndarray = field(init=False)
@@ -176,7 +176,7 @@ def ratios(scene_name: str, progmo_rows: list[dict], scipy_rows: list[dict],
     the best of scipy vs the best of progmo (any formulation and integrator)."""
     from .common import common_error_levels, time_at_error
 
-    def curve(rows):
+    def curve(rows) -> tuple[list[float], list[float]]:
         return [r["error"] for r in rows], [r["cpu_s"] for r in rows]
 
     pairs = []

@@ -16,6 +16,8 @@ elastic terms are not available), so it is not part of this sweep.
 
 from __future__ import annotations
 
+from typing import Literal
+
 import csv
 from pathlib import Path
 
@@ -23,7 +25,7 @@ import numpy as np
 
 from .common import Provenance, cpu_time, log, repo_root, save_figure, write_csv
 
-METHODS = ("dop853", "radau5")
+METHODS: tuple[Literal["dop853", "radau5"], ...] = ("dop853", "radau5")
 
 
 def reference_csv() -> Path:

@@ -14,6 +14,8 @@ atol = rtol in the sweep (states are O(1)).
 
 from __future__ import annotations
 
+from typing import Any
+
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -136,7 +138,7 @@ HEADER = ["scene", "formulation", "integrator", "drift", "rtol", "atol", "code",
 
 def run(scenes, tols, out: Path, prov: Provenance, repeats: int = 3) -> dict:
     """Sweep every scene; write CSV and PNG; return {scene: {rows, reference, residual, files}}."""
-    results = {}
+    results: dict[str, dict[str, Any]] = {}
     all_rows = []
     for scene in scenes:
         log(f"[workprecision] {scene.name}: references")
