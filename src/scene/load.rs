@@ -79,6 +79,8 @@ pub(super) fn load(src: Source) -> R<Scene> {
     if file.name.trim().is_empty() {
         return Err(src.general("name", "the scene needs a non-empty name"));
     }
+    let settings = solver(&src, &file)?;
+    validate_settings(&src, &file, &settings)?;
     let params = parameters(&src, &file.parameters)?;
     let model = file.model.get_ref();
     let kind = model.kind.get_ref().as_str();
@@ -87,7 +89,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
             let (m, mut sym) = lagrangian(&src, model, &params)?;
             let (c, spans) = rows(&src, &file, &mut sym)?;
             let (q0, v0) = initial(&src, &file, &params, &m.q_names(), &m.v_names(), None)?;
-            let (t0, t1) = span(&src, &file)?;
+            let (t0, t1) = span(&file);
             let p = Problem {
                 model: m,
                 constraints: c,
@@ -111,7 +113,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
                 &m.v_names(),
                 Some((m.tree(), neutral.as_slice())),
             )?;
-            let (t0, t1) = span(&src, &file)?;
+            let (t0, t1) = span(&file);
             let p = Problem {
                 model: m,
                 constraints: c,
@@ -133,7 +135,6 @@ pub(super) fn load(src: Source) -> R<Scene> {
     };
     let n_system = file.constraints.len();
     crate::with_problem!(&system, p => check_acceleration_rows(&src, p, &spans, n_system)?);
-    let settings = solver(&src, &file)?;
     let tolerances = tolerances(&src, &file)?;
     Ok(Scene {
         name: file.name.clone(),
@@ -816,27 +817,42 @@ fn initial(
     Ok((q, v.into_iter().map(|x| x.unwrap_or(0.0)).collect()))
 }
 
-fn span(src: &Source, file: &SceneFile) -> R<(f64, f64)> {
+/// The time span as written (checked with the settings by [`validate_settings`]).
+fn span(file: &SceneFile) -> (f64, f64) {
     let t = file.time.get_ref();
-    let (t0, t1) = (t.t0, *t.t1.get_ref());
-    if !(t1 > t0) || !t0.is_finite() || !t1.is_finite() {
-        return Err(src.error(
-            t.t1.span(),
-            "time.t1",
-            format!("t1 = {t1} must be after t0 = {t0}"),
-        ));
-    }
-    if let Some(s) = &t.output_dt {
-        let dt = *s.get_ref();
-        if !(dt > 0.0) || !dt.is_finite() {
-            return Err(src.error(
-                s.span(),
-                "time.output_dt",
-                format!("must be positive, got {dt}"),
-            ));
-        }
-    }
-    Ok((t0, t1))
+    (t.t0.as_ref().map_or(0.0, |x| *x.get_ref()), *t.t1.get_ref())
+}
+
+/// [`crate::solve::validate`] on the file's span and settings, the error located at its key.
+fn validate_settings(src: &Source, file: &SceneFile, settings: &Settings) -> R<()> {
+    use crate::solve::SettingsField as F;
+    let Err(e) = crate::solve::validate(span(file), settings) else {
+        return Ok(());
+    };
+    let t = file.time.get_ref();
+    let f = &file.solver;
+    let at = |x: &Option<Spanned<f64>>| x.as_ref().map(|x| x.span());
+    let place = match e.field {
+        F::T0 => at(&t.t0),
+        F::T1 => Some(t.t1.span()),
+        F::OutputDt => at(&t.output_dt),
+        F::MaxSamples => t.max_samples.as_ref().map(|x| x.span()),
+        F::Step => at(&f.step).or(f.integrator.as_ref().map(|x| x.span())),
+        F::Rtol => at(&f.rtol),
+        F::Atol => at(&f.atol),
+        F::MaxStep => at(&f.max_step),
+        F::ProjectionTol => at(&f.projection_tol),
+        F::BaumgarteAlpha => at(&f.baumgarte_alpha),
+        F::BaumgarteBeta => at(&f.baumgarte_beta),
+        F::MaxDrift => at(&f.max_drift),
+        _ => None,
+    };
+    // A span or rate that is too long is about the time table as a whole when no key is at fault.
+    let place = place.or_else(|| (e.field == F::MaxSamples).then(|| file.time.span()));
+    Err(match place {
+        Some(span) => src.error(span, e.field.key(), e.message),
+        None => src.general(e.field.key(), e.message),
+    })
 }
 
 fn choose<T: Copy>(
@@ -892,6 +908,7 @@ fn solver(src: &Source, file: &SceneFile) -> R<Settings> {
         ("projection_tol", &f.projection_tol),
         ("max_drift", &f.max_drift),
     ] {
+        // Checked even when unused (a `step` without rk4); validate() checks what is used.
         if let Some(x) = x {
             let v = *x.get_ref();
             if !(v > 0.0) || !v.is_finite() {
@@ -901,6 +918,18 @@ fn solver(src: &Source, file: &SceneFile) -> R<Settings> {
                     format!("must be positive, got {v}"),
                 ));
             }
+        }
+    }
+    for (name, x) in [
+        ("baumgarte_alpha", &f.baumgarte_alpha),
+        ("baumgarte_beta", &f.baumgarte_beta),
+    ] {
+        if let Some(x) = x.as_ref().filter(|x| !x.get_ref().is_finite()) {
+            return Err(src.error(
+                x.span(),
+                &format!("solver.{name}"),
+                format!("must be a finite number, got {}", x.get_ref()),
+            ));
         }
     }
     let step = num(&f.step).unwrap_or(0.0);
@@ -949,6 +978,15 @@ fn solver(src: &Source, file: &SceneFile) -> R<Settings> {
         None => Output::Steps,
     };
     s.assemble = file.initial.get_ref().assemble;
+    if let Some(n) = &file.time.get_ref().max_samples {
+        s.max_samples = usize::try_from(*n.get_ref()).map_err(|_| {
+            src.error(
+                n.span(),
+                "time.max_samples",
+                format!("must be a positive count, got {}", n.get_ref()),
+            )
+        })?;
+    }
     Ok(s)
 }
 
