@@ -32,7 +32,7 @@ seed() {
 run() {
     local t="$1"
     mkdir -p "corpus/$t"
-    cargo +nightly fuzz run "$t" "corpus/$t" "seeds/$t" -- \
+    cargo +nightly fuzz run -s none "$t" "corpus/$t" "seeds/$t" -- \
         -runs="$runs" -max_len=8192 -timeout=10 -rss_limit_mb=2048 \
         -print_final_stats=1
 }
