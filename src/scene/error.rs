@@ -146,6 +146,10 @@ impl Source {
         match e.span() {
             Some(span) => {
                 let (field, on_header) = self.field_at(span.start);
+                if missing.is_some() && !on_header && field.is_empty() {
+                    // A missing top-level key: the span is the whole document, no place to show.
+                    return self.general(&join(field), msg);
+                }
                 let field = if on_header { join(field) } else { field };
                 self.error(span, &field, msg)
             }
@@ -316,5 +320,29 @@ pub fn io_error(file: &Path, e: &std::io::Error) -> SceneError {
         field: String::new(),
         message: format!("cannot read the scene file: {e}"),
         excerpt: String::new(),
+    }
+}
+
+/// A file that is not valid UTF-8: located at the first invalid byte.
+pub fn utf8_error(file: &Path, bytes: &[u8], e: std::str::Utf8Error) -> SceneError {
+    let at = e.valid_up_to();
+    let valid = String::from_utf8_lossy(&bytes[..at]).into_owned();
+    let line_start = valid.rfind('\n').map_or(0, |i| i + 1);
+    let line = valid.matches('\n').count() + 1;
+    let column = valid[line_start..].chars().count() + 1;
+    SceneError {
+        file: file.to_path_buf(),
+        line,
+        column,
+        field: String::new(),
+        message: format!(
+            "the scene file is not valid UTF-8 (byte 0x{:02x}); save it as UTF-8",
+            bytes[at]
+        ),
+        excerpt: format!(
+            "    {}\n    {}^",
+            &valid[line_start..],
+            " ".repeat(column - 1)
+        ),
     }
 }

@@ -612,6 +612,23 @@ fn tree_scene(
             _ => (None, e.to_string()),
         };
         let idx = body.and_then(|b| m.bodies.iter().position(|x| x.get_ref().name == b));
+        // Bodies are sorted parents first here, so an unplaced parent is missing or in a cycle.
+        let msg = match idx.map(|i| &m.bodies[i].get_ref().parent) {
+            Some(parent) if msg.contains("unknown parent") => {
+                if m.bodies.iter().any(|b| &b.get_ref().name == parent) {
+                    format!(
+                        "the parents of body '{}' form a cycle through '{parent}'",
+                        m.bodies[idx.unwrap_or(0)].get_ref().name
+                    )
+                } else {
+                    format!(
+                        "body '{}': unknown parent '{parent}'",
+                        m.bodies[idx.unwrap_or(0)].get_ref().name
+                    )
+                }
+            }
+            _ => msg,
+        };
         match idx {
             // Inertia problems point at the inertia itself.
             Some(i) if msg.contains("inertia") && m.bodies[i].get_ref().inertia.is_some() => {

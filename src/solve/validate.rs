@@ -109,7 +109,7 @@ fn positive(field: SettingsField, x: f64) -> Result<(), SettingsError> {
     if x > 0.0 && x.is_finite() {
         Ok(())
     } else {
-        Err(err(field, x, format!("must be positive, got {x}")))
+        Err(err(field, x, format!("must be positive, got {x:?}")))
     }
 }
 
@@ -117,7 +117,7 @@ fn finite(field: SettingsField, x: f64) -> Result<(), SettingsError> {
     if x.is_finite() {
         Ok(())
     } else {
-        Err(err(field, x, format!("must be a finite number, got {x}")))
+        Err(err(field, x, format!("must be a finite number, got {x:?}")))
     }
 }
 
@@ -128,7 +128,7 @@ fn advances(field: SettingsField, (t0, t1): (f64, f64), h: f64) -> Result<(), Se
             return Err(err(
                 field,
                 h,
-                format!("{h} cannot advance time: t + {h} == t at t = {t}"),
+                format!("{h:?} cannot advance time: t + {h:?} == t at t = {t:?}"),
             ));
         }
     }
@@ -149,10 +149,14 @@ pub fn validate(span: (f64, f64), s: &Settings) -> Result<(), SettingsError> {
     let (t0, t1) = span;
     finite(T0, t0)?;
     if !t1.is_finite() {
-        return Err(err(T1, t1, format!("must be a finite number, got {t1}")));
+        return Err(err(T1, t1, format!("must be a finite number, got {t1:?}")));
     }
     if !(t1 > t0) {
-        return Err(err(T1, t1, format!("t1 = {t1} must be after t0 = {t0}")));
+        return Err(err(
+            T1,
+            t1,
+            format!("t1 = {t1:?} must be after t0 = {t0:?}"),
+        ));
     }
     if s.max_samples < 2 {
         return Err(err(
@@ -173,7 +177,7 @@ pub fn validate(span: (f64, f64), s: &Settings) -> Result<(), SettingsError> {
                 OutputDt,
                 dt,
                 format!(
-                    "{dt} gives {n:.3e} samples over [{t0}, {t1}], more than max_samples = {} \
+                    "{dt:?} gives {n:.3e} samples over [{t0:?}, {t1:?}], more than max_samples = {} \
                      (raise max_samples or the spacing)",
                     s.max_samples
                 ),
@@ -189,7 +193,7 @@ pub fn validate(span: (f64, f64), s: &Settings) -> Result<(), SettingsError> {
                 field,
                 h,
                 format!(
-                    "{h} needs {n:.3e} steps over [{t0}, {t1}], more than max_steps = {}",
+                    "{h:?} needs {n:.3e} steps over [{t0:?}, {t1:?}], more than max_steps = {}",
                     s.max_steps
                 ),
             ));
@@ -208,7 +212,7 @@ pub fn validate(span: (f64, f64), s: &Settings) -> Result<(), SettingsError> {
         return Err(err(
             MaxStep,
             s.h_max,
-            format!("must be positive, got {}", s.h_max),
+            format!("must be positive, got {:?}", s.h_max),
         ));
     }
     match s.drift {
