@@ -284,7 +284,7 @@ fn flagged(a: &SolveArgs, e: &progmo::solve::SettingsError) -> String {
         _ => false,
     };
     match e.field.flag().filter(|_| given) {
-        Some(flag) => format!("{flag} {}: {}", e.value, e.message),
+        Some(flag) => format!("{flag} {:?}: {}", e.value, e.message),
         None => format!("{}: {}", a.scene.display(), e),
     }
 }

@@ -231,3 +231,86 @@ pub fn validate(span: (f64, f64), s: &Settings) -> Result<(), SettingsError> {
     positive(RankVanishing, s.rank_vanishing)?;
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn field(span: (f64, f64), s: &Settings) -> Option<SettingsField> {
+        validate(span, s).err().map(|e| e.field)
+    }
+
+    #[test]
+    fn defaults_over_a_normal_span_pass() {
+        assert_eq!(validate((0.0, 10.0), &Settings::default()), Ok(()));
+    }
+
+    #[test]
+    fn each_bad_value_is_named() {
+        use SettingsField::*;
+        let d = Settings::default();
+        let every = |dt| Settings {
+            output: Output::Every(dt),
+            ..d.clone()
+        };
+        let rk4 = |h| Settings {
+            integrator: Method::Rk4 { h },
+            ..d.clone()
+        };
+        assert_eq!(field((0.0, f64::INFINITY), &d), Some(T1));
+        assert_eq!(field((0.0, f64::NAN), &d), Some(T1));
+        assert_eq!(field((1.0, 1.0), &d), Some(T1));
+        assert_eq!(field((f64::NAN, 1.0), &d), Some(T0));
+        assert_eq!(field((0.0, 1.0), &every(1e-300)), Some(OutputDt));
+        assert_eq!(field((0.0, 1.0), &every(f64::NAN)), Some(OutputDt));
+        assert_eq!(field((0.0, 1e9), &every(1e-3)), Some(OutputDt));
+        assert_eq!(field((0.0, 1.0), &rk4(1e-300)), Some(Step));
+        for h in [f64::NAN, 0.0, -1.0, f64::INFINITY] {
+            assert_eq!(field((0.0, 1.0), &rk4(h)), Some(Step), "step {h}");
+        }
+        let baumgarte = Settings {
+            drift: DriftControl::Baumgarte {
+                alpha: f64::NAN,
+                beta: 1.0,
+            },
+            ..d.clone()
+        };
+        assert_eq!(field((0.0, 1.0), &baumgarte), Some(BaumgarteAlpha));
+        let rtol = Settings {
+            rtol: 0.0,
+            ..d.clone()
+        };
+        assert_eq!(field((0.0, 1.0), &rtol), Some(Rtol));
+    }
+
+    #[test]
+    fn the_sample_limit_is_exact_and_overridable() {
+        // [0, 1] at 0.25: samples 0, 0.25, 0.5, 0.75, 1.
+        let s = |max_samples| Settings {
+            output: Output::Every(0.25),
+            max_samples,
+            ..Settings::default()
+        };
+        assert_eq!(validate((0.0, 1.0), &s(5)), Ok(()));
+        assert_eq!(field((0.0, 1.0), &s(4)), Some(SettingsField::OutputDt));
+        assert_eq!(
+            validate(
+                (0.0, 1e9),
+                &Settings {
+                    output: Output::Every(1e-3),
+                    max_samples: 2_000_000_000_000,
+                    ..Settings::default()
+                }
+            ),
+            Ok(())
+        );
+    }
+
+    #[test]
+    fn messages_name_the_field_and_the_value() {
+        let e = validate((0.0, f64::INFINITY), &Settings::default()).unwrap_err();
+        assert_eq!(e.to_string(), "time.t1: must be a finite number, got inf");
+        assert_eq!(e.field.flag(), Some("--t1"));
+        assert_eq!(e.field.name(), "t1");
+    }
+}
