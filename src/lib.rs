@@ -11,6 +11,8 @@
 pub mod export;
 pub mod expr;
 pub mod formulation;
+#[doc(hidden)]
+pub mod fuzzing;
 pub mod integrate;
 pub mod linalg;
 pub mod model;

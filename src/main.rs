@@ -143,6 +143,9 @@ struct SolveArgs {
     /// Output sample spacing (overrides time.output_dt).
     #[arg(long)]
     output_dt: Option<f64>,
+    /// Most output samples (overrides time.max_samples; default 10^7).
+    #[arg(long)]
+    max_samples: Option<usize>,
     /// Do not write the MCAP recording.
     #[arg(long)]
     no_mcap: bool,
@@ -268,7 +271,26 @@ fn settings_from(a: &SolveArgs, base: &Settings) -> Result<Settings, String> {
         s.output = Output::Every(dt);
     }
     s.strict |= a.strict;
+    s.max_samples = a.max_samples.unwrap_or(s.max_samples);
     Ok(s)
+}
+
+/// A settings error named by the flag that set the value (`--t1 inf: ...`), else by its scene key.
+fn flagged(a: &SolveArgs, e: &progmo::solve::SettingsError) -> String {
+    use progmo::solve::SettingsField as F;
+    let given = match e.field {
+        F::T1 => a.t1.is_some(),
+        F::OutputDt => a.output_dt.is_some(),
+        F::MaxSamples => a.max_samples.is_some(),
+        F::Step => a.step.is_some(),
+        F::Rtol => a.rtol.is_some(),
+        F::Atol => a.atol.is_some(),
+        _ => false,
+    };
+    match e.field.flag().filter(|_| given) {
+        Some(flag) => format!("{flag} {:?}: {}", e.value, e.message),
+        None => format!("{}: {}", a.scene.display(), e),
+    }
 }
 
 fn solve(a: SolveArgs) -> ExitCode {
@@ -290,6 +312,10 @@ fn solve(a: SolveArgs) -> ExitCode {
             return ExitCode::from(2);
         }
         progmo::with_problem!(&mut scene.system, p => p.t1 = t1);
+    }
+    if let Err(e) = progmo::solve::validate(scene.span(), &settings) {
+        eprintln!("progmo solve: error: {}", flagged(&a, &e));
+        return ExitCode::from(2);
     }
     let out = a
         .out

@@ -361,6 +361,7 @@ assemble = true
 t0 = 0.0
 t1 = 1.0
 output_dt = 0.1
+max_samples = 1000
 
 [solver]
 formulation = "kkt"

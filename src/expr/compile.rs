@@ -127,21 +127,53 @@ fn pow_kind(b: f64) -> PowKind {
     }
 }
 
-fn fold(n: Node, src: &str) -> Result<F, ExprError> {
-    let (start, end) = (n.start, n.end);
-    let check = |v: f64| -> Result<F, ExprError> {
-        if v.is_finite() {
-            Ok(F::C(v))
-        } else {
-            let text: String = src
-                .chars()
-                .skip(start.saturating_sub(1))
-                .take(end.saturating_sub(start))
-                .collect();
-            Err(ExprError::new(K::NonFinite { value: v }, start, &text, src))
+/// A constant, or the error naming the subexpression `start..end` that overflowed.
+fn checked(v: f64, start: usize, end: usize, src: &str) -> Result<F, ExprError> {
+    if v.is_finite() {
+        Ok(F::C(v))
+    } else {
+        let text: String = src
+            .chars()
+            .skip(start.saturating_sub(1))
+            .take(end.saturating_sub(start))
+            .collect();
+        Err(ExprError::new(K::NonFinite { value: v }, start, &text, src))
+    }
+}
+
+fn fold(mut n: Node, src: &str) -> Result<F, ExprError> {
+    // The left spine of a chain (`a + b + c`) is folded iteratively, innermost first.
+    let mut spine = vec![];
+    loop {
+        match std::mem::replace(&mut n.kind, Kind::Num(0.0)) {
+            Kind::Bin(op, a, b) => {
+                spine.push((op, *b, n.start, n.end, n.height));
+                n = *a;
+            }
+            k => {
+                n.kind = k;
+                break;
+            }
         }
-    };
-    let height = n.height;
+    }
+    let mut acc = fold_one(n, src)?;
+    for (op, b, start, end, height) in spine.into_iter().rev() {
+        acc = match (acc, fold(b, src)?) {
+            (F::C(x), F::C(y)) => checked(apply2(op, x, y), start, end, src)?,
+            (a, b) => F::N(Node {
+                kind: Kind::Bin(op, Box::new(unfold(a)), Box::new(unfold(b))),
+                start,
+                end,
+                height,
+            }),
+        };
+    }
+    Ok(acc)
+}
+
+fn fold_one(mut n: Node, src: &str) -> Result<F, ExprError> {
+    let (start, end, height) = (n.start, n.end, n.height);
+    let check = |v: f64| checked(v, start, end, src);
     let rebuild = move |kind| {
         F::N(Node {
             kind,
@@ -150,10 +182,10 @@ fn fold(n: Node, src: &str) -> Result<F, ExprError> {
             height,
         })
     };
-    Ok(match n.kind {
+    Ok(match std::mem::replace(&mut n.kind, Kind::Num(0.0)) {
         Kind::Num(v) => F::C(v),
         Kind::Named(_, v) => return check(v),
-        Kind::Sym(..) => F::N(n),
+        k @ Kind::Sym(..) => rebuild(k),
         Kind::Neg(a) => match fold(*a, src)? {
             F::C(v) => F::C(-v),
             F::N(a) => rebuild(Kind::Neg(Box::new(a))),
@@ -241,6 +273,51 @@ impl Gen {
     }
 
     fn emit(&mut self, n: &Node) {
+        // A binary node whose left operand is not a leaf emits that operand first: walk the left
+        // spine iteratively (a long chain would recurse once per term), then finish each level.
+        let mut spine = vec![];
+        let mut cur = n;
+        while let Kind::Bin(_, a, _) = &cur.kind {
+            if leaf(a).is_some() {
+                break;
+            }
+            spine.push(cur);
+            cur = a;
+        }
+        if spine.is_empty() {
+            return self.emit_one(n);
+        }
+        self.emit(cur);
+        for node in spine.into_iter().rev() {
+            let Kind::Bin(op, _, b) = &node.kind else {
+                continue;
+            };
+            match (op, &b.kind, leaf(b)) {
+                (BinOp::Pow, Kind::Num(e), _) => self.pow_const(*e),
+                (BinOp::Pow, ..) => {
+                    self.emit(b);
+                    self.reduce(Op::Pow, 2);
+                }
+                (_, _, Some(r)) => self.reduce(fused(*op, r, false), 1),
+                (_, _, None) => {
+                    self.emit(b);
+                    self.reduce(binary(*op), 2);
+                }
+            }
+        }
+    }
+
+    fn pow_const(&mut self, e: f64) {
+        match pow_kind(e) {
+            PowKind::One => {}
+            PowKind::Square => self.reduce(Op::Square, 1),
+            PowKind::Sqrt => self.reduce(Op::Sqrt, 1),
+            PowKind::Int(i) => self.reduce(Op::Powi(i), 1),
+            PowKind::Real => self.reduce(Op::Powf(e), 1),
+        }
+    }
+
+    fn emit_one(&mut self, n: &Node) {
         match &n.kind {
             Kind::Num(v) => self.push(Op::Const(*v)),
             Kind::Named(_, v) => self.push(Op::Const(*v)),
@@ -252,13 +329,7 @@ impl Gen {
             Kind::Bin(BinOp::Pow, a, b) => {
                 self.emit(a);
                 match &b.kind {
-                    Kind::Num(e) => match pow_kind(*e) {
-                        PowKind::One => {}
-                        PowKind::Square => self.reduce(Op::Square, 1),
-                        PowKind::Sqrt => self.reduce(Op::Sqrt, 1),
-                        PowKind::Int(i) => self.reduce(Op::Powi(i), 1),
-                        PowKind::Real => self.reduce(Op::Powf(*e), 1),
-                    },
+                    Kind::Num(e) => self.pow_const(*e),
                     _ => {
                         self.emit(b);
                         self.reduce(Op::Pow, 2);
@@ -279,14 +350,7 @@ impl Gen {
                     Some(l) => self.reduce(fused(*op, l, swapped), 1),
                     None => {
                         self.emit(b);
-                        let o = match op {
-                            BinOp::Add => Op::Add,
-                            BinOp::Sub => Op::Sub,
-                            BinOp::Mul => Op::Mul,
-                            BinOp::Div => Op::Div,
-                            BinOp::Pow => Op::Pow,
-                        };
-                        self.reduce(o, 2);
+                        self.reduce(binary(*op), 2);
                     }
                 }
             }
@@ -316,19 +380,33 @@ impl Gen {
     }
 }
 
+fn binary(op: BinOp) -> Op {
+    match op {
+        BinOp::Add => Op::Add,
+        BinOp::Sub => Op::Sub,
+        BinOp::Mul => Op::Mul,
+        BinOp::Div => Op::Div,
+        BinOp::Pow => Op::Pow,
+    }
+}
+
+/// Slots in order of appearance (an explicit stack: no recursion per level).
 fn collect_slots(n: &Node, out: &mut Vec<usize>, order: &mut u8) {
-    match &n.kind {
-        Kind::Sym(s, name) => {
-            out.push(*s);
-            *order = (*order).max(time_order(name));
+    let mut stack = vec![n];
+    while let Some(n) = stack.pop() {
+        match &n.kind {
+            Kind::Sym(s, name) => {
+                out.push(*s);
+                *order = (*order).max(time_order(name));
+            }
+            Kind::Num(_) | Kind::Named(..) => {}
+            Kind::Neg(a) => stack.push(a),
+            Kind::Bin(_, a, b) => {
+                stack.push(b);
+                stack.push(a);
+            }
+            Kind::Call(_, args) => stack.extend(args.iter().rev()),
         }
-        Kind::Num(_) | Kind::Named(..) => {}
-        Kind::Neg(a) => collect_slots(a, out, order),
-        Kind::Bin(_, a, b) => {
-            collect_slots(a, out, order);
-            collect_slots(b, out, order);
-        }
-        Kind::Call(_, args) => args.iter().for_each(|a| collect_slots(a, out, order)),
     }
 }
 

@@ -5,9 +5,10 @@ use super::lexer::{lex, Tok, Token};
 use super::SymbolTable;
 use std::fmt;
 
-/// Limit on nesting (parentheses, unary signs, powers) and on tree height (long chains).
+/// Limits (FORMAT.md, "Limits"): nesting of parentheses, unary signs, powers and calls, and the
+/// height of the tree (a flat sum or product of up to 10,000 terms).
 pub(crate) const MAX_DEPTH: usize = 200;
-pub(crate) const MAX_HEIGHT: usize = 1000;
+pub(crate) const MAX_HEIGHT: usize = 10_000;
 
 /// Built-in functions.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -131,6 +132,29 @@ pub(crate) struct Node {
     pub start: usize,
     pub end: usize,
     pub height: usize,
+}
+
+/// Dropped iteratively: a chain of 10,000 terms would otherwise recurse once per level.
+impl Drop for Node {
+    fn drop(&mut self) {
+        let mut stack = vec![];
+        take_children(&mut self.kind, &mut stack);
+        while let Some(mut n) = stack.pop() {
+            take_children(&mut n.kind, &mut stack);
+        }
+    }
+}
+
+fn take_children(k: &mut Kind, out: &mut Vec<Node>) {
+    match k {
+        Kind::Neg(a) => out.push(std::mem::replace(&mut **a, Node::empty())),
+        Kind::Bin(_, a, b) => {
+            out.push(std::mem::replace(&mut **a, Node::empty()));
+            out.push(std::mem::replace(&mut **b, Node::empty()));
+        }
+        Kind::Call(_, args) => out.append(args),
+        Kind::Num(_) | Kind::Named(..) | Kind::Sym(..) => {}
+    }
 }
 
 struct Parser<'a> {
@@ -308,11 +332,10 @@ impl<'a> Parser<'a> {
                     ));
                 }
                 // Parentheses only group; keep the inner node with the wider span.
-                Ok(Node {
-                    start: t.col,
-                    end: c.col + 1,
-                    ..inner
-                })
+                let mut inner = inner;
+                inner.start = t.col;
+                inner.end = c.col + 1;
+                Ok(inner)
             }
             Tok::Name(name) => {
                 if self.peek().tok == Tok::LParen {
@@ -478,6 +501,55 @@ fn wrap(f: &mut fmt::Formatter<'_>, n: &Node, paren: bool) -> fmt::Result {
 
 impl fmt::Display for Node {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        // The left spine of a chain (`a + b + c`) without parentheses is printed iteratively, so a
+        // long chain does not recurse once per term.
+        let mut spine = vec![];
+        let mut cur = self;
+        while let Kind::Bin(op, a, _) = &cur.kind {
+            let needs_paren = match op {
+                BinOp::Pow => prec(a) <= 4,
+                _ => prec(a) < prec(cur),
+            };
+            if needs_paren {
+                break;
+            }
+            spine.push(cur);
+            cur = a;
+        }
+        if spine.is_empty() {
+            return self.fmt_one(f);
+        }
+        cur.fmt(f)?;
+        for node in spine.into_iter().rev() {
+            if let Kind::Bin(op, _, b) = &node.kind {
+                let p = prec(node);
+                let rp = match op {
+                    BinOp::Pow => prec(b) < 3,
+                    _ => prec(b) <= p,
+                };
+                match op {
+                    BinOp::Add | BinOp::Sub => write!(f, " {} ", op.symbol())?,
+                    _ => f.write_str(op.symbol())?,
+                }
+                wrap(f, b, rp)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Node {
+    /// A placeholder leaf (what a node's children are replaced by when it is taken apart).
+    pub(crate) fn empty() -> Node {
+        Node {
+            kind: Kind::Num(0.0),
+            start: 0,
+            end: 0,
+            height: 1,
+        }
+    }
+
+    fn fmt_one(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match &self.kind {
             Kind::Num(v) => f.write_str(&fmt_num(*v)),
             Kind::Named(name, _) => f.write_str(name),

@@ -456,6 +456,31 @@ fn deep_input_is_an_error_not_a_crash() {
 }
 
 #[test]
+fn long_flat_sums_and_products_are_allowed_up_to_the_documented_limit() {
+    // FORMAT.md: a sum or product of up to 10,000 terms (tree height 10,000). Checked on the
+    // default 2 MiB stack of a spawned thread: parse, fold, compile, display, evaluate, drop.
+    std::thread::Builder::new()
+        .stack_size(2 << 20)
+        .spawn(|| {
+            let sum = vec!["2*x"; 1000].join(" + ");
+            assert_eq!(ev(&sum, &[1.0; 9]), 2000.0);
+            let sum = "x+".repeat(9_999) + "x";
+            let e = Expr::compile(&sum, &table()).unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(e.value(&[1.0; 9]), 10_000.0);
+            assert!(e.to_string().len() > 10_000);
+            let d = e.value(&[num_dual::Dual64::new(1.0, 1.0); 9]);
+            assert_eq!(d.eps, 10_000.0);
+            let prod = vec!["x"; 10_000].join("*");
+            assert_eq!(ev(&prod, &[1.0; 9]), 1.0);
+            let over = "x+".repeat(10_000) + "x";
+            assert!(matches!(err(&over).kind, ExprErrorKind::TooDeep { .. }));
+        })
+        .unwrap()
+        .join()
+        .unwrap();
+}
+
+#[test]
 fn caret_and_scene_rendering() {
     let e = err("sin(thta) + 1");
     assert_eq!(e.caret(), "sin(thta) + 1\n    ^^^^");

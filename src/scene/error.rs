@@ -81,8 +81,8 @@ impl Source {
             file: self.file.clone(),
             line,
             column,
-            field: field.to_string(),
-            message: message.into(),
+            field: escape_invisible(field),
+            message: escape_invisible(&message.into()),
             excerpt: self.excerpt(line, column, first_line_len),
         }
     }
@@ -93,8 +93,8 @@ impl Source {
             file: self.file.clone(),
             line: 0,
             column: 0,
-            field: field.to_string(),
-            message: message.into(),
+            field: escape_invisible(field),
+            message: escape_invisible(&message.into()),
             excerpt: String::new(),
         }
     }
@@ -122,8 +122,8 @@ impl Source {
             file: self.file.clone(),
             line: eline,
             column: ecol,
-            field: field.to_string(),
-            message: e.message(),
+            field: escape_invisible(field),
+            message: escape_invisible(&e.message()),
             excerpt: excerpt.to_string(),
         }
     }
@@ -131,19 +131,35 @@ impl Source {
     /// A TOML syntax or type error. The field is reconstructed from the text: the table header in
     /// force at the error (array-of-tables entries counted, `[[model.bodies]]` -> `model.bodies[1]`)
     /// and the key on the error's line (best effort: empty for syntax errors outside a key/value).
+    /// A missing field is named in full (`time.t1`), with the caret on its table's header.
     pub fn toml_error(&self, e: &toml::de::Error) -> SceneError {
         let msg = e.message().trim().to_string();
+        let missing = msg
+            .strip_prefix("missing field `")
+            .and_then(|r| r.split_once('`'))
+            .map(|(name, _)| name.to_string());
+        let join = |table: String| match (&missing, table.is_empty()) {
+            (Some(m), true) => m.clone(),
+            (Some(m), false) => format!("{table}.{m}"),
+            (None, _) => table,
+        };
         match e.span() {
             Some(span) => {
-                let field = self.field_at(span.start);
+                let (field, on_header) = self.field_at(span.start);
+                if missing.is_some() && !on_header && field.is_empty() {
+                    // A missing top-level key: the span is the whole document, no place to show.
+                    return self.general(&join(field), msg);
+                }
+                let field = if on_header { join(field) } else { field };
                 self.error(span, &field, msg)
             }
-            None => self.general("", msg),
+            None => self.general(&join(String::new()), msg),
         }
     }
 
     /// Dotted field path at a byte offset, from the table headers above it and the key of its line.
-    fn field_at(&self, offset: usize) -> String {
+    /// True with it when the offset is on a table header (the field is that table's).
+    fn field_at(&self, offset: usize) -> (String, bool) {
         let offset = offset.min(self.text.len());
         let mut table = String::new();
         // Entries seen per array of tables, and the index of the current entry.
@@ -178,17 +194,26 @@ impl Source {
         };
         let mut line_start = 0;
         let mut body_start = 0;
+        // The error is on a table header itself (a missing field): that header's table.
+        let mut on_header = false;
         for line in self.text.split_inclusive('\n') {
-            if line_start + line.len() > offset {
-                break;
-            }
-            line_start += line.len();
+            let here = line_start + line.len() > offset;
             let l = line.split('#').next().unwrap_or("").trim();
-            if let Some(name) = l
+            let array = l
                 .strip_prefix("[[")
                 .and_then(|r| r.strip_suffix("]]"))
-                .and_then(header_name)
-            {
+                .and_then(header_name);
+            let plain = l
+                .strip_prefix('[')
+                .and_then(|r| r.strip_suffix(']'))
+                .and_then(header_name);
+            if here && array.is_none() && plain.is_none() {
+                break;
+            }
+            if !here {
+                line_start += line.len();
+            }
+            if let Some(name) = array {
                 let k = counts.entry(name.clone()).or_insert(0);
                 let idx = *k;
                 *k += 1;
@@ -199,14 +224,17 @@ impl Source {
                 current.insert(name.clone(), idx);
                 table = format!("{}[{idx}]", qualify(&name, &current));
                 body_start = line_start;
-            } else if let Some(name) = l
-                .strip_prefix('[')
-                .and_then(|r| r.strip_suffix(']'))
-                .and_then(header_name)
-            {
+            } else if let Some(name) = plain {
                 table = qualify(&name, &current);
                 body_start = line_start;
             }
+            if here {
+                on_header = true;
+                break;
+            }
+        }
+        if on_header {
+            return (table, true);
         }
         let key_line = &self.text[line_start..offset];
         let key = key_line
@@ -242,12 +270,38 @@ impl Source {
                 .unwrap_or("")
                 .to_string()
         };
-        match (table.is_empty(), key.is_empty()) {
+        let field = match (table.is_empty(), key.is_empty()) {
             (_, true) => table,
             (true, false) => key,
             (false, false) => format!("{table}.{key}"),
-        }
+        };
+        (field, false)
     }
+}
+
+/// Characters a terminal does not show (controls, zero-width and format characters, non-ASCII
+/// spaces) written as `\u{200b}`, so a message about a name shows what is in it.
+pub fn escape_invisible(s: &str) -> String {
+    let invisible = |c: char| {
+        (c.is_control() && c != '\n')
+            || (c.is_whitespace() && c != ' ' && c != '\n')
+            || matches!(c as u32,
+                0xAD | 0x34F | 0x61C | 0x115F | 0x1160 | 0x17B4 | 0x17B5 | 0x180B..=0x180F
+                | 0x200B..=0x200F | 0x202A..=0x202E | 0x2060..=0x206F | 0x3164 | 0xFE00..=0xFE0F
+                | 0xFEFF | 0xFFA0 | 0xFFF0..=0xFFFB | 0xE0000..=0xE0FFF)
+    };
+    if !s.chars().any(invisible) {
+        return s.to_string();
+    }
+    s.chars()
+        .map(|c| {
+            if invisible(c) {
+                format!("\\u{{{:x}}}", c as u32)
+            } else {
+                c.to_string()
+            }
+        })
+        .collect()
 }
 
 fn parse_position(head: &str) -> Option<(usize, usize)> {
@@ -266,5 +320,29 @@ pub fn io_error(file: &Path, e: &std::io::Error) -> SceneError {
         field: String::new(),
         message: format!("cannot read the scene file: {e}"),
         excerpt: String::new(),
+    }
+}
+
+/// A file that is not valid UTF-8: located at the first invalid byte.
+pub fn utf8_error(file: &Path, bytes: &[u8], e: std::str::Utf8Error) -> SceneError {
+    let at = e.valid_up_to();
+    let valid = String::from_utf8_lossy(&bytes[..at]).into_owned();
+    let line_start = valid.rfind('\n').map_or(0, |i| i + 1);
+    let line = valid.matches('\n').count() + 1;
+    let column = valid[line_start..].chars().count() + 1;
+    SceneError {
+        file: file.to_path_buf(),
+        line,
+        column,
+        field: String::new(),
+        message: format!(
+            "the scene file is not valid UTF-8 (byte 0x{:02x}); save it as UTF-8",
+            bytes[at]
+        ),
+        excerpt: format!(
+            "    {}\n    {}^",
+            &valid[line_start..],
+            " ".repeat(column - 1)
+        ),
     }
 }

@@ -183,11 +183,14 @@ pub struct InitialFile {
 #[serde(deny_unknown_fields)]
 pub struct TimeFile {
     #[serde(default)]
-    pub t0: f64,
+    pub t0: Option<Spanned<f64>>,
     pub t1: Spanned<f64>,
     /// Output sample spacing; absent: one sample per accepted step.
     #[serde(default)]
     pub output_dt: Option<Spanned<f64>>,
+    /// Most output samples a run may write (default `solve::DEFAULT_MAX_SAMPLES`).
+    #[serde(default)]
+    pub max_samples: Option<Spanned<i64>>,
 }
 
 #[derive(Clone, Debug, Default, Deserialize)]

@@ -79,6 +79,8 @@ pub(super) fn load(src: Source) -> R<Scene> {
     if file.name.trim().is_empty() {
         return Err(src.general("name", "the scene needs a non-empty name"));
     }
+    let settings = solver(&src, &file)?;
+    validate_settings(&src, &file, &settings)?;
     let params = parameters(&src, &file.parameters)?;
     let model = file.model.get_ref();
     let kind = model.kind.get_ref().as_str();
@@ -87,7 +89,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
             let (m, mut sym) = lagrangian(&src, model, &params)?;
             let (c, spans) = rows(&src, &file, &mut sym)?;
             let (q0, v0) = initial(&src, &file, &params, &m.q_names(), &m.v_names(), None)?;
-            let (t0, t1) = span(&src, &file)?;
+            let (t0, t1) = span(&file);
             let p = Problem {
                 model: m,
                 constraints: c,
@@ -97,6 +99,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
                 v0,
             };
             check_mass(&src, &file, &p)?;
+            check_finite_at_start(&src, &file, &p)?;
             (SceneSystem::Lagrangian(p), spans)
         }
         "tree" => {
@@ -111,7 +114,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
                 &m.v_names(),
                 Some((m.tree(), neutral.as_slice())),
             )?;
-            let (t0, t1) = span(&src, &file)?;
+            let (t0, t1) = span(&file);
             let p = Problem {
                 model: m,
                 constraints: c,
@@ -121,6 +124,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
                 v0,
             };
             check_mass(&src, &file, &p)?;
+            check_finite_at_start(&src, &file, &p)?;
             (SceneSystem::Tree(p), spans)
         }
         other => {
@@ -133,7 +137,6 @@ pub(super) fn load(src: Source) -> R<Scene> {
     };
     let n_system = file.constraints.len();
     crate::with_problem!(&system, p => check_acceleration_rows(&src, p, &spans, n_system)?);
-    let settings = solver(&src, &file)?;
     let tolerances = tolerances(&src, &file)?;
     let expected_not_checked = expected_not_checked(&src, &file)?;
     Ok(Scene {
@@ -195,24 +198,86 @@ fn parameters(src: &Source, p: &BTreeMap<String, Spanned<Number>>) -> R<Vec<(Str
             }
         }
         if !progress {
-            // Report the first failing expression with its own error.
-            let name = still[0];
-            let s = &p[name];
-            if let Number::Expr(text) = s.get_ref() {
-                if let Err(e) = Expr::compile(text, &table) {
-                    let spanned = Spanned::new(s.span(), text.clone());
-                    return Err(src.expr_error(spanned.span(), &format!("parameters.{name}"), &e));
+            // A parameter that fails on its own (not waiting for a pending one) reports its error;
+            // if every pending one waits for another, they form a cycle.
+            let waits = |name: &String| -> Vec<&String> {
+                match p[name].get_ref() {
+                    Number::Expr(text) => expr::referenced_names(text)
+                        .unwrap_or_default()
+                        .into_iter()
+                        .filter_map(|n| still.iter().find(|s| ***s == n).copied())
+                        .collect(),
+                    Number::Value(_) => vec![],
                 }
+            };
+            let name = *still
+                .iter()
+                .find(|n| waits(n).is_empty())
+                .unwrap_or(&still[0]);
+            let s = &p[name];
+            if waits(name).is_empty() {
+                if let Number::Expr(text) = s.get_ref() {
+                    if let Err(e) = Expr::compile(text, &table) {
+                        let spanned = Spanned::new(s.span(), text.clone());
+                        return Err(src.expr_error(
+                            spanned.span(),
+                            &format!("parameters.{name}"),
+                            &e,
+                        ));
+                    }
+                }
+                return Err(src.error(
+                    s.span(),
+                    &format!("parameters.{name}"),
+                    "cannot be evaluated",
+                ));
             }
-            return Err(src.error(
-                s.span(),
-                &format!("parameters.{name}"),
-                "cannot be evaluated",
-            ));
+            // Follow the first pending dependency until a parameter repeats.
+            let mut path: Vec<&String> = vec![name];
+            loop {
+                let next = waits(path[path.len() - 1])[0];
+                if let Some(i) = path.iter().position(|n| *n == next) {
+                    let mut cycle: Vec<&str> = path[i..].iter().map(|n| n.as_str()).collect();
+                    cycle.push(next);
+                    let first = &p[path[i]];
+                    return Err(src.error(
+                        first.span(),
+                        &format!("parameters.{}", path[i]),
+                        format!("parameters form a cycle: {}", cycle.join(" -> ")),
+                    ));
+                }
+                path.push(next);
+            }
         }
         pending = still;
     }
     Ok(done)
+}
+
+/// Bodies reordered so that every parent precedes its children (the file may list them in any
+/// order); stable otherwise. Bodies whose parent never appears stay at the end, for the tree to
+/// report.
+fn parents_first(specs: Vec<BodySpec>) -> Vec<BodySpec> {
+    let mut placed: Vec<BodySpec> = Vec::with_capacity(specs.len());
+    let mut names = std::collections::HashSet::new();
+    let mut rest = specs;
+    loop {
+        let before = rest.len();
+        let mut still = vec![];
+        for b in rest {
+            if b.parent == tree::WORLD || names.contains(&b.parent) {
+                names.insert(b.name.clone());
+                placed.push(b);
+            } else {
+                still.push(b);
+            }
+        }
+        rest = still;
+        if rest.is_empty() || rest.len() == before {
+            placed.extend(rest);
+            return placed;
+        }
+    }
 }
 
 fn is_identifier(s: &str) -> bool {
@@ -432,6 +497,7 @@ fn tree_scene(
         ));
     }
     let mut specs = vec![];
+    let mut joint_names: Vec<&str> = vec![];
     for (bi, b) in m.bodies.iter().enumerate() {
         let bf = b.get_ref();
         let field = format!("model.bodies[{bi}]");
@@ -442,6 +508,25 @@ fn tree_scene(
                 &format!("{field}.mass"),
                 format!("mass must be positive (or 0 for a massless link), got {mass}"),
             ));
+        }
+        for (ji, j) in bf.joints.iter().enumerate() {
+            let n = j.get_ref().name.as_str();
+            let jfield = format!("{field}.joints[{ji}].name");
+            if !is_identifier(n) || n == "t" || n == "pi" || params.iter().any(|p| p.0 == n) {
+                return Err(src.error(
+                    j.span(),
+                    &jfield,
+                    format!("`{n}` is not a valid joint name (an identifier, not `t`, `pi` or a parameter)"),
+                ));
+            }
+            if joint_names.contains(&n) {
+                return Err(src.error(
+                    j.span(),
+                    &jfield,
+                    format!("joint name `{n}` is used twice"),
+                ));
+            }
+            joint_names.push(n);
         }
         let inertia = match &bf.inertia {
             None => [[0.0; 3]; 3],
@@ -456,6 +541,14 @@ fn tree_scene(
                 }
             }
         };
+        if mass == 0.0 && inertia != [[0.0; 3]; 3] {
+            let span = bf.inertia.as_ref().map_or(b.span(), |i| i.span());
+            return Err(src.error(
+                span,
+                &format!("{field}.inertia"),
+                "a body of mass 0 is a massless link and takes no inertia: give a positive `mass` or remove `inertia`",
+            ));
+        }
         let mut spec = if mass == 0.0 && inertia == [[0.0; 3]; 3] {
             BodySpec::massless(&bf.name, &bf.parent)
         } else {
@@ -512,6 +605,7 @@ fn tree_scene(
             })
             .collect(),
     };
+    let specs = parents_first(specs);
     let tree = tree::Model::new(&specs, fields).map_err(|e| {
         let (body, msg) = match &e {
             ModelError::Body { body, .. } | ModelError::Joint { body, .. } => {
@@ -520,6 +614,23 @@ fn tree_scene(
             _ => (None, e.to_string()),
         };
         let idx = body.and_then(|b| m.bodies.iter().position(|x| x.get_ref().name == b));
+        // Bodies are sorted parents first here, so an unplaced parent is missing or in a cycle.
+        let msg = match idx.map(|i| &m.bodies[i].get_ref().parent) {
+            Some(parent) if msg.contains("unknown parent") => {
+                if m.bodies.iter().any(|b| &b.get_ref().name == parent) {
+                    format!(
+                        "the parents of body '{}' form a cycle through '{parent}'",
+                        m.bodies[idx.unwrap_or(0)].get_ref().name
+                    )
+                } else {
+                    format!(
+                        "body '{}': unknown parent '{parent}'",
+                        m.bodies[idx.unwrap_or(0)].get_ref().name
+                    )
+                }
+            }
+            _ => msg,
+        };
         match idx {
             // Inertia problems point at the inertia itself.
             Some(i) if msg.contains("inertia") && m.bodies[i].get_ref().inertia.is_some() => {
@@ -546,6 +657,21 @@ fn tree_scene(
                 s.span(),
                 &format!("model.sites[{si}].name"),
                 "a site name must be an identifier",
+            ));
+        }
+        if sites.iter().any(|x: &Site| x.name == sf.name) {
+            return Err(src.error(
+                s.span(),
+                &format!("model.sites[{si}].name"),
+                format!("site name `{}` is used twice", sf.name),
+            ));
+        }
+        // `j.qw` would name both the site's orientation and ball joint j's coordinate.
+        if joint_names.contains(&sf.name.as_str()) {
+            return Err(src.error(
+                s.span(),
+                &format!("model.sites[{si}].name"),
+                format!("site name `{}` is also a joint name: its signals would collide with the joint's coordinates", sf.name),
             ));
         }
         sites.push(Site {
@@ -812,27 +938,42 @@ fn initial(
     Ok((q, v.into_iter().map(|x| x.unwrap_or(0.0)).collect()))
 }
 
-fn span(src: &Source, file: &SceneFile) -> R<(f64, f64)> {
+/// The time span as written (checked with the settings by [`validate_settings`]).
+fn span(file: &SceneFile) -> (f64, f64) {
     let t = file.time.get_ref();
-    let (t0, t1) = (t.t0, *t.t1.get_ref());
-    if !(t1 > t0) || !t0.is_finite() || !t1.is_finite() {
-        return Err(src.error(
-            t.t1.span(),
-            "time.t1",
-            format!("t1 = {t1} must be after t0 = {t0}"),
-        ));
-    }
-    if let Some(s) = &t.output_dt {
-        let dt = *s.get_ref();
-        if !(dt > 0.0) || !dt.is_finite() {
-            return Err(src.error(
-                s.span(),
-                "time.output_dt",
-                format!("must be positive, got {dt}"),
-            ));
-        }
-    }
-    Ok((t0, t1))
+    (t.t0.as_ref().map_or(0.0, |x| *x.get_ref()), *t.t1.get_ref())
+}
+
+/// [`crate::solve::validate`] on the file's span and settings, the error located at its key.
+fn validate_settings(src: &Source, file: &SceneFile, settings: &Settings) -> R<()> {
+    use crate::solve::SettingsField as F;
+    let Err(e) = crate::solve::validate(span(file), settings) else {
+        return Ok(());
+    };
+    let t = file.time.get_ref();
+    let f = &file.solver;
+    let at = |x: &Option<Spanned<f64>>| x.as_ref().map(|x| x.span());
+    let place = match e.field {
+        F::T0 => at(&t.t0),
+        F::T1 => Some(t.t1.span()),
+        F::OutputDt => at(&t.output_dt),
+        F::MaxSamples => t.max_samples.as_ref().map(|x| x.span()),
+        F::Step => at(&f.step).or(f.integrator.as_ref().map(|x| x.span())),
+        F::Rtol => at(&f.rtol),
+        F::Atol => at(&f.atol),
+        F::MaxStep => at(&f.max_step),
+        F::ProjectionTol => at(&f.projection_tol),
+        F::BaumgarteAlpha => at(&f.baumgarte_alpha),
+        F::BaumgarteBeta => at(&f.baumgarte_beta),
+        F::MaxDrift => at(&f.max_drift),
+        _ => None,
+    };
+    // A span or rate that is too long is about the time table as a whole when no key is at fault.
+    let place = place.or_else(|| (e.field == F::MaxSamples).then(|| file.time.span()));
+    Err(match place {
+        Some(span) => src.error(span, e.field.key(), e.message),
+        None => src.general(e.field.key(), e.message),
+    })
 }
 
 fn choose<T: Copy>(
@@ -888,6 +1029,7 @@ fn solver(src: &Source, file: &SceneFile) -> R<Settings> {
         ("projection_tol", &f.projection_tol),
         ("max_drift", &f.max_drift),
     ] {
+        // Checked even when unused (a `step` without rk4); validate() checks what is used.
         if let Some(x) = x {
             let v = *x.get_ref();
             if !(v > 0.0) || !v.is_finite() {
@@ -897,6 +1039,18 @@ fn solver(src: &Source, file: &SceneFile) -> R<Settings> {
                     format!("must be positive, got {v}"),
                 ));
             }
+        }
+    }
+    for (name, x) in [
+        ("baumgarte_alpha", &f.baumgarte_alpha),
+        ("baumgarte_beta", &f.baumgarte_beta),
+    ] {
+        if let Some(x) = x.as_ref().filter(|x| !x.get_ref().is_finite()) {
+            return Err(src.error(
+                x.span(),
+                &format!("solver.{name}"),
+                format!("must be a finite number, got {}", x.get_ref()),
+            ));
         }
     }
     let step = num(&f.step).unwrap_or(0.0);
@@ -946,6 +1100,15 @@ fn solver(src: &Source, file: &SceneFile) -> R<Settings> {
     };
     s.assemble = file.initial.get_ref().assemble;
     s.strict = f.strict.unwrap_or(false);
+    if let Some(n) = &file.time.get_ref().max_samples {
+        s.max_samples = usize::try_from(*n.get_ref()).map_err(|_| {
+            src.error(
+                n.span(),
+                "time.max_samples",
+                format!("must be a positive count, got {}", n.get_ref()),
+            )
+        })?;
+    }
     Ok(s)
 }
 
@@ -1030,6 +1193,55 @@ fn check_mass<M: Model, C: Constraints>(
         ));
     }
     Ok(())
+}
+
+/// The forces G, Q and the rows must be finite at the initial state: a value that overflows there
+/// (a velocity of 1e308 squares to inf) is refused at its `initial` entry, not as NaN rows at t0.
+fn check_finite_at_start<M: Model, C: Constraints>(
+    src: &Source,
+    file: &SceneFile,
+    p: &Problem<M, C>,
+) -> R<()> {
+    let (nv, s) = (p.model.nv(), p.constraints.rows().len());
+    let mut ws = p.model.workspace::<f64>();
+    let (mut g, mut f, mut h) = (vec![0.0; nv], vec![0.0; nv], vec![0.0; s]);
+    p.model.velocity_terms(&mut ws, &p.q0, &p.v0, &mut g);
+    p.model.applied_forces(&mut ws, p.t0, &p.q0, &p.v0, &mut f);
+    let mut cws = p.constraints.workspace::<f64>();
+    p.constraints
+        .eval(&mut cws, p.t0, &p.q0, &p.v0, &vec![0.0; nv], &mut h);
+    if g.iter().chain(&f).chain(&h).all(|x| x.is_finite()) {
+        return Ok(());
+    }
+    // Blame the largest initial value the file gives (velocities first), else the table.
+    let init = file.initial.get_ref();
+    let largest = |what: &str, map: &BTreeMap<String, Spanned<Initial>>| {
+        map.iter()
+            .filter_map(|(k, x)| {
+                let m = match x.get_ref() {
+                    Initial::One(Number::Value(v)) => v.abs(),
+                    Initial::Many(vs) => vs
+                        .iter()
+                        .map(|n| match n {
+                            Number::Value(v) => v.abs(),
+                            Number::Expr(_) => 0.0,
+                        })
+                        .fold(0.0, f64::max),
+                    _ => 0.0,
+                };
+                (m > 1e100).then(|| (m, format!("initial.{what}.{k}"), x.span()))
+            })
+            .max_by(|a, b| a.0.total_cmp(&b.0))
+    };
+    let message = "the forces or the rows overflow (are not finite) at the initial state";
+    Err(
+        match largest("v", &init.v).or_else(|| largest("q", &init.q)) {
+            Some((m, field, span)) => {
+                src.error(span, &field, format!("{m:e} is too large: {message}"))
+            }
+            None => src.error(file.initial.span(), "initial", message),
+        },
+    )
 }
 
 /// Acceleration-level rows must be linear in dv/dt (checked at the initial state).

@@ -84,8 +84,13 @@ pub struct Scene {
 
 impl Scene {
     /// Load and validate a scene file.
+    /// A file that is not UTF-8 is refused at its first invalid byte.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|e| error::io_error(path, &e))?;
+        let bytes = std::fs::read(path).map_err(|e| error::io_error(path, &e))?;
+        let text = match String::from_utf8(bytes) {
+            Ok(t) => t,
+            Err(e) => return Err(error::utf8_error(path, e.as_bytes(), e.utf8_error())),
+        };
         Scene::from_text(path, &text)
     }
 

@@ -9,9 +9,11 @@
 mod evaluator;
 mod ode;
 mod project;
+mod validate;
 
 pub use evaluator::{Baumgarte, Evaluator};
 pub use project::{ProjectionReport, Projector};
+pub use validate::{validate, SettingsError, SettingsField, DEFAULT_MAX_SAMPLES};
 
 use crate::formulation::{Formulation, RankTolerances};
 use crate::integrate::{DriverOptions, Integrator, IntegratorStats, Method};
@@ -77,6 +79,10 @@ pub struct Settings {
     pub fixed_step: Option<f64>,
     /// Maximum step attempts. Default 10_000_000.
     pub max_steps: usize,
+    /// Most output samples [`validate`] lets a run write (t0 and t1 included). Default
+    /// [`DEFAULT_MAX_SAMPLES`] (10^7); scene `[time] max_samples`, CLI `--max-samples`.
+    #[serde(default = "default_max_samples")]
+    pub max_samples: usize,
     /// Drift control. Default: projection to 1e-12 with up to 8 Newton iterations.
     pub drift: DriftControl,
     /// Rank decisions on B. Default: [`RankTolerances::default`].
@@ -227,6 +233,7 @@ impl Default for Settings {
             h_max: f64::INFINITY,
             fixed_step: None,
             max_steps: 10_000_000,
+            max_samples: DEFAULT_MAX_SAMPLES,
             drift: DriftControl::Projection {
                 tol: 1e-12,
                 max_iter: 8,
@@ -241,6 +248,10 @@ impl Default for Settings {
             strict: false,
         }
     }
+}
+
+fn default_max_samples() -> usize {
+    DEFAULT_MAX_SAMPLES
 }
 
 impl Settings {

@@ -1,0 +1,316 @@
+//! One validation of a time span and [`Settings`] before integrating, shared by every door (scene
+//! loader, CLI flags, Python binding): finite positive numbers, steps that advance time, and work
+//! bounded by [`Settings::max_samples`] and [`Settings::max_steps`].
+
+use super::{DriftControl, Output, Settings};
+use crate::integrate::Method;
+use std::fmt;
+
+/// Default of [`Settings::max_samples`]: 10^7 output samples (about 1 GB of CSV for a 10-dof
+/// scene).
+pub const DEFAULT_MAX_SAMPLES: usize = 10_000_000;
+
+/// The setting an error is about. Each door names it its own way ([`SettingsField::key`] in a
+/// scene file, [`SettingsField::flag`] on the command line, [`SettingsField::name`] in Python).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SettingsField {
+    T0,
+    T1,
+    OutputDt,
+    MaxSamples,
+    Step,
+    FixedStep,
+    Rtol,
+    Atol,
+    MaxStep,
+    MaxSteps,
+    ProjectionTol,
+    BaumgarteAlpha,
+    BaumgarteBeta,
+    MaxDrift,
+    ConsistencyTol,
+    RankDependent,
+    RankVanishing,
+}
+
+impl SettingsField {
+    /// Plain name (`output_dt`), as in Python keyword arguments.
+    pub fn name(self) -> &'static str {
+        self.key().rsplit('.').next().unwrap_or("")
+    }
+
+    /// Key in a scene file (`time.output_dt`); settings the file cannot set have a `settings.` key.
+    pub fn key(self) -> &'static str {
+        use SettingsField::*;
+        match self {
+            T0 => "time.t0",
+            T1 => "time.t1",
+            OutputDt => "time.output_dt",
+            MaxSamples => "time.max_samples",
+            Step => "solver.step",
+            FixedStep => "settings.fixed_step",
+            Rtol => "solver.rtol",
+            Atol => "solver.atol",
+            MaxStep => "solver.max_step",
+            MaxSteps => "settings.max_steps",
+            ProjectionTol => "solver.projection_tol",
+            BaumgarteAlpha => "solver.baumgarte_alpha",
+            BaumgarteBeta => "solver.baumgarte_beta",
+            MaxDrift => "solver.max_drift",
+            ConsistencyTol => "settings.consistency_tol",
+            RankDependent => "settings.rank_dependent",
+            RankVanishing => "settings.rank_vanishing",
+        }
+    }
+
+    /// `progmo solve` flag that sets it, if any.
+    pub fn flag(self) -> Option<&'static str> {
+        use SettingsField::*;
+        Some(match self {
+            T1 => "--t1",
+            OutputDt => "--output-dt",
+            MaxSamples => "--max-samples",
+            Step => "--step",
+            Rtol => "--rtol",
+            Atol => "--atol",
+            _ => return None,
+        })
+    }
+}
+
+/// A span or setting that would make the solve meaningless or unbounded.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SettingsError {
+    /// Which setting.
+    pub field: SettingsField,
+    /// Its value (as f64; counts are converted).
+    pub value: f64,
+    /// What is wrong, without the field's name.
+    pub message: String,
+}
+
+impl fmt::Display for SettingsError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}: {}", self.field.key(), self.message)
+    }
+}
+
+impl std::error::Error for SettingsError {}
+
+fn err(field: SettingsField, value: f64, message: impl Into<String>) -> SettingsError {
+    SettingsError {
+        field,
+        value,
+        message: message.into(),
+    }
+}
+
+fn positive(field: SettingsField, x: f64) -> Result<(), SettingsError> {
+    if x > 0.0 && x.is_finite() {
+        Ok(())
+    } else {
+        Err(err(field, x, format!("must be positive, got {x:?}")))
+    }
+}
+
+fn finite(field: SettingsField, x: f64) -> Result<(), SettingsError> {
+    if x.is_finite() {
+        Ok(())
+    } else {
+        Err(err(field, x, format!("must be a finite number, got {x:?}")))
+    }
+}
+
+/// A step `h` must move time at both ends of the span (`t + h > t` in floating point).
+fn advances(field: SettingsField, (t0, t1): (f64, f64), h: f64) -> Result<(), SettingsError> {
+    for t in [t0, t1] {
+        if t + h == t {
+            return Err(err(
+                field,
+                h,
+                format!("{h:?} cannot advance time: t + {h:?} == t at t = {t:?}"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Number of intervals of width `h` in the span, rounded up (saturating).
+fn intervals((t0, t1): (f64, f64), h: f64) -> f64 {
+    ((t1 - t0) / h).ceil()
+}
+
+/// Check a time span and settings before integrating. Refuses non-finite spans, t1 <= t0,
+/// non-finite or non-positive step sizes and tolerances, steps and output spacings that cannot
+/// advance time, more output samples than [`Settings::max_samples`], and fixed-step runs of more
+/// steps than [`Settings::max_steps`].
+pub fn validate(span: (f64, f64), s: &Settings) -> Result<(), SettingsError> {
+    use SettingsField::*;
+    let (t0, t1) = span;
+    finite(T0, t0)?;
+    if !t1.is_finite() {
+        return Err(err(T1, t1, format!("must be a finite number, got {t1:?}")));
+    }
+    if !(t1 > t0) {
+        return Err(err(
+            T1,
+            t1,
+            format!("t1 = {t1:?} must be after t0 = {t0:?}"),
+        ));
+    }
+    if s.max_samples < 2 {
+        return Err(err(
+            MaxSamples,
+            s.max_samples as f64,
+            format!("must be at least 2 (t0 and t1), got {}", s.max_samples),
+        ));
+    }
+    if s.max_steps == 0 {
+        return Err(err(MaxSteps, 0.0, "must be at least 1"));
+    }
+    if let Output::Every(dt) = s.output {
+        positive(OutputDt, dt)?;
+        advances(OutputDt, span, dt)?;
+        let n = intervals(span, dt) + 1.0;
+        if n > s.max_samples as f64 {
+            return Err(err(
+                OutputDt,
+                dt,
+                format!(
+                    "{dt:?} gives {n:.3e} samples over [{t0:?}, {t1:?}], more than max_samples = {} \
+                     (raise max_samples or the spacing)",
+                    s.max_samples
+                ),
+            ));
+        }
+    }
+    let fixed = |field: SettingsField, h: f64| -> Result<(), SettingsError> {
+        positive(field, h)?;
+        advances(field, span, h)?;
+        let n = intervals(span, h);
+        if n > s.max_steps as f64 {
+            return Err(err(
+                field,
+                h,
+                format!(
+                    "{h:?} needs {n:.3e} steps over [{t0:?}, {t1:?}], more than max_steps = {}",
+                    s.max_steps
+                ),
+            ));
+        }
+        Ok(())
+    };
+    if let Method::Rk4 { h } = s.integrator {
+        fixed(Step, h)?;
+    }
+    if let Some(h) = s.fixed_step {
+        fixed(FixedStep, h)?;
+    }
+    positive(Rtol, s.rtol)?;
+    positive(Atol, s.atol)?;
+    if !(s.h_max > 0.0) {
+        return Err(err(
+            MaxStep,
+            s.h_max,
+            format!("must be positive, got {:?}", s.h_max),
+        ));
+    }
+    match s.drift {
+        DriftControl::Projection { tol, .. } => positive(ProjectionTol, tol)?,
+        DriftControl::Baumgarte { alpha, beta } => {
+            finite(BaumgarteAlpha, alpha)?;
+            finite(BaumgarteBeta, beta)?;
+        }
+        DriftControl::None => {}
+    }
+    if let Some(x) = s.max_drift {
+        positive(MaxDrift, x)?;
+    }
+    positive(ConsistencyTol, s.consistency_tol)?;
+    positive(RankDependent, s.rank_dependent)?;
+    positive(RankVanishing, s.rank_vanishing)?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn field(span: (f64, f64), s: &Settings) -> Option<SettingsField> {
+        validate(span, s).err().map(|e| e.field)
+    }
+
+    #[test]
+    fn defaults_over_a_normal_span_pass() {
+        assert_eq!(validate((0.0, 10.0), &Settings::default()), Ok(()));
+    }
+
+    #[test]
+    fn each_bad_value_is_named() {
+        use SettingsField::*;
+        let d = Settings::default();
+        let every = |dt| Settings {
+            output: Output::Every(dt),
+            ..d.clone()
+        };
+        let rk4 = |h| Settings {
+            integrator: Method::Rk4 { h },
+            ..d.clone()
+        };
+        assert_eq!(field((0.0, f64::INFINITY), &d), Some(T1));
+        assert_eq!(field((0.0, f64::NAN), &d), Some(T1));
+        assert_eq!(field((1.0, 1.0), &d), Some(T1));
+        assert_eq!(field((f64::NAN, 1.0), &d), Some(T0));
+        assert_eq!(field((0.0, 1.0), &every(1e-300)), Some(OutputDt));
+        assert_eq!(field((0.0, 1.0), &every(f64::NAN)), Some(OutputDt));
+        assert_eq!(field((0.0, 1e9), &every(1e-3)), Some(OutputDt));
+        assert_eq!(field((0.0, 1.0), &rk4(1e-300)), Some(Step));
+        for h in [f64::NAN, 0.0, -1.0, f64::INFINITY] {
+            assert_eq!(field((0.0, 1.0), &rk4(h)), Some(Step), "step {h}");
+        }
+        let baumgarte = Settings {
+            drift: DriftControl::Baumgarte {
+                alpha: f64::NAN,
+                beta: 1.0,
+            },
+            ..d.clone()
+        };
+        assert_eq!(field((0.0, 1.0), &baumgarte), Some(BaumgarteAlpha));
+        let rtol = Settings {
+            rtol: 0.0,
+            ..d.clone()
+        };
+        assert_eq!(field((0.0, 1.0), &rtol), Some(Rtol));
+    }
+
+    #[test]
+    fn the_sample_limit_is_exact_and_overridable() {
+        // [0, 1] at 0.25: samples 0, 0.25, 0.5, 0.75, 1.
+        let s = |max_samples| Settings {
+            output: Output::Every(0.25),
+            max_samples,
+            ..Settings::default()
+        };
+        assert_eq!(validate((0.0, 1.0), &s(5)), Ok(()));
+        assert_eq!(field((0.0, 1.0), &s(4)), Some(SettingsField::OutputDt));
+        assert_eq!(
+            validate(
+                (0.0, 1e9),
+                &Settings {
+                    output: Output::Every(1e-3),
+                    max_samples: 2_000_000_000_000,
+                    ..Settings::default()
+                }
+            ),
+            Ok(())
+        );
+    }
+
+    #[test]
+    fn messages_name_the_field_and_the_value() {
+        let e = validate((0.0, f64::INFINITY), &Settings::default()).unwrap_err();
+        assert_eq!(e.to_string(), "time.t1: must be a finite number, got inf");
+        assert_eq!(e.field.flag(), Some("--t1"));
+        assert_eq!(e.field.name(), "t1");
+    }
+}
