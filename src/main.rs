@@ -7,14 +7,16 @@
 //!   the programme;
 //! - 3: the results could not be written.
 
+use clap::builder::PossibleValuesParser;
 use clap::{Parser, Subcommand, ValueEnum};
-use progmo::formulation::Formulation;
-use progmo::integrate::Method;
 use progmo::output::{
     write_summary_to_path, CsvSink, McapSink, OutputSink, Progress, SampleLayout, SummaryInput, Tee,
 };
 use progmo::scene::{Scene, SceneError};
-use progmo::solve::{DriftControl, Output, ReturnCode, Settings};
+use progmo::solve::{
+    OverrideError, Overrides, ReturnCode, Settings, DRIFT_NAMES, FORMULATION_NAMES,
+    INTEGRATOR_NAMES,
+};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -83,33 +85,9 @@ enum Command {
 }
 
 #[derive(Clone, Copy, ValueEnum)]
-enum FormulationArg {
-    NullSpace,
-    NullSpaceStacked,
-    Kkt,
-    RangeSpace,
-    UdwadiaKalaba,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-enum IntegratorArg {
-    Dop853,
-    Dopri5,
-    Radau5,
-    Rk4,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
 enum FormatArg {
     Mjcf,
     Urdf,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-enum DriftArg {
-    Projection,
-    Baumgarte,
-    None,
 }
 
 #[derive(clap::Args)]
@@ -120,11 +98,11 @@ struct SolveArgs {
     #[arg(long)]
     out: Option<PathBuf>,
     /// Override the scene's formulation.
-    #[arg(long, value_enum)]
-    formulation: Option<FormulationArg>,
+    #[arg(long, value_parser = PossibleValuesParser::new(FORMULATION_NAMES))]
+    formulation: Option<String>,
     /// Override the scene's integrator (rk4 needs --step).
-    #[arg(long, value_enum)]
-    integrator: Option<IntegratorArg>,
+    #[arg(long, value_parser = PossibleValuesParser::new(INTEGRATOR_NAMES))]
+    integrator: Option<String>,
     /// Fixed step for rk4.
     #[arg(long)]
     step: Option<f64>,
@@ -135,8 +113,8 @@ struct SolveArgs {
     #[arg(long)]
     atol: Option<f64>,
     /// Drift control.
-    #[arg(long, value_enum)]
-    drift: Option<DriftArg>,
+    #[arg(long, value_parser = PossibleValuesParser::new(DRIFT_NAMES))]
+    drift: Option<String>,
     /// End time (overrides the scene's time.t1).
     #[arg(long)]
     t1: Option<f64>,
@@ -218,61 +196,24 @@ fn load(path: &Path) -> Result<Scene, ExitCode> {
 }
 
 fn settings_from(a: &SolveArgs, base: &Settings) -> Result<Settings, String> {
-    let mut s = base.clone();
-    if let Some(f) = a.formulation {
-        s.formulation = match f {
-            FormulationArg::NullSpace => Formulation::NullSpace,
-            FormulationArg::NullSpaceStacked => Formulation::NullSpaceStacked,
-            FormulationArg::Kkt => Formulation::Kkt,
-            FormulationArg::RangeSpace => Formulation::RangeSpace,
-            FormulationArg::UdwadiaKalaba => Formulation::UdwadiaKalaba,
-        };
-    }
-    if let Some(i) = a.integrator {
-        s.integrator = match i {
-            IntegratorArg::Dop853 => Method::Dop853,
-            IntegratorArg::Dopri5 => Method::Dopri5,
-            IntegratorArg::Radau5 => Method::Radau5,
-            IntegratorArg::Rk4 => Method::Rk4 {
-                h: a.step.ok_or("--integrator rk4 needs --step")?,
-            },
-        };
-    } else if let (Some(h), Method::Rk4 { .. }) = (a.step, s.integrator) {
-        s.integrator = Method::Rk4 { h };
-    }
-    for (name, x) in [
-        ("--rtol", a.rtol),
-        ("--atol", a.atol),
-        ("--step", a.step),
-        ("--output-dt", a.output_dt),
-    ] {
-        if let Some(x) = x {
-            if !(x > 0.0) || !x.is_finite() {
-                return Err(format!("{name} must be positive, got {x}"));
-            }
-        }
-    }
-    s.rtol = a.rtol.unwrap_or(s.rtol);
-    s.atol = a.atol.unwrap_or(s.atol);
-    if let Some(d) = a.drift {
-        s.drift = match d {
-            DriftArg::Projection => DriftControl::Projection {
-                tol: 1e-12,
-                max_iter: 8,
-            },
-            DriftArg::Baumgarte => DriftControl::Baumgarte {
-                alpha: 1.0,
-                beta: 1.0,
-            },
-            DriftArg::None => DriftControl::None,
-        };
-    }
-    if let Some(dt) = a.output_dt {
-        s.output = Output::Every(dt);
-    }
-    s.strict |= a.strict;
-    s.max_samples = a.max_samples.unwrap_or(s.max_samples);
-    Ok(s)
+    // The flags are overrides in the one vocabulary of `Settings::apply`; values are checked with
+    // the span by `solve::validate`, which names the flag.
+    let o = Overrides {
+        formulation: a.formulation.clone(),
+        integrator: a.integrator.clone(),
+        step: a.step,
+        rtol: a.rtol,
+        atol: a.atol,
+        drift: a.drift.clone(),
+        output_dt: a.output_dt,
+        max_samples: a.max_samples,
+        strict: a.strict.then_some(true),
+        ..Default::default()
+    };
+    base.apply(&o).map_err(|e| match e {
+        OverrideError::StepRequired => "--integrator rk4 needs --step".to_string(),
+        e => format!("--{}: {e}", e.field()),
+    })
 }
 
 /// A settings error named by the flag that set the value (`--t1 inf: ...`), else by its scene key.

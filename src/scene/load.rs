@@ -9,11 +9,9 @@ use super::signals::{Signals, Site};
 use super::tree_model::{PointForce, TreeSceneModel};
 use super::{Scene, SceneSystem, Tolerance};
 use crate::expr::{self, Expr, SymbolTable};
-use crate::formulation::Formulation;
-use crate::integrate::Method;
 use crate::model::Model;
 use crate::programme::{Constraints, Level, Role, RowSpec};
-use crate::solve::{DriftControl, Output, Problem, Settings};
+use crate::solve::{OverrideError, Overrides, Problem, Settings};
 use crate::tree::{self, BodySpec, Fields, JointSpec, ModelError};
 use std::collections::BTreeMap;
 use std::ops::Range;
@@ -976,50 +974,8 @@ fn validate_settings(src: &Source, file: &SceneFile, settings: &Settings) -> R<(
     })
 }
 
-fn choose<T: Copy>(
-    src: &Source,
-    s: &Option<Spanned<String>>,
-    field: &str,
-    options: &[(&str, T)],
-    default: T,
-) -> R<T> {
-    match s {
-        None => Ok(default),
-        Some(s) => options
-            .iter()
-            .find(|(n, _)| *n == s.get_ref())
-            .map(|(_, v)| *v)
-            .ok_or_else(|| {
-                let names: Vec<&str> = options.iter().map(|o| o.0).collect();
-                src.error(
-                    s.span(),
-                    field,
-                    format!(
-                        "unknown value `{}`: expected one of {}",
-                        s.get_ref(),
-                        names.join(", ")
-                    ),
-                )
-            }),
-    }
-}
-
 fn solver(src: &Source, file: &SceneFile) -> R<Settings> {
     let f = &file.solver;
-    let mut s = Settings::default();
-    s.formulation = choose(
-        src,
-        &f.formulation,
-        "solver.formulation",
-        &[
-            ("null_space", Formulation::NullSpace),
-            ("kkt", Formulation::Kkt),
-            ("range_space", Formulation::RangeSpace),
-            ("udwadia_kalaba", Formulation::UdwadiaKalaba),
-            ("null_space_stacked", Formulation::NullSpaceStacked),
-        ],
-        s.formulation,
-    )?;
     let num = |x: &Option<Spanned<f64>>| x.as_ref().map(|x| *x.get_ref());
     for (name, x) in [
         ("step", &f.step),
@@ -1053,63 +1009,59 @@ fn solver(src: &Source, file: &SceneFile) -> R<Settings> {
             ));
         }
     }
-    let step = num(&f.step).unwrap_or(0.0);
-    s.integrator = choose(
-        src,
-        &f.integrator,
-        "solver.integrator",
-        &[
-            ("dop853", Method::Dop853),
-            ("dopri5", Method::Dopri5),
-            ("radau5", Method::Radau5),
-            ("rk4", Method::Rk4 { h: step }),
-        ],
-        s.integrator,
-    )?;
-    if let Method::Rk4 { h } = s.integrator {
-        if !(h > 0.0) {
-            let span = f.integrator.as_ref().map(|x| x.span()).unwrap_or(0..0);
-            return Err(src.error(span, "solver.step", "rk4 needs a positive fixed `step`"));
-        }
-    }
-    s.rtol = num(&f.rtol).unwrap_or(s.rtol);
-    s.atol = num(&f.atol).unwrap_or(s.atol);
-    s.h_max = num(&f.max_step).unwrap_or(s.h_max);
-    s.max_drift = num(&f.max_drift);
-    let drift = choose(
-        src,
-        &f.drift,
-        "solver.drift",
-        &[("projection", 0), ("baumgarte", 1), ("none", 2)],
-        0,
-    )?;
-    s.drift = match drift {
-        0 => DriftControl::Projection {
-            tol: num(&f.projection_tol).unwrap_or(1e-12),
-            max_iter: 8,
-        },
-        1 => DriftControl::Baumgarte {
-            alpha: num(&f.baumgarte_alpha).unwrap_or(1.0),
-            beta: num(&f.baumgarte_beta).unwrap_or(1.0),
-        },
-        _ => DriftControl::None,
-    };
-    s.output = match &file.time.get_ref().output_dt {
-        Some(dt) => Output::Every(*dt.get_ref()),
-        None => Output::Steps,
-    };
-    s.assemble = file.initial.get_ref().assemble;
-    s.strict = f.strict.unwrap_or(false);
-    if let Some(n) = &file.time.get_ref().max_samples {
-        s.max_samples = usize::try_from(*n.get_ref()).map_err(|_| {
+    let name = |x: &Option<Spanned<String>>| x.as_ref().map(|x| x.get_ref().clone());
+    let time = file.time.get_ref();
+    let max_samples = match &time.max_samples {
+        Some(n) => Some(usize::try_from(*n.get_ref()).map_err(|_| {
             src.error(
                 n.span(),
                 "time.max_samples",
                 format!("must be a positive count, got {}", n.get_ref()),
             )
-        })?;
-    }
-    Ok(s)
+        })?),
+        None => None,
+    };
+    // The file's keys are overrides of the defaults: the one vocabulary of `Settings::apply`.
+    let o = Overrides {
+        formulation: name(&f.formulation),
+        integrator: name(&f.integrator),
+        step: num(&f.step),
+        rtol: num(&f.rtol),
+        atol: num(&f.atol),
+        max_step: num(&f.max_step),
+        drift: name(&f.drift),
+        projection_tol: num(&f.projection_tol),
+        baumgarte_alpha: num(&f.baumgarte_alpha),
+        baumgarte_beta: num(&f.baumgarte_beta),
+        max_drift: num(&f.max_drift),
+        output_dt: time.output_dt.as_ref().map(|x| *x.get_ref()),
+        max_samples,
+        strict: f.strict,
+        assemble: Some(file.initial.get_ref().assemble),
+    };
+    Settings::default().apply(&o).map_err(|e| match e {
+        OverrideError::UnknownName(u) => {
+            let spanned = match u.what {
+                "formulation" => &f.formulation,
+                "integrator" => &f.integrator,
+                _ => &f.drift,
+            };
+            let span = spanned.as_ref().map(|x| x.span()).unwrap_or(0..0);
+            src.error(
+                span,
+                &format!("solver.{}", u.what),
+                format!(
+                    "unknown value `{}`: expected one of {}",
+                    u.value,
+                    u.expected.join(", ")
+                ),
+            )
+        }
+        OverrideError::StepRequired => {
+            let span = f.integrator.as_ref().map(|x| x.span()).unwrap_or(0..0);
+            src.error(span, "solver.step", "rk4 needs a positive fixed `step`")
+        }
+    })
 }
 
 /// Simulators the scene declares it is not checked in, with the reasons.

@@ -8,10 +8,15 @@
 
 mod evaluator;
 mod ode;
+mod overrides;
 mod project;
 mod validate;
 
 pub use evaluator::{Baumgarte, Evaluator};
+pub use overrides::{
+    OverrideError, Overrides, UnknownName, DEFAULT_BAUMGARTE, DEFAULT_PROJECTION_ITER,
+    DEFAULT_PROJECTION_TOL, DRIFT_NAMES, FORMULATION_NAMES, INTEGRATOR_NAMES,
+};
 pub use project::{ProjectionReport, Projector};
 pub use validate::{validate, SettingsError, SettingsField, DEFAULT_MAX_SAMPLES};
 
@@ -235,8 +240,8 @@ impl Default for Settings {
             max_steps: 10_000_000,
             max_samples: DEFAULT_MAX_SAMPLES,
             drift: DriftControl::Projection {
-                tol: 1e-12,
-                max_iter: 8,
+                tol: DEFAULT_PROJECTION_TOL,
+                max_iter: DEFAULT_PROJECTION_ITER,
             },
             rank_dependent: 1e-10,
             rank_vanishing: 1e-12,
