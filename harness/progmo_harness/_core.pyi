@@ -92,6 +92,7 @@ class Scene:
         step: float | None = None,
         formulation: Literal["null_space", "null_space_stacked", "kkt", "range_space", "udwadia_kalaba"] | None = None,
         drift: Literal["projection", "baumgarte", "none"] | None = None,
+        max_samples: int | None = None,
     ) -> SolveResult: ...
     def residuals(self, t: F64, q: F64, v: F64, a: F64 | None = None) -> F64: ...
     def dynamics(self, t: float, q: F64, v: F64) -> Dynamics: ...
@@ -120,6 +121,7 @@ def chain_toml(
     name: str | None = None,
     t1: float = 2.0,
 ) -> str:
-    """Scene text of a generated n-link planar chain (progmo::problems::chain)."""
+    """Scene text of a generated n-link planar chain (progmo::problems::chain); 2 <= n <= 10000,
+    ValueError otherwise. The name is quoted and escaped."""
 def drift_cost(rounds: int = 5) -> dict[str, float]:
     """Projection on/off over 10^4 periods: minimum wall times and residuals (progmo::problems::hard)."""

@@ -155,9 +155,10 @@ impl PyScene {
 
     /// Solve (the GIL is released meanwhile). Keyword overrides: output_dt, t1, rtol, atol,
     /// integrator ("dop853", "dopri5", "radau5", "rk4" with step), formulation ("null_space",
-    /// "kkt", "range_space", "udwadia_kalaba"), drift ("projection", "baumgarte", "none").
-    /// Returns a dict of numpy arrays and the return code.
-    #[pyo3(signature = (*, output_dt=None, t1=None, rtol=None, atol=None, integrator=None, step=None, formulation=None, drift=None))]
+    /// "kkt", "range_space", "udwadia_kalaba"), drift ("projection", "baumgarte", "none"),
+    /// max_samples (default 10^7). The span and settings are checked by `progmo::solve::validate`
+    /// first (ValueError naming the argument). Returns a dict of numpy arrays and the return code.
+    #[pyo3(signature = (*, output_dt=None, t1=None, rtol=None, atol=None, integrator=None, step=None, formulation=None, drift=None, max_samples=None))]
     #[allow(clippy::too_many_arguments)]
     fn solve<'py>(
         &self,
@@ -170,20 +171,15 @@ impl PyScene {
         step: Option<f64>,
         formulation: Option<&str>,
         drift: Option<&str>,
+        max_samples: Option<usize>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let mut s = self.scene.settings.clone();
         if let Some(dt) = output_dt {
-            positive("output_dt", dt)?;
             s.output = Output::Every(dt);
         }
-        if let Some(x) = rtol {
-            positive("rtol", x)?;
-            s.rtol = x;
-        }
-        if let Some(x) = atol {
-            positive("atol", x)?;
-            s.atol = x;
-        }
+        s.rtol = rtol.unwrap_or(s.rtol);
+        s.atol = atol.unwrap_or(s.atol);
+        s.max_samples = max_samples.unwrap_or(s.max_samples);
         if let Some(i) = integrator {
             s.integrator = match i {
                 "dop853" => Method::Dop853,
@@ -222,11 +218,10 @@ impl PyScene {
         }
         let mut scene = self.scene.clone();
         if let Some(t1) = t1 {
-            if !(t1 > scene.span().0) {
-                return Err(PyValueError::new_err(format!("t1 = {t1} must be after t0")));
-            }
             with_problem!(&mut scene.system, p => p.t1 = t1);
         }
+        progmo::solve::validate(scene.span(), &s)
+            .map_err(|e| PyValueError::new_err(format!("{}: {}", e.field.name(), e.message)))?;
         let sol: Solution = py.detach(|| scene.solve(&s));
         solution_dict(py, &sol, &s)
     }
@@ -248,6 +243,12 @@ impl PyScene {
             v.as_array().to_owned(),
         );
         let a = a.map(|a| a.as_array().to_owned());
+        finite("t", t.iter())?;
+        finite("q", q.iter())?;
+        finite("v", v.iter())?;
+        if let Some(a) = &a {
+            finite("a", a.iter())?;
+        }
         let n = t.len();
         let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
         if q.shape() != [n, nq]
@@ -291,6 +292,9 @@ impl PyScene {
         v: PyReadonlyArray1<'py, f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let (q, v) = (q.as_slice()?.to_vec(), v.as_slice()?.to_vec());
+        finite("t", [&t])?;
+        finite("q", &q)?;
+        finite("v", &v)?;
         let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
         if q.len() != nq || v.len() != nv {
             return Err(PyValueError::new_err(format!(
@@ -331,6 +335,9 @@ impl PyScene {
     ) -> PyResult<Bound<'py, PyDict>> {
         let f = parse_formulation(formulation)?;
         let (q, v) = (q.as_slice()?.to_vec(), v.as_slice()?.to_vec());
+        finite("t", [&t])?;
+        finite("q", &q)?;
+        finite("v", &v)?;
         let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
         if q.len() != nq || v.len() != nv {
             return Err(PyValueError::new_err(format!(
@@ -386,6 +393,9 @@ impl PyScene {
             Some(v) => v.as_slice()?.to_vec(),
             None => with_problem!(&self.scene.system, p => p.v0.clone()),
         };
+        finite("t", [&t])?;
+        finite("q", &q)?;
+        finite("v", &v)?;
         let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
         if q.len() != nq || v.len() != nv || iterations == 0 {
             return Err(PyValueError::new_err(format!(
@@ -481,13 +491,13 @@ fn parse_formulation(f: &str) -> PyResult<Formulation> {
     })
 }
 
-fn positive(name: &str, x: f64) -> PyResult<()> {
-    if x > 0.0 && x.is_finite() {
-        Ok(())
-    } else {
-        Err(PyValueError::new_err(format!(
-            "{name} must be positive, got {x}"
-        )))
+/// Arrays from Python must be finite: a NaN state would only come back as NaN results.
+fn finite<'a>(name: &str, x: impl IntoIterator<Item = &'a f64>) -> PyResult<()> {
+    match x.into_iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        None => Ok(()),
+        Some((i, v)) => Err(PyValueError::new_err(format!(
+            "{name}: entry {i} is {v:?}; inputs must be finite"
+        ))),
     }
 }
 
@@ -540,19 +550,6 @@ fn chain_toml(
     name: Option<String>,
     t1: f64,
 ) -> PyResult<String> {
-    if n < 2 {
-        return Err(PyValueError::new_err(format!(
-            "chain_toml: n = {n}, a chain needs at least 2 links"
-        )));
-    }
-    if let Some(m) = &masses {
-        if m.len() != n {
-            return Err(PyValueError::new_err(format!(
-                "chain_toml: {} masses for {n} links",
-                m.len()
-            )));
-        }
-    }
     let spec = progmo::problems::chain::ChainSpec {
         n,
         masses,
@@ -561,6 +558,8 @@ fn chain_toml(
         name,
         t1,
     };
+    spec.check()
+        .map_err(|e| PyValueError::new_err(format!("chain_toml: {e}")))?;
     Ok(spec.toml())
 }
 
