@@ -114,6 +114,7 @@ class Scene:
         step: float | None = None,
         formulation: Literal["null_space", "null_space_stacked", "kkt", "range_space", "udwadia_kalaba"] | None = None,
         drift: Literal["projection", "baumgarte", "none"] | None = None,
+        max_samples: int | None = None,
         strict: bool | None = None,
     ) -> SolveResult: ...
     def check_initial(self) -> None:
@@ -150,6 +151,7 @@ def chain_toml(
     name: str | None = None,
     t1: float = 2.0,
 ) -> str:
-    """Scene text of a generated n-link planar chain (progmo::problems::chain)."""
+    """Scene text of a generated n-link planar chain (progmo::problems::chain); 2 <= n <= 10000,
+    ValueError otherwise. The name is quoted and escaped."""
 def drift_cost(rounds: int = 5) -> dict[str, float]:
     """Projection on/off over 10^4 periods: minimum wall times and residuals (progmo::problems::hard)."""

@@ -74,6 +74,28 @@ pub enum FormulationError {
     NonFinite,
 }
 
+impl std::fmt::Display for FormulationError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            FormulationError::RankDeficient { rank, rows, rcond } => write!(
+                f,
+                "the programme Jacobian has rank {rank} < {}: rows {rows:?} vanish or are \
+                 dependent (rcond {rcond:.2e})",
+                rank + rows.len()
+            ),
+            FormulationError::SingularSystem { rcond } => write!(
+                f,
+                "the linear system for dv/dt is singular (reciprocal condition {rcond:.2e})"
+            ),
+            FormulationError::NonFinite => {
+                f.write_str("A, G + Q, the programme Jacobian or gamma is not finite")
+            }
+        }
+    }
+}
+
+impl std::error::Error for FormulationError {}
+
 /// Diagnostics of one solve.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Diagnostics {

@@ -27,7 +27,42 @@ pub struct ChainSpec {
     pub t1: f64,
 }
 
+/// Most links a generated chain may have (a scene of about 2 MB; bounds the work a caller can ask
+/// for, e.g. `chain_toml(10**9)` from Python).
+pub const MAX_LINKS: usize = 10_000;
+
 impl ChainSpec {
+    /// The spec's values are usable: 2 <= n <= [`MAX_LINKS`], n finite positive masses, finite
+    /// positive length and t1, finite q0. The message names the field.
+    pub fn check(&self) -> Result<(), String> {
+        let n = self.n;
+        if !(2..=MAX_LINKS).contains(&n) {
+            return Err(format!("n = {n}: a chain needs 2 to {MAX_LINKS} links"));
+        }
+        if let Some(m) = &self.masses {
+            if m.len() != n {
+                return Err(format!("masses: {} masses for {n} links", m.len()));
+            }
+            if let Some(x) = m.iter().find(|x| !(x.is_finite() && **x > 0.0)) {
+                return Err(format!(
+                    "masses: every mass must be finite and positive, got {x:?}"
+                ));
+            }
+        }
+        for (field, x) in [("length", self.length), ("t1", self.t1)] {
+            if !(x.is_finite() && x > 0.0) {
+                return Err(format!("{field} must be finite and positive, got {x:?}"));
+            }
+        }
+        if let Some(q0) = self.q0.filter(|x| !x.is_finite()) {
+            return Err(format!("q0 must be finite, got {q0:?}"));
+        }
+        if self.name.as_ref().is_some_and(|n| n.trim().is_empty()) {
+            return Err("name must not be empty".into());
+        }
+        Ok(())
+    }
+
     /// A uniform chain of `n` links with the defaults above.
     pub fn uniform(n: usize) -> Self {
         ChainSpec {
@@ -40,7 +75,8 @@ impl ChainSpec {
         }
     }
 
-    /// The scene file text. Panics if n < 2 or the masses do not have n entries (programming error).
+    /// The scene file text. Panics if n < 2 or the masses do not have n entries (programming error;
+    /// callers with outside input use [`ChainSpec::check`] first).
     pub fn toml(&self) -> String {
         let n = self.n;
         assert!(n >= 2, "a chain needs at least 2 links");
@@ -51,7 +87,8 @@ impl ChainSpec {
         let l = self.length;
         let cos_sum: Vec<String> = (1..=n).map(|k| format!("cos({k}*q0)")).collect();
         let mut s = String::new();
-        let _ = writeln!(s, "name = \"{name}\"");
+        // Quoted and escaped as a TOML string: a name cannot add keys to the scene.
+        let _ = writeln!(s, "name = {}", toml::Value::String(name));
         let _ = writeln!(
             s,
             "description = \"Generated {n}-link planar chain for progmo bench.\""

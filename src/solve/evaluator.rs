@@ -6,7 +6,7 @@ use crate::formulation::{
 use crate::model::Model;
 use crate::programme::jet::Jet;
 use crate::programme::{Constraints, Level, Role};
-use crate::scalar::Scalar;
+use crate::scalar::{re, Scalar};
 use nalgebra::DMatrix;
 
 /// Baumgarte stabilization gains: velocity rows get d f/dt = -alpha f, position rows
@@ -60,6 +60,18 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
             lambda: vec![z; s],
             diag: Diagnostics::default(),
             row_scale: vec![1.0; s],
+        }
+    }
+
+    /// Take the reference row norms of the vanishing-row test (|B_i| at (t, q, v)); a solve takes
+    /// them at its initial state, and so must every caller that wants the solver's rank decisions.
+    pub fn set_row_scale_at(&mut self, t: S, q: &[S], v: &[S]) {
+        self.prepare(t, q, v);
+        for i in 0..self.row_scale.len() {
+            let n2 = (0..self.jet.b.ncols())
+                .map(|j| re(self.jet.b[(i, j)]) * re(self.jet.b[(i, j)]))
+                .sum::<f64>();
+            self.row_scale[i] = n2.sqrt();
         }
     }
 

@@ -260,7 +260,8 @@ fn default_max_samples() -> usize {
 }
 
 impl Settings {
-    fn rank(&self) -> RankTolerances {
+    /// The rank tolerances of B these settings give (every caller of a formulation uses these).
+    pub fn rank(&self) -> RankTolerances {
         RankTolerances {
             dependent: self.rank_dependent,
             vanishing: self.rank_vanishing,

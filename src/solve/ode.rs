@@ -163,12 +163,7 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
 
         let mut ev = Evaluator::new(m, c);
         // Reference row norms for the vanishing-row test.
-        ev.prepare(t0, &q, &v);
-        let mut scale = vec![1.0; s];
-        for (i, sc) in scale.iter_mut().enumerate() {
-            *sc = ev.jet.b.row(i).iter().map(|x| x * x).sum::<f64>().sqrt();
-        }
-        ev.row_scale = scale;
+        ev.set_row_scale_at(t0, &q, &v);
         let baumgarte = match settings.drift {
             DriftControl::Baumgarte { alpha, beta } => Some(Baumgarte { alpha, beta }),
             _ => None,

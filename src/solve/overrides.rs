@@ -262,7 +262,9 @@ mod tests {
             assert_eq!(Settings::default().apply(&o).unwrap().drift.name(), n);
         }
         let e = "nullspace".parse::<Formulation>().unwrap_err();
-        assert!(e.to_string().contains("expected one of null_space, null_space_stacked"));
+        assert!(e
+            .to_string()
+            .contains("expected one of null_space, null_space_stacked"));
     }
 
     #[test]

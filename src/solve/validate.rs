@@ -151,7 +151,7 @@ pub fn validate(span: (f64, f64), s: &Settings) -> Result<(), SettingsError> {
     if !t1.is_finite() {
         return Err(err(T1, t1, format!("must be a finite number, got {t1:?}")));
     }
-    if !(t1 > t0) {
+    if t1.partial_cmp(&t0) != Some(std::cmp::Ordering::Greater) {
         return Err(err(
             T1,
             t1,
@@ -208,7 +208,7 @@ pub fn validate(span: (f64, f64), s: &Settings) -> Result<(), SettingsError> {
     }
     positive(Rtol, s.rtol)?;
     positive(Atol, s.atol)?;
-    if !(s.h_max > 0.0) {
+    if s.h_max.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return Err(err(
             MaxStep,
             s.h_max,

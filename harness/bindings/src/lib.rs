@@ -4,12 +4,11 @@
 
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
-use progmo::formulation::{Formulation, RankTolerances};
-use progmo::integrate::Method;
+use progmo::formulation::Formulation;
 use progmo::model::Model;
 use progmo::programme::{Constraints, Level, Role};
 use progmo::scene::{Scene, SceneSystem};
-use progmo::solve::{DriftControl, Evaluator, Output, Settings, Solution};
+use progmo::solve::{Evaluator, Overrides, Settings, Solution};
 use progmo::with_problem;
 use pyo3::create_exception;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
@@ -160,11 +159,14 @@ impl PyScene {
         json_to_py(py, &self.scene.settings)
     }
 
-    /// Solve (the GIL is released meanwhile). Keyword overrides: output_dt, t1, rtol, atol,
-    /// integrator ("dop853", "dopri5", "radau5", "rk4" with step), formulation ("null_space",
-    /// "kkt", "range_space", "udwadia_kalaba"), drift ("projection", "baumgarte", "none").
+    /// Solve (the GIL is released meanwhile). Keyword overrides in the core's one vocabulary
+    /// (`progmo::solve::Overrides`, the scene file's `[solver]`/`[time]` names): output_dt, t1,
+    /// rtol, atol, integrator ("dop853", "dopri5", "radau5", "rk4" with step), formulation
+    /// ("null_space", "null_space_stacked", "kkt", "range_space", "udwadia_kalaba"), drift
+    /// ("projection", "baumgarte", "none"), max_samples (default 10^7), strict. The span and
+    /// settings are checked by `progmo::solve::validate` first (ValueError naming the argument).
     /// Returns a dict of numpy arrays and the return code.
-    #[pyo3(signature = (*, output_dt=None, t1=None, rtol=None, atol=None, integrator=None, step=None, formulation=None, drift=None, strict=None))]
+    #[pyo3(signature = (*, output_dt=None, t1=None, rtol=None, atol=None, integrator=None, step=None, formulation=None, drift=None, max_samples=None, strict=None))]
     #[allow(clippy::too_many_arguments)]
     fn solve<'py>(
         &self,
@@ -173,71 +175,36 @@ impl PyScene {
         t1: Option<f64>,
         rtol: Option<f64>,
         atol: Option<f64>,
-        integrator: Option<&str>,
+        integrator: Option<String>,
         step: Option<f64>,
-        formulation: Option<&str>,
-        drift: Option<&str>,
+        formulation: Option<String>,
+        drift: Option<String>,
+        max_samples: Option<usize>,
         strict: Option<bool>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let mut s = self.scene.settings.clone();
-        if let Some(x) = strict {
-            s.strict = x;
-        }
-        if let Some(dt) = output_dt {
-            positive("output_dt", dt)?;
-            s.output = Output::Every(dt);
-        }
-        if let Some(x) = rtol {
-            positive("rtol", x)?;
-            s.rtol = x;
-        }
-        if let Some(x) = atol {
-            positive("atol", x)?;
-            s.atol = x;
-        }
-        if let Some(i) = integrator {
-            s.integrator = match i {
-                "dop853" => Method::Dop853,
-                "dopri5" => Method::Dopri5,
-                "radau5" => Method::Radau5,
-                "rk4" => Method::Rk4 {
-                    h: step.ok_or_else(|| PyValueError::new_err("integrator rk4 needs step"))?,
-                },
-                other => {
-                    return Err(PyValueError::new_err(format!(
-                        "unknown integrator {other:?}"
-                    )))
-                }
-            };
-        }
-        if let Some(f) = formulation {
-            s.formulation = parse_formulation(f)?;
-        }
-        if let Some(d) = drift {
-            s.drift = match d {
-                "projection" => DriftControl::Projection {
-                    tol: 1e-12,
-                    max_iter: 8,
-                },
-                "baumgarte" => DriftControl::Baumgarte {
-                    alpha: 1.0,
-                    beta: 1.0,
-                },
-                "none" => DriftControl::None,
-                other => {
-                    return Err(PyValueError::new_err(format!(
-                        "unknown drift control {other:?}"
-                    )))
-                }
-            };
-        }
+        let o = Overrides {
+            formulation,
+            integrator,
+            step,
+            rtol,
+            atol,
+            drift,
+            output_dt,
+            max_samples,
+            strict,
+            ..Default::default()
+        };
+        let s = self
+            .scene
+            .settings
+            .apply(&o)
+            .map_err(|e| PyValueError::new_err(format!("{}: {e}", e.field())))?;
         let mut scene = self.scene.clone();
         if let Some(t1) = t1 {
-            if !(t1 > scene.span().0) {
-                return Err(PyValueError::new_err(format!("t1 = {t1} must be after t0")));
-            }
             with_problem!(&mut scene.system, p => p.t1 = t1);
         }
+        progmo::solve::validate(scene.span(), &s)
+            .map_err(|e| PyValueError::new_err(format!("{}: {}", e.field.name(), e.message)))?;
         let sol: Solution = py.detach(|| scene.solve(&s));
         solution_dict(py, &sol, &s)
     }
@@ -259,6 +226,12 @@ impl PyScene {
             v.as_array().to_owned(),
         );
         let a = a.map(|a| a.as_array().to_owned());
+        finite("t", t.iter())?;
+        finite("q", q.iter())?;
+        finite("v", v.iter())?;
+        if let Some(a) = &a {
+            finite("a", a.iter())?;
+        }
         let n = t.len();
         let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
         if q.shape() != [n, nq]
@@ -302,6 +275,9 @@ impl PyScene {
         v: PyReadonlyArray1<'py, f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let (q, v) = (q.as_slice()?.to_vec(), v.as_slice()?.to_vec());
+        finite("t", [&t])?;
+        finite("q", &q)?;
+        finite("v", &v)?;
         let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
         if q.len() != nq || v.len() != nv {
             return Err(PyValueError::new_err(format!(
@@ -331,7 +307,7 @@ impl PyScene {
 
     /// One right-hand side at (t, q, v) with `formulation` (no drift control): dv/dt ("a"), the
     /// control force u of the programme rows (2.12), the system rows' reactions and the multipliers.
-    /// Row norms for the vanishing-row test are taken at this state. For benchmarks and checks.
+    /// Rank decisions as the solver makes them (reference row norms at t0). For benchmarks and checks.
     fn accelerations<'py>(
         &self,
         py: Python<'py>,
@@ -342,26 +318,23 @@ impl PyScene {
     ) -> PyResult<Bound<'py, PyDict>> {
         let f = parse_formulation(formulation)?;
         let (q, v) = (q.as_slice()?.to_vec(), v.as_slice()?.to_vec());
+        finite("t", [&t])?;
+        finite("q", &q)?;
+        finite("v", &v)?;
         let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
         if q.len() != nq || v.len() != nv {
             return Err(PyValueError::new_err(format!(
                 "q needs {nq} entries, v {nv}"
             )));
         }
-        let rank = RankTolerances {
-            dependent: self.scene.settings.rank_dependent,
-            vanishing: self.scene.settings.rank_vanishing,
-        };
+        let rank = self.scene.settings.rank();
         let d = PyDict::new(py);
         with_problem!(&self.scene.system, p => {
             let mut ev = Evaluator::<_, _, f64>::new(&p.model, &p.constraints);
-            ev.prepare(t, &q, &v);
-            // reference row norms for the vanishing-row test, as the solver takes them at t0
-                ev.row_scale = (0..ev.jet.b.nrows())
-                    .map(|i| ev.jet.b.row(i).iter().map(|x| x * x).sum::<f64>().sqrt())
-                    .collect();
+            // the solver's reference row norms: at the scene's initial state
+            ev.set_row_scale_at(p.t0, &p.q0, &p.v0);
             ev.evaluate(f, &rank, None, t, &q, &v)
-                .map_err(|e| PyRuntimeError::new_err(format!("{formulation}: {e:?}")))?;
+                .map_err(|e| PyRuntimeError::new_err(format!("{formulation}: {e}")))?;
             let mut u = vec![0.0; nv];
             let mut r = vec![0.0; nv];
             ev.reaction(Role::Programme, &mut u);
@@ -397,31 +370,28 @@ impl PyScene {
             Some(v) => v.as_slice()?.to_vec(),
             None => with_problem!(&self.scene.system, p => p.v0.clone()),
         };
+        finite("t", [&t])?;
+        finite("q", &q)?;
+        finite("v", &v)?;
         let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
         if q.len() != nq || v.len() != nv || iterations == 0 {
             return Err(PyValueError::new_err(format!(
                 "q needs {nq} entries, v {nv}, iterations > 0"
             )));
         }
-        let rank = RankTolerances {
-            dependent: self.scene.settings.rank_dependent,
-            vanishing: self.scene.settings.rank_vanishing,
-        };
+        let rank = self.scene.settings.rank();
         let out: Result<f64, String> = py.detach(|| {
             with_problem!(&self.scene.system, p => {
                 let mut ev = Evaluator::<_, _, f64>::new(&p.model, &p.constraints);
-                ev.prepare(t, &q, &v);
-                // reference row norms for the vanishing-row test, as the solver takes them at t0
-                ev.row_scale = (0..ev.jet.b.nrows())
-                    .map(|i| ev.jet.b.row(i).iter().map(|x| x * x).sum::<f64>().sqrt())
-                    .collect();
+                // the solver's reference row norms: at the scene's initial state
+                ev.set_row_scale_at(p.t0, &p.q0, &p.v0);
                 let mut u = vec![0.0; nv];
                 // two nearby states, alternated: every evaluation is at a new q, as in a solve
                 let qb: Vec<f64> = q.iter().map(|x| x + 1e-9).collect();
                 let states = [&q, &qb];
                 let start = std::time::Instant::now();
                 for i in 0..iterations {
-                    ev.evaluate(f, &rank, None, t, states[i % 2], &v).map_err(|e| format!("{e:?}"))?;
+                    ev.evaluate(f, &rank, None, t, states[i % 2], &v).map_err(|e| e.to_string())?;
                     ev.reaction(Role::Programme, &mut u);
                     std::hint::black_box(&u);
                 }
@@ -526,27 +496,17 @@ impl PyScene {
 }
 
 fn parse_formulation(f: &str) -> PyResult<Formulation> {
-    Ok(match f {
-        "null_space" => Formulation::NullSpace,
-        "kkt" => Formulation::Kkt,
-        "range_space" => Formulation::RangeSpace,
-        "udwadia_kalaba" => Formulation::UdwadiaKalaba,
-        "null_space_stacked" => Formulation::NullSpaceStacked,
-        other => {
-            return Err(PyValueError::new_err(format!(
-                "unknown formulation {other:?}"
-            )))
-        }
-    })
+    f.parse()
+        .map_err(|e: progmo::solve::UnknownName| PyValueError::new_err(e.to_string()))
 }
 
-fn positive(name: &str, x: f64) -> PyResult<()> {
-    if x > 0.0 && x.is_finite() {
-        Ok(())
-    } else {
-        Err(PyValueError::new_err(format!(
-            "{name} must be positive, got {x}"
-        )))
+/// Arrays from Python must be finite: a NaN state would only come back as NaN results.
+fn finite<'a>(name: &str, x: impl IntoIterator<Item = &'a f64>) -> PyResult<()> {
+    match x.into_iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        None => Ok(()),
+        Some((i, v)) => Err(PyValueError::new_err(format!(
+            "{name}: entry {i} is {v:?}; inputs must be finite"
+        ))),
     }
 }
 
@@ -607,19 +567,6 @@ fn chain_toml(
     name: Option<String>,
     t1: f64,
 ) -> PyResult<String> {
-    if n < 2 {
-        return Err(PyValueError::new_err(format!(
-            "chain_toml: n = {n}, a chain needs at least 2 links"
-        )));
-    }
-    if let Some(m) = &masses {
-        if m.len() != n {
-            return Err(PyValueError::new_err(format!(
-                "chain_toml: {} masses for {n} links",
-                m.len()
-            )));
-        }
-    }
     let spec = progmo::problems::chain::ChainSpec {
         n,
         masses,
@@ -628,6 +575,8 @@ fn chain_toml(
         name,
         t1,
     };
+    spec.check()
+        .map_err(|e| PyValueError::new_err(format!("chain_toml: {e}")))?;
     Ok(spec.toml())
 }
 
