@@ -66,7 +66,14 @@ class Dynamics(TypedDict):
     B: F64  # (s, nv) constraint Jacobian
     gamma: F64  # (s,) B dv/dt = gamma
 
-__all__ = ["Scene", "SceneError", "ExportUnsupported", "version", "chain_toml", "drift_cost"]
+__all__ = ["Scene", "SceneError", "ExportUnsupported", "FORMULATIONS", "INTEGRATORS", "DRIFTS", "version",
+           "chain_toml", "drift_cost"]
+
+#: The core's method vocabulary (progmo::solve::FORMULATION_NAMES, ...); the Literal types below
+#: spell the same names (tests/python/test_bindings.py checks it).
+FORMULATIONS: list[str]
+INTEGRATORS: list[str]
+DRIFTS: list[str]
 
 @final
 class Scene:
@@ -127,7 +134,7 @@ class Scene:
     def residuals(self, t: F64, q: F64, v: F64, a: F64 | None = None) -> F64: ...
     def dynamics(self, t: float, q: F64, v: F64) -> Dynamics: ...
     def accelerations(
-        self, t: float, q: F64, v: F64, formulation: Literal["null_space", "kkt", "range_space", "udwadia_kalaba"]
+        self, t: float, q: F64, v: F64, formulation: Literal["null_space", "null_space_stacked", "kkt", "range_space", "udwadia_kalaba"]
     ) -> dict[str, F64]:
         """One right-hand side (no drift control): {"a": dv/dt, "u", "reactions", "lambda"}."""
     def rhs_benchmark(

@@ -90,15 +90,22 @@ pub struct DriverOptions {
     pub fixed_step: Option<f64>,
 }
 
+/// Default relative and absolute local error tolerances, of the driver and of
+/// [`crate::solve::Settings`] alike (one default, one place).
+pub const DEFAULT_RTOL: f64 = 1e-10;
+pub const DEFAULT_ATOL: f64 = 1e-12;
+/// Default step limit.
+pub const DEFAULT_MAX_STEPS: usize = 10_000_000;
+
 impl Default for DriverOptions {
     fn default() -> Self {
         DriverOptions {
-            rtol: 1e-8,
-            atol: 1e-10,
+            rtol: DEFAULT_RTOL,
+            atol: DEFAULT_ATOL,
             h0: None,
             h_max: f64::INFINITY,
             h_min_factor: 10.0,
-            max_steps: 10_000_000,
+            max_steps: DEFAULT_MAX_STEPS,
             fixed_step: None,
         }
     }

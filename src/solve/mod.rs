@@ -233,11 +233,11 @@ impl Default for Settings {
         Settings {
             formulation: Formulation::NullSpace,
             integrator: Method::Dop853,
-            rtol: 1e-10,
-            atol: 1e-12,
+            rtol: crate::integrate::DEFAULT_RTOL,
+            atol: crate::integrate::DEFAULT_ATOL,
             h_max: f64::INFINITY,
             fixed_step: None,
-            max_steps: 10_000_000,
+            max_steps: crate::integrate::DEFAULT_MAX_STEPS,
             max_samples: DEFAULT_MAX_SAMPLES,
             drift: DriftControl::Projection {
                 tol: DEFAULT_PROJECTION_TOL,
@@ -260,6 +260,19 @@ fn default_max_samples() -> usize {
 }
 
 impl Settings {
+    /// The step driver's options these settings give (the one mapping; the driver's other fields
+    /// keep their defaults).
+    pub fn driver_options(&self) -> DriverOptions {
+        DriverOptions {
+            rtol: self.rtol,
+            atol: self.atol,
+            h_max: self.h_max,
+            fixed_step: self.fixed_step,
+            max_steps: self.max_steps,
+            ..Default::default()
+        }
+    }
+
     /// The rank tolerances of B these settings give (every caller of a formulation uses these).
     pub fn rank(&self) -> RankTolerances {
         RankTolerances {
@@ -641,15 +654,7 @@ pub fn solve_into<M: Model, C: Constraints>(
     };
     sol.initial_correction = ode.initial_correction.clone();
     let nv = problem.model.nv();
-    let options = DriverOptions {
-        rtol: settings.rtol,
-        atol: settings.atol,
-        h_max: settings.h_max,
-        fixed_step: settings.fixed_step,
-        max_steps: settings.max_steps,
-        ..Default::default()
-    };
-    let mut integrator = Integrator::new(settings.integrator, options, 2 * nv);
+    let mut integrator = Integrator::new(settings.integrator, settings.driver_options(), 2 * nv);
     let mut y = ode.initial_y();
     let (outcome, istats) = integrator.integrate(&mut ode, problem.t0, problem.t1, &mut y);
     sol.code = ode.finish(outcome);

@@ -59,3 +59,24 @@ def test_errors_are_python_exceptions_with_the_location(tmp_path):
         s.solve(integrator="euler")
     with pytest.raises(ValueError, match="shapes"):
         s.residuals(np.zeros(3), np.zeros((3, 5)), np.zeros((3, 2)))
+
+
+def test_stub_literals_spell_the_core_vocabulary():
+    """One vocabulary: the names the core parses (progmo::solve) are the names the stub's Literal
+    types offer, so `_core.pyi` cannot drift from the binary (null_space_stacked once did)."""
+    import pathlib
+    import re
+
+    from progmo_harness import _core
+
+    stub = (pathlib.Path(_core.__file__).parent / "_core.pyi").read_text()
+    for kw, names in (("formulation", _core.FORMULATIONS), ("integrator", _core.INTEGRATORS),
+                      ("drift", _core.DRIFTS)):
+        lits = re.findall(rf"\b{kw}: Literal\[([^\]]*)\]", stub)
+        assert lits, kw
+        for lit in lits:  # every keyword that takes such a name offers exactly the core's names
+            assert set(re.findall(r'"([a-z0-9_]+)"', lit)) == set(names), (kw, lit, names)
+    for name in _core.FORMULATIONS:
+        sol = _core.Scene(str(pathlib.Path(__file__).resolve().parents[2] / "references" / "scenes"
+                              / "double_pendulum.toml")).solve(formulation=name, t1=0.05)
+        assert sol["success"] and sol["settings"]["formulation"] == name

@@ -608,6 +608,10 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyScene>()?;
     m.add("SceneError", m.py().get_type::<SceneError>())?;
     m.add("ExportUnsupported", m.py().get_type::<ExportUnsupported>())?;
+    // The method vocabulary of the core (progmo::solve): one list for every door.
+    m.add("FORMULATIONS", progmo::solve::FORMULATION_NAMES.to_vec())?;
+    m.add("INTEGRATORS", progmo::solve::INTEGRATOR_NAMES.to_vec())?;
+    m.add("DRIFTS", progmo::solve::DRIFT_NAMES.to_vec())?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     m.add_function(wrap_pyfunction!(chain_toml, m)?)?;
     m.add_function(wrap_pyfunction!(drift_cost, m)?)?;

@@ -16,8 +16,11 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
-FORMULATIONS = ("null_space", "null_space_stacked", "kkt", "range_space", "udwadia_kalaba")
-INTEGRATORS = ("dop853", "dopri5", "radau5")
+from .._core import FORMULATIONS as _FORMULATIONS, INTEGRATORS as _INTEGRATORS
+
+#: the core's vocabulary (progmo::solve); the sweeps use every formulation and the adaptive integrators
+FORMULATIONS = tuple(_FORMULATIONS)
+INTEGRATORS = tuple(n for n in _INTEGRATORS if n != "rk4")
 
 
 def repo_root() -> Path:
