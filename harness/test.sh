@@ -5,8 +5,9 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 bash harness/setup.sh
-echo "== static checks: cargo fmt, mypy, stubtest (the .pyi against the built extension) ==" >&2
+echo "== static checks: cargo fmt, clippy -D warnings, mypy, stubtest (the .pyi against the built extension) ==" >&2
 cargo fmt --all -- --check
+cargo clippy --release --workspace --all-targets -q -- -D warnings
 .venv/bin/python -m mypy
 .venv/bin/python -m mypy.stubtest progmo_harness._core --allowlist harness/stubtest-allowlist.txt
 echo "== cargo test (Rust core, pure Rust) ==" >&2

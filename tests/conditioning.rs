@@ -117,9 +117,11 @@ fn an_early_stop_is_one_instant() {
     // with dense output the stop must still be reported at the last written sample.
     for output in [Output::Steps, Output::Every(0.01)] {
         let p = hard::arm_through_boundary();
-        let mut s = Settings::default();
-        s.rank_dependent = 1e-6;
-        s.output = output;
+        let s = Settings {
+            rank_dependent: 1e-6,
+            output,
+            ..Default::default()
+        };
         let sol = solve(&p, &s);
         assert!(!sol.code.is_success());
         let t_code = sol.code.time().expect("a stop has a time");

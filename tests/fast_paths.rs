@@ -1,9 +1,9 @@
 //! Fast paths of one evaluation, each against the straightforward computation it replaces.
 //!
-//! 1. The chain-rule jet of scene rows (`ExprConstraints::jet`: one `Dual2`/`Dual` pass per level and
-//! one `Dual` pass per slot entering B, signals from one set of tree passes) against the generic AD
-//! passes over the whole evaluation (`Jet::compute_generic`: nv `Dual` passes through the tree's
-//! forward kinematics): two independent ways to the same B, gamma, values and dg/dt.
+//! 1. The chain-rule jet of scene rows (`ExprConstraints::jet`: one `Dual2`/`Dual` pass per level
+//!    and one `Dual` pass per slot entering B, signals from one set of tree passes) against the
+//!    generic AD passes over the whole evaluation (`Jet::compute_generic`: nv `Dual` passes through
+//!    the tree's forward kinematics): two independent ways to the same B, gamma, values and dg/dt.
 //!
 //! Scenes: every bundled scene, the generated chains, and tests/scenes/all_signals.toml (every slot
 //! kind at every level: hinge, ball and free joints, quasi-velocities, accelerations, body-point
@@ -106,7 +106,7 @@ fn chain_rule_jet_matches_the_generic_ad_passes_on_every_scene() {
                 }
                 compared += 1;
             }
-            assert!(c.rows().len() > 0, "{}: no rows", scene.name);
+            assert!(!c.rows().is_empty(), "{}: no rows", scene.name);
         });
     }
     assert!(compared >= 14 * 21, "compared {compared} states");

@@ -265,7 +265,7 @@ fn failure_keeps_partial_results() {
         } => {
             assert_eq!(row, "speed");
             assert!(residual > 1e-9 && t > 0.0 && t < p.t1);
-            assert!(sol.trajectory.len() >= 1);
+            assert!(!sol.trajectory.is_empty());
             assert!(sol.t_end == t);
         }
         ref other => panic!("expected drift exceeded, got {other:?}"),
@@ -320,10 +320,12 @@ fn integrators_converge_at_their_order_on_euclidean_and_lie_group_problems() {
         hs: [f64; 3],
     ) -> f64 {
         p.t1 = t1;
-        let mut s = Settings::default();
-        s.drift = DriftControl::None;
-        s.rtol = 1e-14;
-        s.atol = 1e-16;
+        let mut s = Settings {
+            drift: DriftControl::None,
+            rtol: 1e-14,
+            atol: 1e-16,
+            ..Default::default()
+        };
         let reference = final_state(&p, &s);
         let mut errs = vec![];
         for h in hs {

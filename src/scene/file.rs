@@ -57,6 +57,9 @@ pub struct ChecksFile {
     pub not_checked: BTreeMap<String, Spanned<String>>,
 }
 
+/// One row of a full mass matrix as written: expressions with their places.
+pub type SpannedRow = Spanned<Vec<Spanned<String>>>;
+
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ModelFile {
@@ -66,7 +69,7 @@ pub struct ModelFile {
     #[serde(default)]
     pub coordinates: Vec<Spanned<String>>,
     #[serde(default)]
-    pub mass_matrix: Option<Spanned<Vec<Spanned<Vec<Spanned<String>>>>>>,
+    pub mass_matrix: Option<Spanned<Vec<SpannedRow>>>,
     #[serde(default)]
     pub mass_diagonal: Option<Spanned<Vec<Spanned<String>>>>,
     #[serde(default)]

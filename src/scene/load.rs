@@ -343,6 +343,7 @@ fn lagrangian(
     }
     let n = names.len();
     let mut sym = symbols(&names, &names, params, Signals::none());
+    #[allow(clippy::single_range_in_vec_init)] // a list of allowed slot ranges, here one
     let q_only = [sym.layout.q..sym.layout.q + n];
     let mut mass = vec![];
     match (&m.mass_matrix, &m.mass_diagonal) {
@@ -457,6 +458,7 @@ fn lagrangian(
             )
         })?;
         let e = sym.compile(src, s, &field)?;
+        #[allow(clippy::single_range_in_vec_init)] // a list of allowed slot ranges, here one
         let allowed = [sym.layout.t..sym.layout.a];
         if let Some(bad) = sym.outside(&e, &allowed) {
             return Err(src.error(
@@ -686,6 +688,7 @@ fn tree_scene(
         params,
         Signals::new(tree.clone(), sites),
     );
+    #[allow(clippy::single_range_in_vec_init)] // a list of allowed slot ranges, here one
     let state = [sym.layout.t..sym.layout.a];
     let mut point_forces = vec![];
     for (fi, f) in m.point_forces.iter().enumerate() {

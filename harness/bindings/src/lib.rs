@@ -40,7 +40,7 @@ fn json_to_py<'py>(py: Python<'py>, v: &impl serde::Serialize) -> PyResult<Bound
 }
 
 fn matrix<'py>(py: Python<'py>, flat: &[f64], cols: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
-    let rows = if cols == 0 { 0 } else { flat.len() / cols };
+    let rows = flat.len().checked_div(cols).unwrap_or(0);
     let a = Array2::from_shape_vec((rows, cols), flat.to_vec())
         .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     Ok(a.into_pyarray(py))
