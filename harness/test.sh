@@ -6,6 +6,9 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 bash harness/setup.sh
 echo "== static checks: cargo fmt, clippy -D warnings, mypy, stubtest (the .pyi against the built extension) ==" >&2
+for c in rustfmt clippy; do  # part of rustup's default profile; added if a toolchain lacks them
+  cargo "${c/rustfmt/fmt}" --version >/dev/null 2>&1 || rustup component add "$c"
+done
 cargo fmt --all -- --check
 cargo clippy --release --workspace --all-targets -q -- -D warnings
 .venv/bin/python -m mypy
