@@ -5,7 +5,8 @@
 //! - 1: the solve stopped early with a non-success return code (what was computed is written);
 //! - 2: bad input: the scene file (or the command line) is invalid, or its initial state is off
 //!   the programme;
-//! - 3: the results could not be written.
+//! - 3: the results could not be written (including standard output on a full device);
+//! - 141: standard output was closed early (`| head -1`): the command ends quietly.
 
 use clap::builder::PossibleValuesParser;
 use clap::{Parser, Subcommand, ValueEnum};
@@ -23,6 +24,43 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 const GIT_REVISION: &str = env!("PROGMO_GIT_REVISION");
+
+/// `eprintln!` that never panics (a diagnostic that cannot be written has nowhere else to go).
+macro_rules! errln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($arg)*);
+    }};
+}
+
+/// Write a line to standard output without ever panicking: a closed pipe (`| head -1`) ends the
+/// command quietly with status 141 (as a tool killed by SIGPIPE), any other failure (a full device)
+/// is reported on stderr with exit code 3.
+fn write_stdout(args: std::fmt::Arguments<'_>, newline: bool) -> Result<(), ExitCode> {
+    use std::io::Write;
+    let mut o = std::io::stdout().lock();
+    let r = o
+        .write_fmt(args)
+        .and_then(|_| if newline { o.write_all(b"\n") } else { Ok(()) })
+        .and_then(|_| o.flush());
+    match r {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Err(ExitCode::from(141)),
+        Err(e) => {
+            errln!("progmo: error: cannot write to standard output: {e}");
+            Err(ExitCode::from(3))
+        }
+    }
+}
+
+/// `println!` that returns the exit code of [`write_stdout`] from the enclosing function on failure.
+macro_rules! say {
+    ($($arg:tt)*) => {
+        if let Err(code) = write_stdout(format_args!($($arg)*), true) {
+            return code;
+        }
+    };
+}
 
 #[derive(Parser)]
 #[command(
@@ -170,7 +208,7 @@ fn harness_python() -> Option<PathBuf> {
 
 fn harness(sub: &str, module: &[&str], args: &[String]) -> ExitCode {
     let Some(python) = harness_python() else {
-        eprintln!(
+        errln!(
             "progmo {sub}: error: the Python harness is not set up (no .venv found); run `bash harness/setup.sh` once, or set PROGMO_PYTHON"
         );
         return ExitCode::from(2);
@@ -182,7 +220,7 @@ fn harness(sub: &str, module: &[&str], args: &[String]) -> ExitCode {
     match status {
         Ok(s) => ExitCode::from(s.code().unwrap_or(1).clamp(0, 255) as u8),
         Err(e) => {
-            eprintln!("progmo {sub}: error: cannot run {}: {e}", python.display());
+            errln!("progmo {sub}: error: cannot run {}: {e}", python.display());
             ExitCode::from(2)
         }
     }
@@ -190,7 +228,7 @@ fn harness(sub: &str, module: &[&str], args: &[String]) -> ExitCode {
 
 fn load(path: &Path) -> Result<Scene, ExitCode> {
     Scene::load(path).map_err(|e: SceneError| {
-        eprintln!("{e}");
+        errln!("{e}");
         ExitCode::from(2)
     })
 }
@@ -242,20 +280,20 @@ fn solve(a: SolveArgs) -> ExitCode {
     let settings = match settings_from(&a, &scene.settings) {
         Ok(s) => s,
         Err(msg) => {
-            eprintln!("progmo solve: error: {msg}");
+            errln!("progmo solve: error: {msg}");
             return ExitCode::from(2);
         }
     };
     if let Some(t1) = a.t1 {
         let (t0, _) = scene.span();
         if !(t1 > t0) {
-            eprintln!("progmo solve: error: --t1 {t1} must be after t0 = {t0}");
+            errln!("progmo solve: error: --t1 {t1} must be after t0 = {t0}");
             return ExitCode::from(2);
         }
         progmo::with_problem!(&mut scene.system, p => p.t1 = t1);
     }
     if let Err(e) = progmo::solve::validate(scene.span(), &settings) {
-        eprintln!("progmo solve: error: {}", flagged(&a, &e));
+        errln!("progmo solve: error: {}", flagged(&a, &e));
         return ExitCode::from(2);
     }
     let out = a
@@ -263,7 +301,7 @@ fn solve(a: SolveArgs) -> ExitCode {
         .clone()
         .unwrap_or_else(|| PathBuf::from("out").join(&scene.name));
     if let Err(e) = std::fs::create_dir_all(&out) {
-        eprintln!("progmo solve: error: cannot create {}: {e}", out.display());
+        errln!("progmo solve: error: cannot create {}: {e}", out.display());
         return ExitCode::from(3);
     }
     let layout = progmo::with_problem!(&scene.system, p => SampleLayout::from_problem(p));
@@ -272,7 +310,7 @@ fn solve(a: SolveArgs) -> ExitCode {
     let csv = match CsvSink::create(&csv_path, &layout) {
         Ok(c) => c,
         Err(e) => {
-            eprintln!("progmo solve: error: {e}");
+            errln!("progmo solve: error: {e}");
             return ExitCode::from(3);
         }
     };
@@ -286,7 +324,7 @@ fn solve(a: SolveArgs) -> ExitCode {
         let mcap = match McapSink::create(out.join("recording.mcap"), &layout) {
             Ok(m) => m,
             Err(e) => {
-                eprintln!("progmo solve: error: {e}");
+                errln!("progmo solve: error: {e}");
                 return ExitCode::from(3);
             }
         };
@@ -295,7 +333,10 @@ fn solve(a: SolveArgs) -> ExitCode {
         (sol, sink.finish().err())
     };
     let wall = started.elapsed().as_secs_f64();
-    let command_line: Vec<String> = std::env::args().collect();
+    // Arguments as the OS gave them (a non-UTF-8 path must not stop the run after the solve).
+    let command_line: Vec<String> = std::env::args_os()
+        .map(|a| a.to_string_lossy().into_owned())
+        .collect();
     let rows = layout.row_names.clone();
     let summary = SummaryInput {
         scene: &scene.name,
@@ -308,12 +349,12 @@ fn solve(a: SolveArgs) -> ExitCode {
     };
     let summary_error = write_summary_to_path(out.join("summary.json"), &summary).err();
     for e in write_error.iter().chain(summary_error.iter()) {
-        eprintln!("progmo solve: error: {e}");
+        errln!("progmo solve: error: {e}");
     }
     let worst = solution.max_residual.iter().cloned().fold(0.0, f64::max);
     let st = &solution.stats.integrator;
     for w in &solution.warnings {
-        eprintln!("{}: warning: {w}", scene.name);
+        errln!("{}: warning: {w}", scene.name);
     }
     let warned = match solution.warnings.len() {
         0 => String::new(),
@@ -330,7 +371,7 @@ fn solve(a: SolveArgs) -> ExitCode {
     };
     match &solution.code {
         ReturnCode::Success => {
-            println!(
+            say!(
                 "{}: success, t = {:.6} .. {:.6}, max programme residual {:.2e}, {} steps ({} rejected), {} RHS evaluations, {:.3} s{warned} -> {}",
                 scene.name, t0, solution.t_end, worst, st.steps, st.rejected, st.rhs_evals, wall, out.display()
             );
@@ -342,18 +383,18 @@ fn solve(a: SolveArgs) -> ExitCode {
                 ReturnCode::InconsistentInitialState { .. } | ReturnCode::SingularProgramme { .. }
             ) =>
         {
-            eprintln!("{}", scene.initial_error(code, &settings));
+            errln!("{}", scene.initial_error(code, &settings));
             return ExitCode::from(2);
         }
         code => {
-            eprintln!(
+            errln!(
                 "{}: stopped at t = {:.6} ({}): {code}; results up to there are in {}",
                 scene.name,
                 solution.t_end,
                 code.name(),
                 out.display()
             );
-            println!(
+            say!(
                 "{}: {}, t = {:.6} .. {:.6}, max programme residual {:.2e}{warned} -> {}",
                 scene.name,
                 code.name(),
@@ -385,7 +426,7 @@ fn validate(scenes: &[PathBuf]) -> ExitCode {
         match scene.check_initial(&scene.settings) {
             Ok((traj, corr)) => {
                 let res = traj.residual_at(0);
-                println!(
+                say!(
                     "{}: ok: nq = {}, nv = {}, {} rows ({}), t = {} .. {}",
                     scene.name,
                     scene.q_names().len(),
@@ -403,15 +444,16 @@ fn validate(scenes: &[PathBuf]) -> ExitCode {
                     scene.span().1
                 );
                 if let Some(c) = corr {
-                    println!(
+                    say!(
                         "  initial state assembled: |dq| = {:.3e}, |dv| = {:.3e}",
-                        c.position, c.velocity
+                        c.position,
+                        c.velocity
                     );
                 }
             }
             Err(e) => {
                 failed = true;
-                eprintln!("{e}");
+                errln!("{e}");
             }
         }
     }
@@ -441,7 +483,7 @@ fn export(path: &Path, format: FormatArg, out: Option<&Path>) -> ExitCode {
     let (doc, report) = match result {
         Ok(x) => x,
         Err(e) => {
-            eprintln!(
+            errln!(
                 "{}: error: cannot export `{}`: {e}",
                 path.display(),
                 scene.name
@@ -452,16 +494,18 @@ fn export(path: &Path, format: FormatArg, out: Option<&Path>) -> ExitCode {
     let report_json = serde_json::to_string_pretty(&report).expect("report serializes");
     match out {
         None => {
-            print!("{doc}");
-            eprintln!("{report_json}");
+            if let Err(code) = write_stdout(format_args!("{doc}"), false) {
+                return code;
+            }
+            errln!("{report_json}");
         }
         Some(o) => {
             let rp = PathBuf::from(format!("{}.report.json", o.display()));
             if let Err(e) = std::fs::write(o, &doc).and_then(|_| std::fs::write(&rp, report_json)) {
-                eprintln!("progmo export: error: cannot write {}: {e}", o.display());
+                errln!("progmo export: error: cannot write {}: {e}", o.display());
                 return ExitCode::from(3);
             }
-            eprintln!("wrote {} and {}", o.display(), rp.display());
+            errln!("wrote {} and {}", o.display(), rp.display());
         }
     }
     ExitCode::SUCCESS

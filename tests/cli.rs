@@ -338,3 +338,53 @@ fn conditioning_warnings_reach_every_output_and_strict_stops() {
         .unwrap()
         .contains("`precession`"));
 }
+
+#[test]
+fn output_failures_are_exit_codes_not_panics() {
+    // stdout on a full device: every subcommand that prints says so and exits 3 (issue 11).
+    let dir = tmp("full");
+    let s = scene("double_pendulum");
+    let s = s.to_str().unwrap();
+    let out = dir.join("o");
+    let out = out.to_str().unwrap();
+    for args in [
+        vec!["validate", s],
+        vec!["solve", s, "--no-mcap", "--out", out],
+        vec!["export", s, "--format", "mjcf"],
+    ] {
+        let full = std::fs::OpenOptions::new()
+            .write(true)
+            .open("/dev/full")
+            .unwrap();
+        let o = progmo().args(&args).stdout(full).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(3), "{args:?}: {err}");
+        assert!(
+            err.contains("cannot write to standard output") && !err.contains("panicked"),
+            "{args:?}: {err}"
+        );
+    }
+    // A closed pipe ends quietly (141, as a tool killed by SIGPIPE), or 0 if all was written first.
+    let cmd = format!(
+        "{} validate {s} {s} {s} {s} | true; echo ${{PIPESTATUS[0]}}",
+        env!("CARGO_BIN_EXE_progmo")
+    );
+    let o = Command::new("bash").args(["-c", &cmd]).output().unwrap();
+    let status = String::from_utf8_lossy(&o.stdout).trim().to_string();
+    assert!(status == "141" || status == "0", "status {status}");
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("panicked"));
+}
+
+#[test]
+fn a_non_utf8_output_path_is_a_path_like_any_other() {
+    use std::os::unix::ffi::OsStrExt;
+    let dir = tmp("nonutf8");
+    let out = dir.join(std::ffi::OsStr::from_bytes(b"run-\xff"));
+    let o = progmo()
+        .args(["solve", scene("double_pendulum").to_str().unwrap(), "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.join("summary.json").is_file() && out.join("recording.mcap").is_file());
+}
