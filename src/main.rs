@@ -304,6 +304,21 @@ fn solve(a: SolveArgs) -> ExitCode {
         errln!("progmo solve: error: cannot create {}: {e}", out.display());
         return ExitCode::from(3);
     }
+    // A run into the folder of an earlier one first removes that run's outputs, so nothing of it
+    // (an old summary saying success, an MCAP of another scene) can pass for this run's.
+    for f in ["summary.json", "trajectory.csv", "recording.mcap"] {
+        match std::fs::remove_file(out.join(f)) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => {
+                errln!(
+                    "progmo solve: error: cannot remove the earlier {}: {e}",
+                    out.join(f).display()
+                );
+                return ExitCode::from(3);
+            }
+        }
+    }
     let layout = progmo::with_problem!(&scene.system, p => SampleLayout::from_problem(p));
     let (t0, t1) = scene.span();
     let csv_path = out.join("trajectory.csv");

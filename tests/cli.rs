@@ -388,3 +388,32 @@ fn a_non_utf8_output_path_is_a_path_like_any_other() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(out.join("summary.json").is_file() && out.join("recording.mcap").is_file());
 }
+
+#[test]
+fn a_run_into_an_earlier_runs_folder_leaves_nothing_of_it() {
+    // --no-mcap into the folder of an earlier run: its recording.mcap must not pass for this run's.
+    let dir = tmp("reuse");
+    let first = progmo()
+        .args(["solve", scene("heavy_top").to_str().unwrap(), "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(first.status.success());
+    assert!(dir.join("recording.mcap").is_file());
+    let second = progmo()
+        .args([
+            "solve",
+            scene("double_pendulum").to_str().unwrap(),
+            "--no-mcap",
+            "--out",
+        ])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(second.status.success());
+    assert!(!dir.join("recording.mcap").exists());
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["scene"], "double_pendulum");
+    assert!(!dir.join("summary.json.tmp").exists());
+}

@@ -182,14 +182,27 @@ pub fn write_summary<W: Write>(w: W, input: &SummaryInput<'_>) -> Result<(), Out
     write_named(w, input, "<summary>")
 }
 
-/// Write the summary to the file at `path` (created or truncated).
+/// Write the summary to the file at `path`, whole or not at all: it is written under
+/// `<path>.tmp` and renamed when complete (a full device leaves no truncated summary.json).
 pub fn write_summary_to_path(
     path: impl AsRef<Path>,
     input: &SummaryInput<'_>,
 ) -> Result<(), OutputError> {
-    let name = path.as_ref().display().to_string();
-    let f = File::create(path.as_ref()).map_err(|e| OutputError::io(&name, "create", e))?;
-    write_named(BufWriter::new(f), input, &name)
+    let path = path.as_ref();
+    let name = path.display().to_string();
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = std::path::PathBuf::from(tmp);
+    let r = File::create(&tmp)
+        .map_err(|e| OutputError::io(&name, "create", e))
+        .and_then(|f| write_named(BufWriter::new(f), input, &name))
+        .and_then(|()| {
+            std::fs::rename(&tmp, path).map_err(|e| OutputError::io(&name, "rename", e))
+        });
+    if r.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    r
 }
 
 #[cfg(test)]
