@@ -384,8 +384,20 @@ impl ReturnCode {
         }
     }
 
-    /// The time the code refers to (None for an inconsistent initial state, which has none).
+    /// The time the code refers to (None for success and an inconsistent initial state).
     pub fn time(&self) -> Option<f64> {
+        self.clone().time_mut().copied()
+    }
+
+    /// The same code at time `t_new` (no change for codes without a time).
+    pub(crate) fn at(mut self, t_new: f64) -> Self {
+        if let Some(t) = self.time_mut() {
+            *t = t_new;
+        }
+        self
+    }
+
+    fn time_mut(&mut self) -> Option<&mut f64> {
         match self {
             ReturnCode::Success | ReturnCode::InconsistentInitialState { .. } => None,
             ReturnCode::StepTooSmall { t, .. }
@@ -395,24 +407,8 @@ impl ReturnCode {
             | ReturnCode::NonFinite { t }
             | ReturnCode::MaxSteps { t }
             | ReturnCode::ProjectionFailed { t, .. }
-            | ReturnCode::IllConditioned { t, .. } => Some(*t),
+            | ReturnCode::IllConditioned { t, .. } => Some(t),
         }
-    }
-
-    /// The same code at time `t_new` (no change for codes without a time).
-    pub(crate) fn at(mut self, t_new: f64) -> Self {
-        match &mut self {
-            ReturnCode::Success | ReturnCode::InconsistentInitialState { .. } => {}
-            ReturnCode::StepTooSmall { t, .. }
-            | ReturnCode::SingularProgramme { t, .. }
-            | ReturnCode::SingularSystem { t, .. }
-            | ReturnCode::DriftExceeded { t, .. }
-            | ReturnCode::NonFinite { t }
-            | ReturnCode::MaxSteps { t }
-            | ReturnCode::ProjectionFailed { t, .. }
-            | ReturnCode::IllConditioned { t, .. } => *t = t_new,
-        }
-        self
     }
 }
 
