@@ -60,6 +60,28 @@ fn level_name(l: Level) -> &'static str {
     }
 }
 
+impl PyScene {
+    /// One state from Python: finite, with the scene's nq and nv entries (ValueError otherwise).
+    fn state(
+        &self,
+        t: f64,
+        q: &PyReadonlyArray1<'_, f64>,
+        v: &PyReadonlyArray1<'_, f64>,
+    ) -> PyResult<(Vec<f64>, Vec<f64>)> {
+        let (q, v) = (q.as_slice()?.to_vec(), v.as_slice()?.to_vec());
+        finite("t", [&t])?;
+        finite("q", &q)?;
+        finite("v", &v)?;
+        let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
+        if q.len() != nq || v.len() != nv {
+            return Err(PyValueError::new_err(format!(
+                "q needs {nq} entries, v {nv}"
+            )));
+        }
+        Ok((q, v))
+    }
+}
+
 #[pymethods]
 impl PyScene {
     /// Load and validate a scene file; raises SceneError with a located message.
@@ -274,16 +296,8 @@ impl PyScene {
         q: PyReadonlyArray1<'py, f64>,
         v: PyReadonlyArray1<'py, f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let (q, v) = (q.as_slice()?.to_vec(), v.as_slice()?.to_vec());
-        finite("t", [&t])?;
-        finite("q", &q)?;
-        finite("v", &v)?;
-        let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
-        if q.len() != nq || v.len() != nv {
-            return Err(PyValueError::new_err(format!(
-                "q needs {nq} entries, v {nv}"
-            )));
-        }
+        let (q, v) = self.state(t, &q, &v)?;
+        let nv = v.len();
         let d = PyDict::new(py);
         with_problem!(&self.scene.system, p => {
             let mut ev = Evaluator::<_, _, f64>::new(&p.model, &p.constraints);
@@ -317,16 +331,8 @@ impl PyScene {
         formulation: &str,
     ) -> PyResult<Bound<'py, PyDict>> {
         let f = parse_formulation(formulation)?;
-        let (q, v) = (q.as_slice()?.to_vec(), v.as_slice()?.to_vec());
-        finite("t", [&t])?;
-        finite("q", &q)?;
-        finite("v", &v)?;
-        let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
-        if q.len() != nq || v.len() != nv {
-            return Err(PyValueError::new_err(format!(
-                "q needs {nq} entries, v {nv}"
-            )));
-        }
+        let (q, v) = self.state(t, &q, &v)?;
+        let nv = v.len();
         let rank = self.scene.settings.rank();
         let d = PyDict::new(py);
         with_problem!(&self.scene.system, p => {
@@ -426,13 +432,8 @@ impl PyScene {
         q: PyReadonlyArray1<'py, f64>,
         v: PyReadonlyArray1<'py, f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let (q, v) = (q.as_slice()?.to_vec(), v.as_slice()?.to_vec());
-        let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
-        if q.len() != nq || v.len() != nv {
-            return Err(PyValueError::new_err(format!(
-                "q needs {nq} entries, v {nv}"
-            )));
-        }
+        let (q, v) = self.state(t, &q, &v)?;
+        let nv = v.len();
         let d = PyDict::new(py);
         let points = PyList::empty(py);
         match &self.scene.system {
