@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Prepares everything the harness needs on a fresh machine, idempotently:
 #   .venv with numpy, scipy, MuJoCo, Pinocchio, matplotlib, mcap, pytest (versions pinned in
-#   pyproject.toml) and the Rust core built into it as progmo_harness._core (maturin, release).
+#   pyproject.toml) and the Rust core built into it as progmo._core (maturin, release).
 # Run by harness/nightly.sh and harness/test.sh; prints what it does, fails loudly.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"

@@ -12,7 +12,7 @@ done
 cargo fmt --all -- --check
 cargo clippy --release --workspace --all-targets -q -- -D warnings
 .venv/bin/python -m mypy
-.venv/bin/python -m mypy.stubtest progmo_harness._core --allowlist harness/stubtest-allowlist.txt
+.venv/bin/python -m mypy.stubtest progmo._core --allowlist harness/stubtest-allowlist.txt
 echo "== cargo test (Rust core, pure Rust) ==" >&2
 cargo test --release
 echo "== headless Chromium for the report test ==" >&2

@@ -8,6 +8,7 @@
 //!
 //! See `ARCHITECTURE.md` for the map of modules.
 
+pub mod cli;
 pub mod export;
 pub mod expr;
 pub mod formulation;

@@ -12,7 +12,7 @@ import math
 import os
 import pathlib
 
-from progmo_harness.results import Budget, CheckResult, Series, judge
+from progmo.results import Budget, CheckResult, Series, judge
 
 PLAN_ENV = "FAKE_CHECKS_PLAN"
 

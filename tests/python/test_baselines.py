@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from progmo_harness import baselines as bl
-from progmo_harness.results import CheckResult
+from progmo import baselines as bl
+from progmo.results import CheckResult
 
 
 def result(status="pass", **metrics):

@@ -1,13 +1,13 @@
-"""Tests of `progmo bench` (harness/progmo_harness/bench): fast, smoke-sized; timings are never asserted."""
+"""Tests of `progmo bench` (harness/progmo/bench): fast, smoke-sized; timings are never asserted."""
 
 import csv
 
 import numpy as np
 import pytest
 
-from progmo_harness import Scene
-from progmo_harness.bench import common, conditioning, scipy_pipeline
-from progmo_harness.bench.main import main
+from progmo import Scene
+from progmo.bench import common, conditioning, scipy_pipeline
+from progmo.bench.main import main
 
 pin = pytest.importorskip("pinocchio")
 
@@ -46,7 +46,7 @@ def test_bench_runs_end_to_end_and_every_output_names_its_rerun_command(tmp_path
 
 
 def test_testset_mescd_is_the_test_sets_formula():
-    from progmo_harness.bench import testset
+    from progmo.bench import testset
 
     ref = np.array([1.0, -2.0, 0.0])
     assert testset.mescd(ref + np.array([1e-6, 0.0, 0.0]), ref) == pytest.approx(-np.log10(0.5e-6), rel=1e-9)

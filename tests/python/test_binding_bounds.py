@@ -8,8 +8,8 @@ import time
 import numpy as np
 import pytest
 
-import progmo_harness as ph
-from progmo_harness._core import chain_toml
+import progmo as ph
+from progmo._core import chain_toml
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 SCENE = str(ROOT / "references" / "scenes" / "double_pendulum.toml")

@@ -5,7 +5,7 @@ import pathlib
 import numpy as np
 import pytest
 
-import progmo_harness as ph
+import progmo as ph
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 SCENES = ROOT / "references" / "scenes"
@@ -67,7 +67,7 @@ def test_stub_literals_spell_the_core_vocabulary():
     import pathlib
     import re
 
-    from progmo_harness import _core
+    from progmo import _core
 
     stub = (pathlib.Path(_core.__file__).parent / "_core.pyi").read_text()
     for kw, names in (("formulation", _core.FORMULATIONS), ("integrator", _core.INTEGRATORS),

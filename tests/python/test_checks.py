@@ -8,8 +8,8 @@ import sys
 import numpy as np
 import pytest
 
-from progmo_harness import checks
-from progmo_harness.checks import CheckOptions, _run, run_check
+from progmo import checks
+from progmo.checks import CheckOptions, _run, run_check
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 SCENES = ROOT / "references" / "scenes"
@@ -139,7 +139,7 @@ def test_step_by_convergence_check(tmp_path):
 
 def test_parity_breach_does_not_blame_the_dynamics(tmp_path, monkeypatch):
     """A wrong exported model (mass matrix perturbed) fails parity and the replay is not judged."""
-    from progmo_harness.simulators import mujoco_sim
+    from progmo.simulators import mujoco_sim
 
     orig = mujoco_sim.MujocoBackend.model_terms
 

@@ -11,7 +11,7 @@ import types
 import pytest
 
 import fake_checks
-from progmo_harness import checks, cli, parallel
+from progmo import checks, cli, parallel
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 SCENES = ROOT / "references" / "scenes"
@@ -198,23 +198,23 @@ def test_report_subcommand_rebuilds_the_report(env):
 
 def test_debug_not_available(monkeypatch, capsys):
     real = cli.importlib.util.find_spec
-    monkeypatch.setattr(cli.importlib.util, "find_spec", lambda n, *a: None if n == "progmo_harness.debug" else real(n, *a))
+    monkeypatch.setattr(cli.importlib.util, "find_spec", lambda n, *a: None if n == "progmo.debug" else real(n, *a))
     assert cli.main(["debug", "heavy_top"]) == 2
     assert "not available" in capsys.readouterr().err
 
 
 def test_debug_forwards_its_arguments(monkeypatch):
     seen = []
-    mod = types.ModuleType("progmo_harness.debug")
-    mod.__spec__ = importlib.machinery.ModuleSpec("progmo_harness.debug", None)
+    mod = types.ModuleType("progmo.debug")
+    mod.__spec__ = importlib.machinery.ModuleSpec("progmo.debug", None)
     mod.main = lambda args: seen.append(args) or 3
-    monkeypatch.setitem(sys.modules, "progmo_harness.debug", mod)
+    monkeypatch.setitem(sys.modules, "progmo.debug", mod)
     assert cli.main(["debug", "--help", "x.toml"]) == 3
     assert seen == [["--help", "x.toml"]]
 
 
 def test_module_entry_point_and_help():
     for args in (["--help"], ["check", "--help"]):
-        p = subprocess.run([sys.executable, "-m", "progmo_harness.cli", *args], capture_output=True, text=True, timeout=60)
+        p = subprocess.run([sys.executable, "-m", "progmo.cli", *args], capture_output=True, text=True, timeout=60)
         assert p.returncode == 0, p.stderr
     assert "exit codes" in p.stdout and "--accept" in p.stdout and "--jobs" in p.stdout

@@ -7,7 +7,7 @@ import pathlib
 import pytest
 from mcap.reader import make_reader
 
-from progmo_harness import debug
+from progmo import debug
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 SCENE = str(ROOT / "references" / "scenes" / "double_pendulum.toml")

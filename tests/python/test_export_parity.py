@@ -10,9 +10,9 @@ import zlib
 import numpy as np
 import pytest
 
-import progmo_harness as ph
-from progmo_harness.simulators.mujoco_sim import MujocoBackend
-from progmo_harness.simulators.pinocchio_sim import PinocchioBackend
+import progmo as ph
+from progmo.simulators.mujoco_sim import MujocoBackend
+from progmo.simulators.pinocchio_sim import PinocchioBackend
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 TREE_SCENES = [p for p in sorted((ROOT / "references" / "scenes").glob("*.toml")) if ph.Scene(str(p)).kind == "tree"]

@@ -10,8 +10,8 @@ import subprocess
 import pytest
 
 from fake_checks import make_result
-from progmo_harness import baselines as bl
-from progmo_harness import report as rp
+from progmo import baselines as bl
+from progmo import report as rp
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 EVIL = "<script>alert('x')</script>"

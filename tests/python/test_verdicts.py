@@ -12,8 +12,8 @@ import sys
 
 import pytest
 
-from progmo_harness import Scene, SceneError
-from progmo_harness.checks import BUDGETED, CheckOptions, _run, default_budgets, run_check
+from progmo import Scene, SceneError
+from progmo.checks import BUDGETED, CheckOptions, _run, default_budgets, run_check
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 TESTS = ROOT / "tests" / "scenes"
@@ -24,7 +24,7 @@ SHORT = CheckOptions(horizon=0.5, step=1e-3)
 
 
 def cli(*args, timeout=300):
-    return subprocess.run([sys.executable, "-m", "progmo_harness.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "progmo.cli", *args], capture_output=True,
                           text=True, timeout=timeout, cwd=ROOT)
 
 

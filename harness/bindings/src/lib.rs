@@ -1,5 +1,5 @@
-//! `progmo_harness._core`: the Rust core seen from Python (private; the public API is the
-//! `progmo_harness` package). Thin glue only: every conversion of errors lives in `scene_error`,
+//! `progmo._core`: the Rust core seen from Python (private; the public API is the
+//! `progmo` package). Thin glue only: every conversion of errors lives in `scene_error`,
 //! every solve releases the GIL.
 
 use numpy::ndarray::Array2;
@@ -47,7 +47,7 @@ fn matrix<'py>(py: Python<'py>, flat: &[f64], cols: usize) -> PyResult<Bound<'py
 }
 
 /// A loaded scene.
-#[pyclass(name = "Scene", module = "progmo_harness._core", frozen)]
+#[pyclass(name = "Scene", module = "progmo._core", frozen)]
 struct PyScene {
     scene: Scene,
 }

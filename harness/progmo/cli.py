@@ -1,4 +1,4 @@
-"""Command line of the harness: ``python -m progmo_harness.cli check|debug|report ...``.
+"""Command line of the harness: ``python -m progmo.cli check|debug|report ...``.
 
 The Rust ``progmo`` command forwards ``progmo check ...`` and ``progmo debug ...`` here, so the
 help speaks of ``progmo``. Exit codes of ``check`` (stable; the nightly job branches on them):
@@ -61,7 +61,7 @@ def parser() -> argparse.ArgumentParser:
 
     p = argparse.ArgumentParser(
         prog="progmo",
-        description="Cross-simulator checks of progmo (also: python -m progmo_harness.cli).",
+        description="Cross-simulator checks of progmo (also: python -m progmo.cli).",
     )
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
     c = sub.add_parser(
@@ -93,7 +93,7 @@ def parser() -> argparse.ArgumentParser:
                    help="sample states of the parity and instantaneous checks (default: 8)")
     c.add_argument("--no-plots", action="store_true",
                    help="leave the plots out of report.html (faster; tables and verdicts unchanged)")
-    sub.add_parser("debug", help="debugging run of one scene (progmo_harness.debug; its own --help)", add_help=False)
+    sub.add_parser("debug", help="debugging run of one scene (progmo.debug; its own --help)", add_help=False)
     r = sub.add_parser("report", help="re-render the report of a saved run from its results.json and run.json")
     r.add_argument("dir", metavar="DIR", help="output folder of a check run (default layout: out/check)")
     return p
@@ -127,7 +127,7 @@ def rerun_command(argv: list[str], cwd: Path, root: Path) -> str:
     args = shlex.join(a for a in argv if a != "--accept")
     lines = [f"progmo check {args}".rstrip()]
     lines.append(f"# on a fresh machine: bash harness/nightly.sh {args}".rstrip())
-    lines.append(f"# without the Rust CLI: .venv/bin/python -m progmo_harness.cli check {args}".rstrip())
+    lines.append(f"# without the Rust CLI: .venv/bin/python -m progmo.cli check {args}".rstrip())
     if cwd.resolve() != root.resolve():
         lines.insert(0, f"cd {shlex.quote(str(cwd))}")
     return "\n".join(lines)
@@ -309,10 +309,10 @@ def _raise_interrupt(signum, frame):  # noqa: ARG001
 
 # --- debug, report -------------------------------------------------------------------------------
 def cmd_debug(args: list[str]) -> int:
-    if importlib.util.find_spec("progmo_harness.debug") is None:
-        _say("progmo debug: not available in this build (progmo_harness.debug is missing)")
+    if importlib.util.find_spec("progmo.debug") is None:
+        _say("progmo debug: not available in this build (progmo.debug is missing)")
         return EXIT_USAGE
-    debug = importlib.import_module("progmo_harness.debug")  # via sys.modules (tests substitute it)
+    debug = importlib.import_module("progmo.debug")  # via sys.modules (tests substitute it)
     rc = debug.main(args)
     return int(rc or 0)
 

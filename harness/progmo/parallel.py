@@ -2,9 +2,9 @@
 an ``error`` result, so one broken check never stops the run.
 
 The check function is named by a spec ``"module:function"`` (default
-``progmo_harness.checks:run_check``, overridable with the environment variable
+``progmo.checks:run_check``, overridable with the environment variable
 ``PROGMO_CHECK_RUNNER``) and looked up in the worker at call time: a test can substitute a fake
-either by monkeypatching ``progmo_harness.checks.run_check`` and running in-process (``jobs=1``) or
+either by monkeypatching ``progmo.checks.run_check`` and running in-process (``jobs=1``) or
 by naming a fake module in the spec (works with the process pool).
 """
 
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 from .results import STATUSES, CheckResult
 
-DEFAULT_RUNNER = "progmo_harness.checks:run_check"
+DEFAULT_RUNNER = "progmo.checks:run_check"
 RUNNER_ENV = "PROGMO_CHECK_RUNNER"
 
 

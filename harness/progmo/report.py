@@ -2,7 +2,7 @@
 plots as inline base64 PNG, no network), ``summary.md`` and ``summary.csv``.
 
 Everything is rebuilt from plain data (:class:`Run`), which ``run.json`` stores next to
-``results.json``, so ``python -m progmo_harness.cli report OUT_DIR`` re-renders a saved run.
+``results.json``, so ``python -m progmo.cli report OUT_DIR`` re-renders a saved run.
 
 Plots group a result's ``series`` by name: names containing ``residual`` (programme residual, log
 scale), ``deviation``/``error``/``drift`` (deviation from the solver, log scale), names starting
@@ -691,4 +691,4 @@ def comparisons_as_dicts(comps: list[bl.Comparison]) -> list[dict[str, Any]]:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit("use: python -m progmo_harness.cli report OUT_DIR")
+    sys.exit("use: python -m progmo.cli report OUT_DIR")

@@ -24,7 +24,7 @@ INTEGRATORS = tuple(n for n in _INTEGRATORS if n != "rk4")
 
 
 def repo_root() -> Path:
-    """The checkout holding references/scenes (the package lives in harness/progmo_harness)."""
+    """The checkout holding references/scenes (the package lives in harness/progmo)."""
     return Path(__file__).resolve().parents[3]
 
 
@@ -42,7 +42,7 @@ class Provenance:
     def __init__(self, argv: Sequence[str]):
         args = " ".join(argv)
         self.command = f"progmo bench {args}".strip()
-        self.python_command = f"python -m progmo_harness.bench.main {args}".strip()
+        self.python_command = f"python -m progmo.bench.main {args}".strip()
         self.versions = versions()
 
     def lines(self) -> list[str]:

@@ -1,7 +1,7 @@
 """`progmo bench [--quick] [--out DIR] [--only workprecision,scipy,conditioning,scaling]`
 
 Speed against error: writes CSV, PNG and index.html to DIR (default out/bench) and prints the key
-numbers. The `progmo` binary forwards `progmo bench ...` to `python -m progmo_harness.bench.main ...`.
+numbers. The `progmo` binary forwards `progmo bench ...` to `python -m progmo.bench.main ...`.
 
 Run times measured on the shared 2-core x86-64 machine (2026-11-21):
   (full)   172 s wall (10 bundled scenes x 5 formulations x 3 integrators x 9 tolerances, 5

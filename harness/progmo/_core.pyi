@@ -1,4 +1,4 @@
-"""Type stubs of the private extension module `progmo_harness._core` (Rust, pyo3).
+"""Type stubs of the private extension module `progmo._core` (Rust, pyo3).
 
 Shapes: n = number of samples, nq / nv = sizes of q / v, s = number of constraint rows.
 """

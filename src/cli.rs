@@ -1,0 +1,582 @@
+//! The `progmo` command line: compute programmed motions from scene files. One implementation for
+//! both doors: the `progmo` binary (src/main.rs) and the `progmo` command of the Python package
+//! (which calls [`run`] through the binding and handles check/debug/bench/report itself).
+//!
+//! Exit codes (stable; scripts and the nightly check branch on them):
+//! - 0: success;
+//! - 1: the solve stopped early with a non-success return code (what was computed is written);
+//! - 2: bad input: the scene file (or the command line) is invalid, or its initial state is off
+//!   the programme;
+//! - 3: the results could not be written (including standard output on a full device);
+//! - 141: standard output was closed early (`| head -1`): the command ends quietly.
+
+use crate::output::{
+    write_summary_to_path, CsvSink, McapSink, OutputSink, Progress, SampleLayout, SummaryInput, Tee,
+};
+use crate::scene::{Scene, SceneError};
+use crate::solve::{
+    OverrideError, Overrides, ReturnCode, Settings, DRIFT_NAMES, FORMULATION_NAMES,
+    INTEGRATOR_NAMES,
+};
+use clap::builder::PossibleValuesParser;
+use clap::{Parser, Subcommand, ValueEnum};
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+const GIT_REVISION: &str = env!("PROGMO_GIT_REVISION");
+
+/// `eprintln!` that never panics (a diagnostic that cannot be written has nowhere else to go).
+macro_rules! errln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($arg)*);
+    }};
+}
+
+/// Write a line to standard output without ever panicking: a closed pipe (`| head -1`) ends the
+/// command quietly with status 141 (as a tool killed by SIGPIPE), any other failure (a full device)
+/// is reported on stderr with exit code 3.
+fn write_stdout(args: std::fmt::Arguments<'_>, newline: bool) -> Result<(), ExitCode> {
+    use std::io::Write;
+    let mut o = std::io::stdout().lock();
+    let r = o
+        .write_fmt(args)
+        .and_then(|_| if newline { o.write_all(b"\n") } else { Ok(()) })
+        .and_then(|_| o.flush());
+    match r {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Err(ExitCode::from(141)),
+        Err(e) => {
+            errln!("progmo: error: cannot write to standard output: {e}");
+            Err(ExitCode::from(3))
+        }
+    }
+}
+
+/// `println!` that returns the exit code of [`write_stdout`] from the enclosing function on failure.
+macro_rules! say {
+    ($($arg:tt)*) => {
+        if let Err(code) = write_stdout(format_args!($($arg)*), true) {
+            return code;
+        }
+    };
+}
+
+#[derive(Parser)]
+#[command(
+    name = "progmo",
+    version,
+    about = "Programmed motions of mechanical systems (Do Sanh 1998): motion and control forces from a scene file",
+    after_help = "Exit codes: 0 success, 1 solve stopped early (partial results written), 2 bad input, 3 cannot write results.\nScene format: src/scene/FORMAT.md. Bundled scenes: references/scenes/."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Solve a scene: writes trajectory.csv, summary.json and recording.mcap into the output folder.
+    Solve(SolveArgs),
+    /// Check scenes without solving: parse, dimensions, consistency of the initial state.
+    Validate {
+        /// Scene files (TOML).
+        #[arg(required = true)]
+        scenes: Vec<PathBuf>,
+    },
+    /// Export a tree scene's model to MJCF (MuJoCo) or URDF (Pinocchio), with a JSON report of what
+    /// the simulator must be told besides (mass floors, forces the harness applies, q/v maps).
+    Export {
+        /// Scene file (TOML).
+        scene: PathBuf,
+        /// Target format.
+        #[arg(long, value_enum)]
+        format: FormatArg,
+        /// Output file [default: standard output]; the report goes to <out>.report.json.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// The nightly cross-simulator check (Python harness): replay u(t) in MuJoCo and Pinocchio,
+    /// judge against the scenes' budgets and baselines, write the report. `progmo check --help`.
+    #[command(disable_help_flag = true)]
+    Check {
+        /// Arguments for the harness (scenes, --accept, --jobs, --out, --help).
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<String>,
+    },
+    /// Speed against error (Python harness): work-precision diagrams, the scipy + Pinocchio pipeline,
+    /// the paper's conditioning claim, right-hand-side scaling. `progmo bench --help`.
+    #[command(disable_help_flag = true)]
+    Bench {
+        /// Arguments for the harness.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<String>,
+    },
+    /// A debugging run of one scene (Python harness): MCAP with solver and simulator channels, CSV,
+    /// the first tolerance breach. `progmo debug --help`.
+    #[command(disable_help_flag = true)]
+    Debug {
+        /// Arguments for the harness.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<String>,
+    },
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum FormatArg {
+    Mjcf,
+    Urdf,
+}
+
+#[derive(clap::Args)]
+struct SolveArgs {
+    /// Scene file (TOML).
+    scene: PathBuf,
+    /// Output folder [default: out/<scene name>].
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Override the scene's formulation.
+    #[arg(long, value_parser = PossibleValuesParser::new(FORMULATION_NAMES))]
+    formulation: Option<String>,
+    /// Override the scene's integrator (rk4 needs --step).
+    #[arg(long, value_parser = PossibleValuesParser::new(INTEGRATOR_NAMES))]
+    integrator: Option<String>,
+    /// Fixed step for rk4.
+    #[arg(long)]
+    step: Option<f64>,
+    /// Relative tolerance.
+    #[arg(long)]
+    rtol: Option<f64>,
+    /// Absolute tolerance.
+    #[arg(long)]
+    atol: Option<f64>,
+    /// Drift control.
+    #[arg(long, value_parser = PossibleValuesParser::new(DRIFT_NAMES))]
+    drift: Option<String>,
+    /// End time (overrides the scene's time.t1).
+    #[arg(long)]
+    t1: Option<f64>,
+    /// Output sample spacing (overrides time.output_dt).
+    #[arg(long)]
+    output_dt: Option<f64>,
+    /// Most output samples (overrides time.max_samples; default 10^7).
+    #[arg(long)]
+    max_samples: Option<usize>,
+    /// Do not write the MCAP recording.
+    #[arg(long)]
+    no_mcap: bool,
+    /// Stop at the first conditioning warning (exit 1) instead of reporting it and going on.
+    #[arg(long)]
+    strict: bool,
+    /// Never show a progress bar (it is shown only on a terminal anyway).
+    #[arg(long)]
+    quiet: bool,
+}
+
+/// The exit status of a command (the codes above).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ExitCode(pub u8);
+
+impl ExitCode {
+    pub const SUCCESS: Self = Self(0);
+    pub fn from(code: u8) -> Self {
+        Self(code)
+    }
+}
+
+/// Run the command line `args` (the first item is the program name); returns the exit code.
+pub fn run<I, T>(args: I) -> u8
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    dispatch(args).0
+}
+
+fn dispatch<I, T>(args: I) -> ExitCode
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    let args: Vec<std::ffi::OsString> = args.into_iter().map(Into::into).collect();
+    // As the OS gave them (a non-UTF-8 path must not stop the run after the solve).
+    let line: Vec<String> = args
+        .iter()
+        .map(|a| a.to_string_lossy().into_owned())
+        .collect();
+    let cli = match Cli::try_parse_from(args) {
+        Ok(c) => c,
+        Err(e) => return usage(e),
+    };
+    match cli.command {
+        Command::Solve(a) => solve(a, &line),
+        Command::Validate { scenes } => validate(&scenes),
+        Command::Export { scene, format, out } => export(&scene, format, out.as_deref()),
+        Command::Check { args } => harness("check", &["-m", "progmo.cli", "check"], &args),
+        Command::Debug { args } => harness("debug", &["-m", "progmo.cli", "debug"], &args),
+        Command::Bench { args } => harness("bench", &["-m", "progmo.bench.main"], &args),
+    }
+}
+
+/// The harness's Python: $PROGMO_PYTHON, else the .venv of the checkout this binary was built in
+/// (next to target/), else of the source tree it was compiled from.
+fn harness_python() -> Option<PathBuf> {
+    if let Some(p) = std::env::var_os("PROGMO_PYTHON") {
+        return Some(PathBuf::from(p));
+    }
+    let mut candidates = vec![];
+    if let Ok(exe) = std::env::current_exe() {
+        // <root>/target/<profile>/progmo
+        if let Some(root) = exe
+            .parent()
+            .and_then(|p| p.parent())
+            .and_then(|p| p.parent())
+        {
+            candidates.push(root.join(".venv/bin/python"));
+        }
+    }
+    candidates.push(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python"));
+    candidates.into_iter().find(|p| p.exists())
+}
+
+/// A command line clap refused, or `--help` / `--version`: help goes to standard output (exit 0,
+/// or 3 if it cannot be written: nothing is lost silently), a usage error to stderr (exit 2).
+fn usage(e: clap::Error) -> ExitCode {
+    use clap::error::ErrorKind;
+    match e.kind() {
+        ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => {
+            let text = e.render().to_string();
+            match write_stdout(format_args!("{}", text.trim_end()), true) {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(code) => code,
+            }
+        }
+        _ => {
+            let text = e.render();
+            let text = if std::io::stderr().is_terminal() {
+                text.ansi().to_string()
+            } else {
+                text.to_string()
+            };
+            errln!("{}", text.trim_end());
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn harness(sub: &str, module: &[&str], args: &[String]) -> ExitCode {
+    let Some(python) = harness_python() else {
+        errln!(
+            "progmo {sub}: error: the Python harness is not set up (no .venv found); run `bash harness/setup.sh` once, or set PROGMO_PYTHON"
+        );
+        return ExitCode::from(2);
+    };
+    let status = std::process::Command::new(&python)
+        .args(module)
+        .args(args)
+        .status();
+    match status {
+        Ok(s) => ExitCode::from(s.code().unwrap_or(1).clamp(0, 255) as u8),
+        Err(e) => {
+            errln!("progmo {sub}: error: cannot run {}: {e}", python.display());
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn load(path: &Path) -> Result<Scene, ExitCode> {
+    Scene::load(path).map_err(|e: SceneError| {
+        errln!("{e}");
+        ExitCode::from(2)
+    })
+}
+
+fn settings_from(a: &SolveArgs, base: &Settings) -> Result<Settings, String> {
+    // The flags are overrides in the one vocabulary of `Settings::apply`; values are checked with
+    // the span by `solve::validate`, which names the flag.
+    let o = Overrides {
+        formulation: a.formulation.clone(),
+        integrator: a.integrator.clone(),
+        step: a.step,
+        rtol: a.rtol,
+        atol: a.atol,
+        drift: a.drift.clone(),
+        output_dt: a.output_dt,
+        max_samples: a.max_samples,
+        strict: a.strict.then_some(true),
+        ..Default::default()
+    };
+    base.apply(&o).map_err(|e| match e {
+        OverrideError::StepRequired => "--integrator rk4 needs --step".to_string(),
+        e => format!("--{}: {e}", e.field()),
+    })
+}
+
+/// A settings error named by the flag that set the value (`--t1 inf: ...`), else by its scene key.
+fn flagged(a: &SolveArgs, e: &crate::solve::SettingsError) -> String {
+    use crate::solve::SettingsField as F;
+    let given = match e.field {
+        F::T1 => a.t1.is_some(),
+        F::OutputDt => a.output_dt.is_some(),
+        F::MaxSamples => a.max_samples.is_some(),
+        F::Step => a.step.is_some(),
+        F::Rtol => a.rtol.is_some(),
+        F::Atol => a.atol.is_some(),
+        _ => false,
+    };
+    match e.field.flag().filter(|_| given) {
+        Some(flag) => format!("{flag} {:?}: {}", e.value, e.message),
+        None => format!("{}: {}", a.scene.display(), e),
+    }
+}
+
+fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
+    let mut scene = match load(&a.scene) {
+        Ok(s) => s,
+        Err(c) => return c,
+    };
+    let settings = match settings_from(&a, &scene.settings) {
+        Ok(s) => s,
+        Err(msg) => {
+            errln!("progmo solve: error: {msg}");
+            return ExitCode::from(2);
+        }
+    };
+    if let Some(t1) = a.t1 {
+        let (t0, _) = scene.span();
+        if !(t1 > t0) {
+            errln!("progmo solve: error: --t1 {t1} must be after t0 = {t0}");
+            return ExitCode::from(2);
+        }
+        crate::with_problem!(&mut scene.system, p => p.t1 = t1);
+    }
+    if let Err(e) = crate::solve::validate(scene.span(), &settings) {
+        errln!("progmo solve: error: {}", flagged(&a, &e));
+        return ExitCode::from(2);
+    }
+    let out = a
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("out").join(&scene.name));
+    if let Err(e) = std::fs::create_dir_all(&out) {
+        errln!("progmo solve: error: cannot create {}: {e}", out.display());
+        return ExitCode::from(3);
+    }
+    // A run into the folder of an earlier one first removes that run's outputs, so nothing of it
+    // (an old summary saying success, an MCAP of another scene) can pass for this run's.
+    for f in ["summary.json", "trajectory.csv", "recording.mcap"] {
+        match std::fs::remove_file(out.join(f)) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => {
+                errln!(
+                    "progmo solve: error: cannot remove the earlier {}: {e}",
+                    out.join(f).display()
+                );
+                return ExitCode::from(3);
+            }
+        }
+    }
+    let layout = crate::with_problem!(&scene.system, p => SampleLayout::from_problem(p));
+    let (t0, t1) = scene.span();
+    let csv_path = out.join("trajectory.csv");
+    let csv = match CsvSink::create(&csv_path, &layout) {
+        Ok(c) => c,
+        Err(e) => {
+            errln!("progmo solve: error: {e}");
+            return ExitCode::from(3);
+        }
+    };
+    let show = !a.quiet && std::io::stderr().is_terminal();
+    let started = Instant::now();
+    let (solution, write_error) = if a.no_mcap {
+        let mut sink = Progress::new(csv, &scene.name, t0, t1).enabled(show);
+        let sol = scene.solve_into(&settings, &mut sink);
+        (sol, sink.finish().err())
+    } else {
+        let mcap = match McapSink::create(out.join("recording.mcap"), &layout) {
+            Ok(m) => m,
+            Err(e) => {
+                errln!("progmo solve: error: {e}");
+                return ExitCode::from(3);
+            }
+        };
+        let mut sink = Progress::new(Tee::new(csv, mcap), &scene.name, t0, t1).enabled(show);
+        let sol = scene.solve_into(&settings, &mut sink);
+        (sol, sink.finish().err())
+    };
+    let wall = started.elapsed().as_secs_f64();
+    let rows = layout.row_names.clone();
+    let summary = SummaryInput {
+        scene: &scene.name,
+        solution: &solution,
+        row_names: &rows,
+        settings: &settings,
+        wall_seconds: wall,
+        git_revision: (!GIT_REVISION.is_empty()).then_some(GIT_REVISION),
+        command_line,
+    };
+    let summary_error = write_summary_to_path(out.join("summary.json"), &summary).err();
+    for e in write_error.iter().chain(summary_error.iter()) {
+        errln!("progmo solve: error: {e}");
+    }
+    let worst = solution.max_residual.iter().cloned().fold(0.0, f64::max);
+    let st = &solution.stats.integrator;
+    for w in &solution.warnings {
+        errln!("{}: warning: {w}", scene.name);
+    }
+    let warned = match solution.warnings.len() {
+        0 => String::new(),
+        1 => format!(
+            ", 1 conditioning WARNING ({} at t = {:.6})",
+            solution.warnings[0].kind.name(),
+            solution.warnings[0].t
+        ),
+        k => format!(
+            ", {k} conditioning WARNINGS (first: {} at t = {:.6})",
+            solution.warnings[0].kind.name(),
+            solution.warnings[0].t
+        ),
+    };
+    match &solution.code {
+        ReturnCode::Success => {
+            say!(
+                "{}: success, t = {:.6} .. {:.6}, max programme residual {:.2e}, {} steps ({} rejected), {} RHS evaluations, {:.3} s{warned} -> {}",
+                scene.name, t0, solution.t_end, worst, st.steps, st.rejected, st.rhs_evals, wall, out.display()
+            );
+        }
+        code if solution.stats.integrator.steps == 0
+            && solution.t_end == t0
+            && matches!(
+                code,
+                ReturnCode::InconsistentInitialState { .. } | ReturnCode::SingularProgramme { .. }
+            ) =>
+        {
+            errln!("{}", scene.initial_error(code, &settings));
+            return ExitCode::from(2);
+        }
+        code => {
+            errln!(
+                "{}: stopped at t = {:.6} ({}): {code}; results up to there are in {}",
+                scene.name,
+                solution.t_end,
+                code.name(),
+                out.display()
+            );
+            say!(
+                "{}: {}, t = {:.6} .. {:.6}, max programme residual {:.2e}{warned} -> {}",
+                scene.name,
+                code.name(),
+                t0,
+                solution.t_end,
+                worst,
+                out.display()
+            );
+            return ExitCode::from(1);
+        }
+    }
+    if write_error.is_some() || summary_error.is_some() {
+        return ExitCode::from(3);
+    }
+    ExitCode::SUCCESS
+}
+
+fn validate(scenes: &[PathBuf]) -> ExitCode {
+    let mut failed = false;
+    for path in scenes {
+        let scene = match load(path) {
+            Ok(s) => s,
+            Err(_) => {
+                failed = true;
+                continue;
+            }
+        };
+        let rows = scene.rows();
+        match scene.check_initial(&scene.settings) {
+            Ok((traj, corr)) => {
+                let res = traj.residual_at(0);
+                say!(
+                    "{}: ok: nq = {}, nv = {}, {} rows ({}), t = {} .. {}",
+                    scene.name,
+                    scene.q_names().len(),
+                    scene.v_names().len(),
+                    rows.len(),
+                    rows.iter()
+                        .zip(res)
+                        .map(|(r, x)| format!(
+                            "{} {:?}/{:?} residual {x:.1e}",
+                            r.name, r.level, r.role
+                        ))
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    scene.span().0,
+                    scene.span().1
+                );
+                if let Some(c) = corr {
+                    say!(
+                        "  initial state assembled: |dq| = {:.3e}, |dv| = {:.3e}",
+                        c.position,
+                        c.velocity
+                    );
+                }
+            }
+            Err(e) => {
+                failed = true;
+                errln!("{e}");
+            }
+        }
+    }
+    if failed {
+        ExitCode::from(2)
+    } else {
+        ExitCode::SUCCESS
+    }
+}
+
+fn export(path: &Path, format: FormatArg, out: Option<&Path>) -> ExitCode {
+    let scene = match load(path) {
+        Ok(s) => s,
+        Err(c) => return c,
+    };
+    let options = crate::export::ExportOptions {
+        name: scene.name.clone(),
+        ..Default::default()
+    };
+    let result = scene.export(
+        match format {
+            FormatArg::Mjcf => crate::export::Format::Mjcf,
+            FormatArg::Urdf => crate::export::Format::Urdf,
+        },
+        &options,
+    );
+    let (doc, report) = match result {
+        Ok(x) => x,
+        Err(e) => {
+            errln!(
+                "{}: error: cannot export `{}`: {e}",
+                path.display(),
+                scene.name
+            );
+            return ExitCode::from(2);
+        }
+    };
+    let report_json = serde_json::to_string_pretty(&report).expect("report serializes");
+    match out {
+        None => {
+            if let Err(code) = write_stdout(format_args!("{doc}"), false) {
+                return code;
+            }
+            errln!("{report_json}");
+        }
+        Some(o) => {
+            let rp = PathBuf::from(format!("{}.report.json", o.display()));
+            if let Err(e) = std::fs::write(o, &doc).and_then(|_| std::fs::write(&rp, report_json)) {
+                errln!("progmo export: error: cannot write {}: {e}", o.display());
+                return ExitCode::from(3);
+            }
+            errln!("wrote {} and {}", o.display(), rp.display());
+        }
+    }
+    ExitCode::SUCCESS
+}
