@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Prepares everything the harness needs on a fresh machine, idempotently:
-#   .venv with numpy, scipy, MuJoCo, Pinocchio, matplotlib, mcap, pytest (versions pinned in
-#   pyproject.toml) and the Rust core built into it as progmo._core (maturin, release).
+#   .venv with numpy, scipy, MuJoCo, Pinocchio, matplotlib, mcap, pytest (the ranges of
+#   pyproject.toml, at the locked versions of harness/constraints.txt) and the Rust core built
+#   into it as the package progmo (maturin develop, release).
 # Run by harness/nightly.sh and harness/test.sh; prints what it does, fails loudly.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -12,7 +13,7 @@ if [ ! -x .venv/bin/python ]; then
   "$py" -m venv .venv
 fi
 stamp=.venv/.progmo-deps
-if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ harness/constraints.txt -nt "$stamp" ]; then
   echo "setup: installing Python dependencies (first run: about a minute)" >&2
   .venv/bin/python -m pip install -q --upgrade pip
   # One list of requirements: pyproject.toml (build-system, dependencies, the `test` extra).
@@ -24,7 +25,7 @@ print("\n".join(d["build-system"]["requires"] + d["project"]["dependencies"]
                 + d["project"]["optional-dependencies"]["test"]))
 PY
 )
-  .venv/bin/python -m pip install -q "${reqs[@]}"
+  .venv/bin/python -m pip install -q -c harness/constraints.txt "${reqs[@]}"
   touch "$stamp"
 fi
 echo "setup: building the Rust core into .venv (maturin develop --release)" >&2

@@ -24,7 +24,7 @@ use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-const GIT_REVISION: &str = env!("PROGMO_GIT_REVISION");
+use crate::GIT_REVISION;
 
 /// `eprintln!` that never panics (a diagnostic that cannot be written has nowhere else to go).
 macro_rules! errln {
@@ -68,7 +68,7 @@ macro_rules! say {
     name = "progmo",
     version,
     about = "Programmed motions of mechanical systems (Do Sanh 1998): motion and control forces from a scene file",
-    after_help = "Exit codes: 0 success, 1 solve stopped early (partial results written), 2 bad input, 3 cannot write results.\nScene format: src/scene/FORMAT.md. Bundled scenes: references/scenes/."
+    after_help = "Exit codes: 0 success, 1 solve stopped early (partial results written), 2 bad input, 3 cannot write results.\nScene format: src/scene/FORMAT.md. A bundled scene is named without a path: `progmo solve double_pendulum`."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -81,14 +81,17 @@ enum Command {
     Solve(SolveArgs),
     /// Check scenes without solving: parse, dimensions, consistency of the initial state.
     Validate {
-        /// Scene files (TOML).
+        /// Scene files (TOML) or names of bundled scenes.
         #[arg(required = true)]
         scenes: Vec<PathBuf>,
+        /// Print one JSON array on stdout (one object per scene) instead of text.
+        #[arg(long)]
+        json: bool,
     },
     /// Export a tree scene's model to MJCF (MuJoCo) or URDF (Pinocchio), with a JSON report of what
     /// the simulator must be told besides (mass floors, forces the harness applies, q/v maps).
     Export {
-        /// Scene file (TOML).
+        /// Scene file (TOML) or name of a bundled scene.
         scene: PathBuf,
         /// Target format.
         #[arg(long, value_enum)]
@@ -96,6 +99,9 @@ enum Command {
         /// Output file [default: standard output]; the report goes to <out>.report.json.
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Print one JSON object on stdout: format, the document (or its path with --out), report.
+        #[arg(long)]
+        json: bool,
     },
     /// The nightly cross-simulator check (Python harness): replay u(t) in MuJoCo and Pinocchio,
     /// judge against the scenes' budgets and baselines, write the report. `progmo check --help`.
@@ -109,6 +115,14 @@ enum Command {
     /// the paper's conditioning claim, right-hand-side scaling. `progmo bench --help`.
     #[command(disable_help_flag = true)]
     Bench {
+        /// Arguments for the harness.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<String>,
+    },
+    /// Re-render the report of a saved check run from its results.json (Python harness).
+    /// `progmo report --help`.
+    #[command(disable_help_flag = true)]
+    Report {
         /// Arguments for the harness.
         #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
         args: Vec<String>,
@@ -131,7 +145,7 @@ enum FormatArg {
 
 #[derive(clap::Args)]
 struct SolveArgs {
-    /// Scene file (TOML).
+    /// Scene file (TOML) or name of a bundled scene (`progmo solve double_pendulum`).
     scene: PathBuf,
     /// Output folder [default: out/<scene name>].
     #[arg(long)]
@@ -172,6 +186,10 @@ struct SolveArgs {
     /// Never show a progress bar (it is shown only on a terminal anyway).
     #[arg(long)]
     quiet: bool,
+    /// Print the run's summary (summary.json's content and the output folder) as JSON on stdout;
+    /// the one-line report goes to stderr.
+    #[arg(long)]
+    json: bool,
 }
 
 /// The exit status of a command (the codes above).
@@ -211,11 +229,17 @@ where
     };
     match cli.command {
         Command::Solve(a) => solve(a, &line),
-        Command::Validate { scenes } => validate(&scenes),
-        Command::Export { scene, format, out } => export(&scene, format, out.as_deref()),
+        Command::Validate { scenes, json } => validate(&scenes, json),
+        Command::Export {
+            scene,
+            format,
+            out,
+            json,
+        } => export(&scene, format, out.as_deref(), json),
         Command::Check { args } => harness("check", &["-m", "progmo.cli", "check"], &args),
         Command::Debug { args } => harness("debug", &["-m", "progmo.cli", "debug"], &args),
         Command::Bench { args } => harness("bench", &["-m", "progmo.bench.main"], &args),
+        Command::Report { args } => harness("report", &["-m", "progmo.cli", "report"], &args),
     }
 }
 
@@ -285,11 +309,78 @@ fn harness(sub: &str, module: &[&str], args: &[String]) -> ExitCode {
     }
 }
 
-fn load(path: &Path) -> Result<Scene, ExitCode> {
-    Scene::load(path).map_err(|e: SceneError| {
+/// Where bundled scenes are looked for: `$PROGMO_REFERENCES/scenes` (the Python package sets it to
+/// the references it ships), else the checkout this binary was built from.
+fn bundled_scene_dirs() -> Vec<PathBuf> {
+    let mut dirs = vec![];
+    if let Some(r) = std::env::var_os("PROGMO_REFERENCES") {
+        dirs.push(PathBuf::from(r).join("scenes"));
+    }
+    dirs.push(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("references/scenes"));
+    dirs
+}
+
+/// A scene argument: a file as given, else the name of a bundled scene (`double_pendulum`, with
+/// or without `.toml`); the same rule as `progmo.data.scene_file` in Python.
+fn scene_file(arg: &Path) -> Result<PathBuf, String> {
+    if arg.is_file() {
+        return Ok(arg.to_path_buf());
+    }
+    let bare = arg.parent().is_none_or(|p| p.as_os_str().is_empty())
+        && arg.extension().is_none_or(|e| e == "toml");
+    if !bare {
+        return Err(format!("{}: no such scene file", arg.display()));
+    }
+    let stem = arg.file_stem().unwrap_or_default();
+    let dirs = bundled_scene_dirs();
+    for d in &dirs {
+        let f = d.join(stem).with_extension("toml");
+        if f.is_file() {
+            return Ok(f);
+        }
+    }
+    let mut names: Vec<String> = dirs
+        .iter()
+        .filter_map(|d| std::fs::read_dir(d).ok())
+        .flatten()
+        .flatten()
+        .filter_map(|e| {
+            let p = e.path();
+            if p.extension()? != "toml" {
+                return None;
+            }
+            Some(p.file_stem()?.to_string_lossy().into_owned())
+        })
+        .collect();
+    names.sort();
+    names.dedup();
+    Err(format!(
+        "{}: no such scene file or bundled scene (bundled: {})",
+        arg.display(),
+        if names.is_empty() {
+            "none found".to_string()
+        } else {
+            names.join(", ")
+        }
+    ))
+}
+
+fn load(arg: &Path) -> Result<Scene, ExitCode> {
+    let path = scene_file(arg).map_err(|e| {
+        errln!("progmo: error: {e}");
+        ExitCode::from(2)
+    })?;
+    Scene::load(&path).map_err(|e: SceneError| {
         errln!("{e}");
         ExitCode::from(2)
     })
+}
+
+/// One JSON value on standard output (the `--json` of every subcommand).
+fn say_json(v: &serde_json::Value) -> Result<(), ExitCode> {
+    let text =
+        serde_json::to_string_pretty(v).unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"));
+    write_stdout(format_args!("{text}"), true)
 }
 
 fn settings_from(a: &SolveArgs, base: &Settings) -> Result<Settings, String> {
@@ -418,6 +509,23 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
         command_line,
     };
     let summary_error = write_summary_to_path(out.join("summary.json"), &summary).err();
+    // --json: the summary's content (and where the files are) on stdout, the line on stderr.
+    let json = a.json.then(|| {
+        let mut v = crate::output::summary_json(&summary).unwrap_or(serde_json::Value::Null);
+        if let Some(m) = v.as_object_mut() {
+            m.insert("output".into(), out.display().to_string().into());
+        }
+        v
+    });
+    let report = |line: std::fmt::Arguments<'_>| -> Result<(), ExitCode> {
+        match &json {
+            Some(v) => {
+                errln!("{line}");
+                say_json(v)
+            }
+            None => write_stdout(line, true),
+        }
+    };
     for e in write_error.iter().chain(summary_error.iter()) {
         errln!("progmo solve: error: {e}");
     }
@@ -441,10 +549,12 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
     };
     match &solution.code {
         ReturnCode::Success => {
-            say!(
+            if let Err(code) = report(format_args!(
                 "{}: success, t = {:.6} .. {:.6}, max programme residual {:.2e}, {} steps ({} rejected), {} RHS evaluations, {:.3} s{warned} -> {}",
                 scene.name, t0, solution.t_end, worst, st.steps, st.rejected, st.rhs_evals, wall, out.display()
-            );
+            )) {
+                return code;
+            }
         }
         code if solution.stats.integrator.steps == 0
             && solution.t_end == t0
@@ -464,7 +574,7 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
                 code.name(),
                 out.display()
             );
-            say!(
+            if let Err(code) = report(format_args!(
                 "{}: {}, t = {:.6} .. {:.6}, max programme residual {:.2e}{warned} -> {}",
                 scene.name,
                 code.name(),
@@ -472,7 +582,9 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
                 solution.t_end,
                 worst,
                 out.display()
-            );
+            )) {
+                return code;
+            }
             return ExitCode::from(1);
         }
     }
@@ -482,18 +594,39 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
     ExitCode::SUCCESS
 }
 
-fn validate(scenes: &[PathBuf]) -> ExitCode {
+fn validate(scenes: &[PathBuf], json: bool) -> ExitCode {
     let mut failed = false;
+    let mut objects = vec![];
     for path in scenes {
         let scene = match load(path) {
             Ok(s) => s,
             Err(_) => {
                 failed = true;
+                objects.push(serde_json::json!({
+                    "scene": path.display().to_string(), "ok": false, "error": "does not load (see stderr)"
+                }));
                 continue;
             }
         };
         let rows = scene.rows();
         match scene.check_initial(&scene.settings) {
+            Ok((traj, corr)) if json => {
+                let res = traj.residual_at(0);
+                objects.push(serde_json::json!({
+                    "scene": path.display().to_string(),
+                    "name": scene.name,
+                    "ok": true,
+                    "nq": scene.q_names().len(),
+                    "nv": scene.v_names().len(),
+                    "t0": scene.span().0,
+                    "t1": scene.span().1,
+                    "rows": rows.iter().zip(res).map(|(r, x)| serde_json::json!({
+                        "name": r.name, "level": format!("{:?}", r.level).to_lowercase(),
+                        "role": format!("{:?}", r.role).to_lowercase(), "initial_residual": x,
+                    })).collect::<Vec<_>>(),
+                    "initial_correction": corr.map(|c| serde_json::json!({"position": c.position, "velocity": c.velocity})),
+                }));
+            }
             Ok((traj, corr)) => {
                 let res = traj.residual_at(0);
                 say!(
@@ -524,7 +657,16 @@ fn validate(scenes: &[PathBuf]) -> ExitCode {
             Err(e) => {
                 failed = true;
                 errln!("{e}");
+                objects.push(serde_json::json!({
+                    "scene": path.display().to_string(), "name": scene.name, "ok": false,
+                    "error": e.to_string(),
+                }));
             }
+        }
+    }
+    if json {
+        if let Err(code) = say_json(&serde_json::Value::Array(objects)) {
+            return code;
         }
     }
     if failed {
@@ -534,7 +676,7 @@ fn validate(scenes: &[PathBuf]) -> ExitCode {
     }
 }
 
-fn export(path: &Path, format: FormatArg, out: Option<&Path>) -> ExitCode {
+fn export(path: &Path, format: FormatArg, out: Option<&Path>, json: bool) -> ExitCode {
     let scene = match load(path) {
         Ok(s) => s,
         Err(c) => return c,
@@ -561,22 +703,48 @@ fn export(path: &Path, format: FormatArg, out: Option<&Path>) -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    let report_json = serde_json::to_string_pretty(&report).expect("report serializes");
-    match out {
-        None => {
-            if let Err(code) = write_stdout(format_args!("{doc}"), false) {
-                return code;
-            }
-            errln!("{report_json}");
-        }
+    let report_value = serde_json::to_value(&report).unwrap_or(serde_json::Value::Null);
+    let report_text = serde_json::to_string_pretty(&report_value).unwrap_or_default();
+    let format_name = format!("{:?}", report.format).to_lowercase();
+    let written = match out {
+        None => None,
         Some(o) => {
             let rp = PathBuf::from(format!("{}.report.json", o.display()));
-            if let Err(e) = std::fs::write(o, &doc).and_then(|_| std::fs::write(&rp, report_json)) {
+            if let Err(e) = std::fs::write(o, &doc).and_then(|_| std::fs::write(&rp, &report_text))
+            {
                 errln!("progmo export: error: cannot write {}: {e}", o.display());
                 return ExitCode::from(3);
             }
-            errln!("wrote {} and {}", o.display(), rp.display());
+            Some((o.to_path_buf(), rp))
         }
+    };
+    // Reports on stdout, diagnostics on stderr: the document (or the paths written) is the report;
+    // --json puts everything in one object.
+    let r = match (&written, json) {
+        (_, true) => {
+            let mut v = serde_json::json!({"scene": scene.name, "format": format_name, "report": report_value});
+            match &written {
+                Some((o, rp)) => {
+                    v["path"] = o.display().to_string().into();
+                    v["report_path"] = rp.display().to_string().into();
+                }
+                None => v["document"] = doc.into(),
+            }
+            say_json(&v)
+        }
+        (Some((o, rp)), false) => write_stdout(
+            format_args!("wrote {} and {}", o.display(), rp.display()),
+            true,
+        ),
+        (None, false) => {
+            errln!(
+                "progmo export: the report (mass floors, forces the harness applies, q/v maps) is written with --out FILE (FILE.report.json) or --json"
+            );
+            write_stdout(format_args!("{doc}"), false)
+        }
+    };
+    match r {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(code) => code,
     }
-    ExitCode::SUCCESS
 }

@@ -8,6 +8,9 @@
 //!
 //! See `ARCHITECTURE.md` for the map of modules.
 
+/// Git revision of this build (empty outside a checkout): provenance of summaries and reports.
+pub const GIT_REVISION: &str = env!("PROGMO_GIT_REVISION");
+
 pub mod cli;
 pub mod export;
 pub mod expr;

@@ -3,6 +3,7 @@
 Shapes: n = number of samples, nq / nv = sizes of q / v, s = number of constraint rows.
 """
 
+import os
 from typing import Sequence, Any, Literal, TypedDict, final
 
 import numpy as np
@@ -12,6 +13,15 @@ F64 = npt.NDArray[np.float64]
 
 class SceneError(ValueError):
     """A scene file is invalid; the message names file, line, column and field."""
+
+class SettingsError(ValueError):
+    """A solver setting or override is invalid; the message names it (`rtol: must be > 0`)."""
+
+class SolveStopped(RuntimeError):
+    """A solve stopped before t1 (raised by `Solution.raise_if_stopped`)."""
+
+    code: str
+    solution: "Solution"
 
 class ExportUnsupported(ValueError):
     """The scene holds an element the simulator format cannot carry; the message names it."""
@@ -35,29 +45,80 @@ class Row(TypedDict):
     level: Literal["position", "velocity", "acceleration"]
     role: Literal["programme", "system"]
 
-class SolveResult(TypedDict):
-    success: bool
-    code_name: str  # success, step_too_small, singular_programme, ...
-    code: dict[str, Any]  # {"code": name, ...fields}
-    message: str  # the return code as one sentence (quantity, time, rows)
-    warnings: list[Warning]  # conditioning warnings
-    t_end: float  # on an early stop: the time of the code and of the last sample
-    t: F64  # (n,)
-    q: F64  # (n, nq)
-    v: F64  # (n, nv)
-    a: F64  # (n, nv) accelerations dv/dt
-    u: F64  # (n, nv) control forces of the programme rows (paper eq. 2.12)
-    reactions: F64  # (n, nv) reactions of the system's own constraints
-    # "lambda": F64 (n, s) multipliers -- a keyword, so listed here as a comment
-    residual: F64  # (n, s)
-    residual_rate: F64  # (n, s) dg/dt of position rows
-    max_residual: F64  # (s,) over every accepted step
-    max_residual_rate: F64  # (s,)
-    stats: dict[str, Any]
-    settings: dict[str, Any]
-    q_names: list[str]
-    v_names: list[str]
-    row_names: list[str]
+class Code(TypedDict, total=False):
+    code: str  # the return code's name; other keys: its fields (t, rows, values)
+
+@final
+class Solution:
+    """The outcome of `Scene.solve`: samples as read-only arrays, the return code, statistics,
+    warnings, and the writers of `progmo solve` (same formats)."""
+
+    @property
+    def scene(self) -> str: ...
+    @property
+    def success(self) -> bool: ...
+    @property
+    def code(self) -> str:
+        """success, step_too_small, singular_programme, ..."""
+    @property
+    def code_details(self) -> Code: ...
+    @property
+    def message(self) -> str:
+        """The return code as one sentence (quantity, time, rows)."""
+    @property
+    def t_end(self) -> float: ...
+    @property
+    def warnings(self) -> list[Warning]: ...
+    @property
+    def stats(self) -> dict[str, Any]: ...
+    @property
+    def settings(self) -> dict[str, Any]: ...
+    @property
+    def wall_seconds(self) -> float: ...
+    @property
+    def q_names(self) -> list[str]: ...
+    @property
+    def v_names(self) -> list[str]: ...
+    @property
+    def row_names(self) -> list[str]: ...
+    @property
+    def t(self) -> F64:
+        """(n,)"""
+    @property
+    def q(self) -> F64:
+        """(n, nq)"""
+    @property
+    def v(self) -> F64:
+        """(n, nv)"""
+    @property
+    def a(self) -> F64:
+        """(n, nv) accelerations dv/dt"""
+    @property
+    def u(self) -> F64:
+        """(n, nv) control forces of the programme rows (paper eq. 2.12)"""
+    @property
+    def reactions(self) -> F64:
+        """(n, nv) reactions of the system's own constraints"""
+    @property
+    def lambda_(self) -> F64:
+        """(n, s) multipliers"""
+    @property
+    def residuals(self) -> F64:
+        """(n, s)"""
+    @property
+    def residual_rates(self) -> F64:
+        """(n, s) dg/dt of position rows"""
+    @property
+    def max_residuals(self) -> F64:
+        """(s,) over every accepted step"""
+    @property
+    def max_residual_rates(self) -> F64:
+        """(s,)"""
+    def write_csv(self, path: str | os.PathLike[str]) -> None: ...
+    def write_mcap(self, path: str | os.PathLike[str]) -> None: ...
+    def write_summary(self, path: str | os.PathLike[str]) -> None: ...
+    def raise_if_stopped(self) -> "Solution": ...
+    def __len__(self) -> int: ...
 
 class Dynamics(TypedDict):
     mass: F64  # (nv, nv) A(q)
@@ -66,8 +127,8 @@ class Dynamics(TypedDict):
     B: F64  # (s, nv) constraint Jacobian
     gamma: F64  # (s,) B dv/dt = gamma
 
-__all__ = ["Scene", "SceneError", "ExportUnsupported", "FORMULATIONS", "INTEGRATORS", "DRIFTS", "version",
-           "chain_toml", "drift_cost"]
+__all__ = ["Scene", "Solution", "SceneError", "SettingsError", "SolveStopped", "ExportUnsupported", "FORMULATIONS", "INTEGRATORS", "DRIFTS", "version",
+           "chain_toml", "drift_cost", "cli"]
 
 #: The core's method vocabulary (progmo::solve::FORMULATION_NAMES, ...); the Literal types below
 #: spell the same names (tests/python/test_bindings.py checks it).
@@ -123,7 +184,7 @@ class Scene:
         drift: Literal["projection", "baumgarte", "none"] | None = None,
         max_samples: int | None = None,
         strict: bool | None = None,
-    ) -> SolveResult: ...
+    ) -> Solution: ...
     def check_initial(self) -> None:
         """Raises SceneError with the located message `progmo solve` gives when the solver refuses
         the initial state."""
@@ -149,6 +210,8 @@ class Scene:
     def export(self, format: Literal["mjcf", "urdf"], *, timestep: float = 1e-3) -> tuple[str, dict[str, Any]]: ...
 
 def version() -> str: ...
+def cli(argv: Sequence[str | os.PathLike[str]]) -> int:
+    """The `progmo` command line in this process (argv[0] is the program name); the exit code."""
 def chain_toml(
     n: int,
     *,

@@ -106,6 +106,25 @@ def compare(result: CheckResult, baseline: dict[str, Any] | None) -> list[Compar
     return out
 
 
+#: Versions a baseline records and a check compares (a different one is said in the report).
+VERSIONED = ("progmo", "mujoco", "pinocchio")
+
+
+def version_differences(baseline: dict[str, Any] | None, provenance: dict[str, Any]) -> list[str]:
+    """``"mujoco 3.9.0 (now 4.0.0)"`` for every versioned package the baseline was accepted with
+    that differs from this run's (a baseline without the record says so)."""
+    if baseline is None:
+        return []
+    acc = baseline.get("accepted") or {}
+    out = []
+    for k in VERSIONED:
+        if k not in acc:
+            out.append(f"{k} not recorded (now {provenance.get(k, '?')})")
+        elif str(acc[k]) != str(provenance.get(k)):
+            out.append(f"{k} {acc[k]} (now {provenance.get(k, '?')})")
+    return out
+
+
 def regressions(comparisons: list[Comparison]) -> list[Comparison]:
     return [c for c in comparisons if c.state == "regression"]
 

@@ -272,18 +272,18 @@ def _solve_reference(c: _Check, h: float):
     st = scene.settings
     sol = scene.solve(output_dt=h / 2, t1=scene.t0 + n * h,
                       rtol=min(st["rtol"], REF_RTOL), atol=min(st["atol"], REF_ATOL))
-    c.res.warnings = [w["message"] for w in sol["warnings"]]
-    if not sol["success"]:
-        raise _Stop("error", f"the reference solve stopped ({sol['code_name']}): {sol['message']}")
-    t = np.asarray(sol["t"])
+    c.res.warnings = [w["message"] for w in sol.warnings]
+    if not sol.success:
+        raise _Stop("error", f"the reference solve stopped ({sol.code}): {sol.message}")
+    t = np.asarray(sol.t)
     if len(t) != 2 * n + 1 or np.abs(t - (scene.t0 + 0.5 * h * np.arange(2 * n + 1))).max() > 1e-9:
         raise _Stop("error", f"solver output grid does not match the stages of h = {h:g} "
                              f"({len(t)} outputs for {2 * n + 1} stage times)")
-    u = np.array(sol["u"])
+    u = np.array(sol.u)
     if c.corrupt_u is not None:
         u = np.array([c.corrupt_u(tk, uk) for tk, uk in zip(t, u)])
-    return Reference(t, np.asarray(sol["q"]), np.asarray(sol["v"]), np.asarray(sol["a"]), u,
-                     np.asarray(sol["residual"]), h, n, scene.t0, _time.perf_counter() - t0s)
+    return Reference(t, np.asarray(sol.q), np.asarray(sol.v), np.asarray(sol.a), u,
+                     np.asarray(sol.residuals), h, n, scene.t0, _time.perf_counter() - t0s)
 
 
 def _replay_of(c: _Check, ref):

@@ -16,6 +16,7 @@ help speaks of ``progmo``. Exit codes of ``check`` (stable; the nightly job bran
 from __future__ import annotations
 
 import argparse
+import json
 import importlib
 import importlib.util
 import os
@@ -26,6 +27,7 @@ import time
 from pathlib import Path
 
 from . import baselines as bl
+from . import cliutil, data
 from . import report as rp
 from .parallel import Task, default_jobs, error_result, last_line, run_all
 from .results import CheckResult, save
@@ -38,31 +40,20 @@ undeclared not_checked or regression; 2 bad usage, or a scene that does not load
 solver refuses (the rest still runs); 130 interrupted.
 Outputs in --out: results.json (every CheckResult), run.json, report.html (self-contained),
 summary.md, summary.csv; written even when the run fails or is interrupted.
-Baselines: references/baselines/<scene>.<simulator>.json, see references/baselines/README.md."""
+Baselines: <scene>.<simulator>.json in the package's references/baselines (progmo.data), or
+--baselines DIR; format: references/baselines/README.md."""
 
 
 def repo_root() -> Path:
-    """The repository root: $PROGMO_ROOT, else the checkout this package lives in, else the first
-    parent of the working directory holding references/scenes."""
-    env = os.environ.get("PROGMO_ROOT")
-    if env:
-        return Path(env).resolve()
-    here = Path(__file__).resolve().parents[2]
-    if (here / "references" / "scenes").is_dir():
-        return here
-    for d in [Path.cwd(), *Path.cwd().parents]:
-        if (d / "references" / "scenes").is_dir():
-            return d
-    return Path.cwd()
+    """The folder paths in the report are shown relative to: the checkout this package runs from,
+    else the working directory."""
+    return data.checkout() or Path.cwd()
 
 
 def parser() -> argparse.ArgumentParser:
     from .checks import SIMULATORS
 
-    p = argparse.ArgumentParser(
-        prog="progmo",
-        description="Cross-simulator checks of progmo (also: python -m progmo.cli).",
-    )
+    p = cliutil.parser("progmo", "Cross-simulator checks of progmo (also: python -m progmo.cli).")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
     c = sub.add_parser(
         "check",
@@ -71,11 +62,12 @@ def parser() -> argparse.ArgumentParser:
         "the control forces u computed by progmo keep the simulated motion on the programme. Compares "
         "metrics with their budgets (scene [tolerances]) and accepted baselines; writes the report.",
         epilog=EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=cliutil.HelpFormatter,
     )
+    cliutil.styled(c)
     c.add_argument("scenes", nargs="*", metavar="SCENE",
                    help="scene files (TOML), folders of them, or names of bundled scenes "
-                   "(default: every references/scenes/*.toml)")
+                   "(default: every bundled scene)")
     c.add_argument("-s", "--simulator", action="append", choices=SIMULATORS, metavar="NAME",
                    help=f"simulator to check in, repeatable: {', '.join(SIMULATORS)} (default: all)")
     c.add_argument("-j", "--jobs", type=int, default=None, metavar="N",
@@ -84,25 +76,31 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument("--accept", action="store_true",
                    help="write the metrics of every passing check as its new baseline (prints what changed)")
     c.add_argument("--baselines", metavar="DIR", default=None,
-                   help="baseline folder (default: references/baselines of the repository)")
+                   help="baseline folder (default: the bundled references/baselines)")
     c.add_argument("--step", type=float, default=None, metavar="H",
                    help="replay step (default: the scene's replay_step tolerance, else a convergence check)")
     c.add_argument("--horizon", type=float, default=None, metavar="T",
                    help="replay horizon in seconds (default: the scene's whole time span)")
     c.add_argument("--samples", type=int, default=8, metavar="N",
                    help="sample states of the parity and instantaneous checks (default: 8)")
+    c.add_argument("--json", action="store_true",
+                   help="print the outcome as one JSON object on stdout (coverage, ok, and every result "
+                   "without its plot series); the lines for people go to stderr")
     c.add_argument("--no-plots", action="store_true",
                    help="leave the plots out of report.html (faster; tables and verdicts unchanged)")
     sub.add_parser("debug", help="debugging run of one scene (progmo.debug; its own --help)", add_help=False)
-    r = sub.add_parser("report", help="re-render the report of a saved run from its results.json and run.json")
+    r = cliutil.styled(sub.add_parser(
+        "report", help="re-render the report of a saved run from its results.json and run.json",
+        description="Re-render report.html, summary.md and summary.csv of a saved check run from its "
+        "results.json and run.json (exit 0 if the run passed, 1 if not, 2 if they cannot be read)."))
     r.add_argument("dir", metavar="DIR", help="output folder of a check run (default layout: out/check)")
     return p
 
 
 # --- check ---------------------------------------------------------------------------------------
-def _scene_files(args: list[str], root: Path) -> tuple[list[Path], list[str]]:
+def _scene_files(args: list[str]) -> tuple[list[Path], list[str]]:
     """Scene files named by the arguments (files, folders, bundled names) and the problems."""
-    scenes_dir = root / "references" / "scenes"
+    scenes_dir = data.scenes_dir()
     if not args:
         return sorted(scenes_dir.glob("*.toml")), ([] if scenes_dir.is_dir() else [f"no bundled scenes in {scenes_dir}"])
     files, problems = [], []
@@ -115,10 +113,11 @@ def _scene_files(args: list[str], root: Path) -> tuple[list[Path], list[str]]:
             files += found
             if not found:
                 problems.append(f"{a}: folder holds no *.toml scene")
-        elif (scenes_dir / f"{a}.toml").is_file():
-            files.append(scenes_dir / f"{a}.toml")
         else:
-            problems.append(f"{a}: no such scene file or bundled scene")
+            try:
+                files.append(data.scene_file(a))
+            except ValueError as e:
+                problems.append(str(e))
     return files, problems
 
 
@@ -126,8 +125,9 @@ def rerun_command(argv: list[str], cwd: Path, root: Path) -> str:
     """The command that reruns this check (without --accept: rerunning must not re-accept)."""
     args = shlex.join(a for a in argv if a != "--accept")
     lines = [f"progmo check {args}".rstrip()]
-    lines.append(f"# on a fresh machine: bash harness/nightly.sh {args}".rstrip())
-    lines.append(f"# without the Rust CLI: .venv/bin/python -m progmo.cli check {args}".rstrip())
+    if data.checkout() is not None:
+        lines.append(f"# on a fresh machine: bash harness/nightly.sh {args}".rstrip())
+    lines.append(f"# equivalently: python -m progmo.cli check {args}".rstrip())
     if cwd.resolve() != root.resolve():
         lines.insert(0, f"cd {shlex.quote(str(cwd))}")
     return "\n".join(lines)
@@ -160,12 +160,12 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
     except OSError as e:
         _say(f"progmo check: error: cannot create output folder {out}: {e}")
         return EXIT_USAGE
-    base_dir = Path(ns.baselines) if ns.baselines else root / "references" / "baselines"
+    base_dir = Path(ns.baselines) if ns.baselines else data.baselines_dir()
 
     usage_problem = False
     notes: list[str] = []
     results: list[CheckResult] = []
-    files, problems = _scene_files(ns.scenes, root)
+    files, problems = _scene_files(ns.scenes)
     for pr in problems:
         _say(f"progmo check: error: {pr}")
         notes.append(pr)
@@ -214,6 +214,7 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
         signal.signal(signal.SIGTERM, _raise_interrupt)
     _say(f"progmo check: {len(scenes)} scene(s) x {len(sims)} simulator(s) = {n_total} check(s), {jobs} job(s)")
     done = 0
+    other_versions: dict[str, list[str]] = {}
     try:
         for task, r in run_all(tasks, options, jobs):
             done += 1
@@ -222,8 +223,10 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
                 r.scene, r.simulator = task.scene, task.simulator
             results.append(r)
             try:
-                run.comparisons[(r.scene, r.simulator)] = rp.comparisons_as_dicts(
-                    bl.compare(r, bl.load(base_dir, r.scene, r.simulator)))
+                baseline = bl.load(base_dir, r.scene, r.simulator)
+                run.comparisons[(r.scene, r.simulator)] = rp.comparisons_as_dicts(bl.compare(r, baseline))
+                for d in bl.version_differences(baseline, prov):
+                    other_versions.setdefault(d, []).append(f"{r.scene}/{r.simulator}")
             except ValueError as e:
                 notes.append(str(e))
                 usage_problem = True
@@ -236,6 +239,10 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
     finally:
         if _main_thread():
             signal.signal(signal.SIGTERM, old_term)
+        for d, pairs in other_versions.items():
+            notes.append(f"baselines accepted with other versions: {d} for {len(pairs)} check(s) "
+                         f"({', '.join(pairs[:6])}{' ...' if len(pairs) > 6 else ''}); "
+                         "their comparison may reflect the version change")
         results.sort(key=lambda r: order.get((r.scene, r.simulator), -1))
         _save_atomic(results, out / "results.json")
         if ns.accept:
@@ -247,9 +254,19 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
         except Exception as e:  # noqa: BLE001 - keep results.json; say what broke
             report_ok = False
             _say(f"progmo check: error: writing the report failed: {last_line(e)}")
-    print(f"progmo check: {run.coverage()}")
+    human = sys.stderr if ns.json else sys.stdout
+    print(f"progmo check: {run.coverage()}", file=human)
     if report_ok:
-        print(f"report: {paths['html']}  (summary: {paths['md']}, {paths['csv']}; results: {out / 'results.json'})")
+        print(f"report: {paths['html']}  (summary: {paths['md']}, {paths['csv']}; results: {out / 'results.json'})",
+              file=human)
+    if ns.json:
+        print(json.dumps({
+            "coverage": run.coverage(), "ok": run.ok(), "interrupted": interrupted,
+            "report": str(paths["html"]) if report_ok else None, "results_file": str(out / "results.json"),
+            "notes": notes,
+            "results": [{**{k: v for k, v in r.to_json().items() if k != "series"},
+                         "verdict": run.verdict(r)} for r in results],
+        }, indent=1))
     if interrupted:
         return EXIT_INTERRUPTED
     if usage_problem:
@@ -318,8 +335,6 @@ def cmd_debug(args: list[str]) -> int:
 
 
 def cmd_report(ns: argparse.Namespace) -> int:
-    import json
-
     from .results import load
 
     d = Path(ns.dir)

@@ -25,6 +25,7 @@ import sys
 
 import numpy as np
 
+from . import cliutil
 from .checks import SIMULATORS, CheckOptions, Recording, _run
 
 STATE_SCHEMA = {
@@ -172,8 +173,8 @@ def _value_at(rec: Recording, result, metric: str, t: float | None):
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="progmo debug", description=__doc__.split("\n\n")[0])
-    p.add_argument("scene", help="scene file (.toml)")
+    p = cliutil.parser("progmo debug", description=__doc__ or "")
+    p.add_argument("scene", help="scene file (.toml) or name of a bundled scene")
     p.add_argument("--simulator", choices=[*SIMULATORS, "both"], default="both")
     p.add_argument("--out", default="debug-out", help="output directory (default: debug-out)")
     p.add_argument("--step", type=float, default=None, help="replay step (default: the scene's)")
@@ -184,8 +185,11 @@ def main(argv: list[str] | None = None) -> int:
         a = p.parse_args(argv)
     except SystemExit as e:
         return 2 if e.code else 0
-    if not os.path.isfile(a.scene):
-        print(f"progmo debug: error: no scene file {a.scene!r}", file=sys.stderr)
+    from . import data
+    try:
+        a.scene = str(data.scene_file(a.scene))
+    except ValueError as e:
+        print(f"progmo debug: error: {e}", file=sys.stderr)
         return 2
     if (a.step is not None and not a.step > 0) or (a.horizon is not None and not a.horizon > 0):
         print("progmo debug: error: --step and --horizon must be positive", file=sys.stderr)

@@ -157,6 +157,26 @@ impl OutputSink for Trajectory {
     }
 }
 
+/// Write a solved trajectory (and its warnings, each before the first sample at or after its time)
+/// into `sink`, as the solver would have streamed it: the outputs of a solve kept in memory (the
+/// Python `Solution.write_csv` / `write_mcap`) come from the same writers as `progmo solve`'s.
+pub fn replay(
+    traj: &Trajectory,
+    warnings: &[crate::solve::Warning],
+    sink: &mut dyn OutputSink,
+) -> Result<(), OutputError> {
+    let mut pending = warnings.iter().peekable();
+    for k in 0..traj.len() {
+        let s = traj.sample(k);
+        while let Some(w) = pending.next_if(|w| w.t <= s.t) {
+            sink.warning(w);
+        }
+        sink.sample(&s);
+    }
+    pending.for_each(|w| sink.warning(w));
+    sink.finish()
+}
+
 /// Names of the sampled quantities, and whether reactions are written.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SampleLayout {

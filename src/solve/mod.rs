@@ -550,6 +550,21 @@ impl Trajectory {
     pub fn residual_at(&self, k: usize) -> &[f64] {
         &self.residual[k * self.s()..(k + 1) * self.s()]
     }
+    /// Sample k as the solver emitted it.
+    pub fn sample(&self, k: usize) -> Sample<'_> {
+        let s = self.s();
+        Sample {
+            t: self.t[k],
+            q: self.q_at(k),
+            v: self.v_at(k),
+            a: self.a_at(k),
+            u: self.u_at(k),
+            reactions: self.reactions_at(k),
+            lambda: self.lambda_at(k),
+            residual: self.residual_at(k),
+            residual_rate: &self.residual_rate[k * s..(k + 1) * s],
+        }
+    }
     /// Largest |residual| of row i over the samples.
     pub fn max_residual(&self, i: usize) -> f64 {
         (0..self.len())

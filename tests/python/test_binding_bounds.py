@@ -42,16 +42,16 @@ def test_solve_refuses_before_integrating(kwargs, name):
 def test_max_samples_boundary_passes():
     # double_pendulum samples 0.01 s over 10 s: 1001 samples.
     r = ph.Scene(SCENE).solve(max_samples=1001)
-    assert r["success"] and len(r["t"]) == 1001
+    assert r.success and len(r.t) == 1001
 
 
 def test_nan_inputs_raise():
     s = ph.Scene(SCENE)
     r = s.solve(output_dt=0.5)
-    q = r["q"].copy()
+    q = r.q.copy()
     q[1, 0] = math.nan
     with pytest.raises(ValueError, match="q: entry 2 is NaN"):
-        s.residuals(r["t"], q, r["v"])
+        s.residuals(r.t, q, r.v)
     with pytest.raises(ValueError, match="v: entry 0 is inf"):
         s.dynamics(0.0, np.zeros(2), np.array([math.inf, 0.0]))
     with pytest.raises(ValueError, match="t: entry 0 is NaN"):

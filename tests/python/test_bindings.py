@@ -16,29 +16,29 @@ def test_scene_properties_and_solve():
     assert s.kind == "tree" and s.q_names == ["q1", "q2"]
     assert s.rows == [{"name": "elbow", "level": "position", "role": "programme"}]
     r = s.solve(output_dt=0.1)
-    assert r["success"] and r["code_name"] == "success"
-    n = len(r["t"])
-    assert r["q"].shape == (n, 2) and r["u"].shape == (n, 2) and n == 101
+    assert r.success and r.code == "success"
+    n = len(r.t)
+    assert r.q.shape == (n, 2) and r.u.shape == (n, 2) and n == 101
     # The programme q2 = 0.5 sin t holds along the solution, by the core's own evaluator.
-    res = s.residuals(r["t"], r["q"], r["v"])
+    res = s.residuals(r.t, r.q, r.v)
     assert np.max(np.abs(res)) <= s.tolerances["programme_residual"][0]
-    assert np.allclose(res[:, 0], r["q"][:, 1] - 0.5 * np.sin(r["t"]), atol=1e-15)
+    assert np.allclose(res[:, 0], r.q[:, 1] - 0.5 * np.sin(r.t), atol=1e-15)
 
 
 def test_residual_evaluator_detects_a_violation():
     # Negative control: a trajectory off the programme must show its residual.
     s = ph.Scene(str(SCENES / "double_pendulum.toml"))
     r = s.solve(output_dt=0.5)
-    q = r["q"].copy()
+    q = r.q.copy()
     q[:, 1] += 1e-3
-    assert np.min(np.abs(s.residuals(r["t"], q, r["v"]))) > 0.9e-3
+    assert np.min(np.abs(s.residuals(r.t, q, r.v))) > 0.9e-3
 
 
 def test_acceleration_rows_need_accelerations():
     s = ph.Scene(str(SCENES / "heavy_top.toml"))
     r = s.solve(output_dt=0.5)
-    assert np.all(np.isnan(s.residuals(r["t"], r["q"], r["v"])))
-    assert np.max(np.abs(s.residuals(r["t"], r["q"], r["v"], r["a"]))) < 1e-10
+    assert np.all(np.isnan(s.residuals(r.t, r.q, r.v)))
+    assert np.max(np.abs(s.residuals(r.t, r.q, r.v, r.a))) < 1e-10
 
 
 def test_dynamics_terms():
@@ -79,4 +79,4 @@ def test_stub_literals_spell_the_core_vocabulary():
     for name in _core.FORMULATIONS:
         sol = _core.Scene(str(pathlib.Path(__file__).resolve().parents[2] / "references" / "scenes"
                               / "double_pendulum.toml")).solve(formulation=name, t1=0.05)
-        assert sol["success"] and sol["settings"]["formulation"] == name
+        assert sol.success and sol.settings["formulation"] == name

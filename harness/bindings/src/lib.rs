@@ -8,7 +8,7 @@ use progmo::formulation::Formulation;
 use progmo::model::Model;
 use progmo::programme::{Constraints, Level, Role};
 use progmo::scene::{Scene, SceneSystem};
-use progmo::solve::{Evaluator, Overrides, Settings, Solution};
+use progmo::solve::{Evaluator, Overrides, Solution};
 use progmo::with_problem;
 use pyo3::create_exception;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
@@ -16,11 +16,29 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use std::path::PathBuf;
 
+mod solution;
+use progmo::output::SampleLayout;
+use solution::PySolution;
+
 create_exception!(
     _core,
     SceneError,
     PyValueError,
     "A scene file is invalid; the message names file, line, column and field."
+);
+
+create_exception!(
+    _core,
+    SettingsError,
+    PyValueError,
+    "A solver setting or override is invalid; the message names it (`rtol: must be > 0`)."
+);
+
+create_exception!(
+    _core,
+    SolveStopped,
+    pyo3::exceptions::PyRuntimeError,
+    "A solve stopped before t1 (`Solution.raise_if_stopped`); args[0] is the return code as one sentence, `.code` its name."
 );
 
 create_exception!(
@@ -34,12 +52,19 @@ fn scene_error(e: progmo::scene::SceneError) -> PyErr {
     SceneError::new_err(e.to_string())
 }
 
-fn json_to_py<'py>(py: Python<'py>, v: &impl serde::Serialize) -> PyResult<Bound<'py, PyAny>> {
+pub(crate) fn json_to_py<'py>(
+    py: Python<'py>,
+    v: &impl serde::Serialize,
+) -> PyResult<Bound<'py, PyAny>> {
     let s = serde_json::to_string(v).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     py.import("json")?.call_method1("loads", (s,))
 }
 
-fn matrix<'py>(py: Python<'py>, flat: &[f64], cols: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
+pub(crate) fn matrix<'py>(
+    py: Python<'py>,
+    flat: &[f64],
+    cols: usize,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let rows = flat.len().checked_div(cols).unwrap_or(0);
     let a = Array2::from_shape_vec((rows, cols), flat.to_vec())
         .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
@@ -187,7 +212,7 @@ impl PyScene {
     /// ("null_space", "null_space_stacked", "kkt", "range_space", "udwadia_kalaba"), drift
     /// ("projection", "baumgarte", "none"), max_samples (default 10^7), strict. The span and
     /// settings are checked by `progmo::solve::validate` first (ValueError naming the argument).
-    /// Returns a dict of numpy arrays and the return code.
+    /// Returns a `Solution` (partial on an early stop: see its `code` / `raise_if_stopped`).
     #[pyo3(signature = (*, output_dt=None, t1=None, rtol=None, atol=None, integrator=None, step=None, formulation=None, drift=None, max_samples=None, strict=None))]
     #[allow(clippy::too_many_arguments)]
     fn solve<'py>(
@@ -203,7 +228,7 @@ impl PyScene {
         drift: Option<String>,
         max_samples: Option<usize>,
         strict: Option<bool>,
-    ) -> PyResult<Bound<'py, PyDict>> {
+    ) -> PyResult<PySolution> {
         let o = Overrides {
             formulation,
             integrator,
@@ -220,15 +245,18 @@ impl PyScene {
             .scene
             .settings
             .apply(&o)
-            .map_err(|e| PyValueError::new_err(format!("{}: {e}", e.field())))?;
+            .map_err(|e| SettingsError::new_err(format!("{}: {e}", e.field())))?;
         let mut scene = self.scene.clone();
         if let Some(t1) = t1 {
             with_problem!(&mut scene.system, p => p.t1 = t1);
         }
         progmo::solve::validate(scene.span(), &s)
-            .map_err(|e| PyValueError::new_err(format!("{}: {}", e.field.name(), e.message)))?;
+            .map_err(|e| SettingsError::new_err(format!("{}: {}", e.field.name(), e.message)))?;
+        let layout = with_problem!(&scene.system, p => SampleLayout::from_problem(p));
+        let started = std::time::Instant::now();
         let sol: Solution = py.detach(|| scene.solve(&s));
-        solution_dict(py, &sol, &s)
+        let wall = started.elapsed().as_secs_f64();
+        PySolution::new(py, scene.name.clone(), sol, s, layout, wall)
     }
 
     /// Residuals of every row along a trajectory (n samples): position rows g(t, q), velocity
@@ -511,51 +539,6 @@ fn finite<'a>(name: &str, x: impl IntoIterator<Item = &'a f64>) -> PyResult<()> 
     }
 }
 
-fn solution_dict<'py>(
-    py: Python<'py>,
-    sol: &Solution,
-    settings: &Settings,
-) -> PyResult<Bound<'py, PyDict>> {
-    let tr = &sol.trajectory;
-    let (nq, nv, s) = (tr.q_names.len(), tr.v_names.len(), tr.row_names.len());
-    let d = PyDict::new(py);
-    d.set_item("success", sol.code.is_success())?;
-    d.set_item("code_name", sol.code.name())?;
-    d.set_item("code", json_to_py(py, &sol.code)?)?;
-    d.set_item("message", sol.code.to_string())?;
-    let warnings = PyList::empty(py);
-    for w in &sol.warnings {
-        let wd = json_to_py(py, w)?;
-        wd.set_item("message", w.to_string())?;
-        warnings.append(wd)?;
-    }
-    d.set_item("warnings", warnings)?;
-    d.set_item("t_end", sol.t_end)?;
-    d.set_item("t", PyArray1::from_vec(py, tr.t.clone()))?;
-    d.set_item("q", matrix(py, &tr.q, nq)?)?;
-    d.set_item("v", matrix(py, &tr.v, nv)?)?;
-    d.set_item("a", matrix(py, &tr.a, nv)?)?;
-    d.set_item("u", matrix(py, &tr.u, nv)?)?;
-    d.set_item("reactions", matrix(py, &tr.reactions, nv)?)?;
-    d.set_item("lambda", matrix(py, &tr.lambda, s)?)?;
-    d.set_item("residual", matrix(py, &tr.residual, s)?)?;
-    d.set_item("residual_rate", matrix(py, &tr.residual_rate, s)?)?;
-    d.set_item(
-        "max_residual",
-        PyArray1::from_vec(py, sol.max_residual.clone()),
-    )?;
-    d.set_item(
-        "max_residual_rate",
-        PyArray1::from_vec(py, sol.max_residual_rate.clone()),
-    )?;
-    d.set_item("stats", json_to_py(py, &sol.stats)?)?;
-    d.set_item("settings", json_to_py(py, settings)?)?;
-    d.set_item("q_names", tr.q_names.clone())?;
-    d.set_item("v_names", tr.v_names.clone())?;
-    d.set_item("row_names", tr.row_names.clone())?;
-    Ok(d)
-}
-
 /// Scene text of a generated n-link planar chain (`progmo::problems::chain`): the one generator
 /// shared by the Rust benchmarks, the tests and `progmo bench`.
 #[pyfunction]
@@ -598,6 +581,13 @@ fn drift_cost<'py>(py: Python<'py>, rounds: usize) -> PyResult<Bound<'py, PyDict
     Ok(d)
 }
 
+/// The `progmo` command line (`progmo::cli::run`): `argv[0]` is the program name. Returns the
+/// exit code. The Python package's `progmo` command calls it for solve, validate and export.
+#[pyfunction]
+fn cli(py: Python<'_>, argv: Vec<std::ffi::OsString>) -> u8 {
+    py.detach(|| progmo::cli::run(argv))
+}
+
 /// Version of the core.
 #[pyfunction]
 fn version() -> &'static str {
@@ -607,6 +597,9 @@ fn version() -> &'static str {
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyScene>()?;
+    m.add_class::<PySolution>()?;
+    m.add("SettingsError", m.py().get_type::<SettingsError>())?;
+    m.add("SolveStopped", m.py().get_type::<SolveStopped>())?;
     m.add("SceneError", m.py().get_type::<SceneError>())?;
     m.add("ExportUnsupported", m.py().get_type::<ExportUnsupported>())?;
     // The method vocabulary of the core (progmo::solve): one list for every door.
@@ -614,6 +607,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("INTEGRATORS", progmo::solve::INTEGRATOR_NAMES.to_vec())?;
     m.add("DRIFTS", progmo::solve::DRIFT_NAMES.to_vec())?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
+    m.add_function(wrap_pyfunction!(cli, m)?)?;
     m.add_function(wrap_pyfunction!(chain_toml, m)?)?;
     m.add_function(wrap_pyfunction!(drift_cost, m)?)?;
     Ok(())

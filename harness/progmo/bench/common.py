@@ -7,7 +7,6 @@ import csv
 import os
 import platform
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -24,12 +23,16 @@ INTEGRATORS = tuple(n for n in _INTEGRATORS if n != "rk4")
 
 
 def repo_root() -> Path:
-    """The checkout holding references/scenes (the package lives in harness/progmo)."""
-    return Path(__file__).resolve().parents[3]
+    """Where the benchmark is run from: the checkout, else the working directory (provenance)."""
+    from .. import data
+
+    return data.checkout() or Path.cwd()
 
 
 def scene_path(name: str) -> Path:
-    return repo_root() / "references" / "scenes" / f"{name}.toml"
+    from .. import data
+
+    return data.scenes_dir() / f"{name}.toml"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -75,14 +78,9 @@ def versions() -> dict[str, str]:
 
 
 def _git_commit() -> str:
-    try:
-        r = subprocess.run(["git", "-C", str(repo_root()), "rev-parse", "--short", "HEAD"],
-                           capture_output=True, text=True, timeout=10)
-        dirty = subprocess.run(["git", "-C", str(repo_root()), "status", "--porcelain", "-uno"],
-                               capture_output=True, text=True, timeout=10).stdout.strip()
-        return r.stdout.strip() + ("+dirty" if dirty else "") if r.returncode == 0 else "unknown"
-    except Exception:  # noqa: BLE001
-        return "unknown"
+    from .. import data
+
+    return data.git_revision() or "unknown"
 
 
 def write_csv(path: Path, prov: Provenance, header: Sequence[str], rows: Iterable[Sequence]) -> Path:

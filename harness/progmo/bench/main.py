@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import cliutil
+
 PARTS = ("workprecision", "scipy", "conditioning", "scaling", "testset", "drift")
 
 # sweep sizes; --quick is the default a test or a shared 2-core machine can afford
@@ -41,8 +43,7 @@ SMOKE: dict[str, Any] = dict(scenes=("double_pendulum",), tols=[1e-5, 1e-8], rep
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="progmo bench", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = cliutil.parser("progmo bench", description=__doc__ or "")
     p.add_argument("--quick", action="store_true", help="small sweeps (default: full sweeps)")
     p.add_argument("--out", default="out/bench", help="output directory (default out/bench)")
     p.add_argument("--only", default=",".join(PARTS),

@@ -1,8 +1,8 @@
 """IVP Test Set: the car axis (references/testset/caraxis.toml) against its published reference.
 
 Reference: the test set's quad-precision solution at t = 3 (R/ex_reference.R "caraxis", 21 digits),
-read from `../shared/references/testset/caraxis_R_gamd_quad_reference.csv` beside the checkout (the
-provenance is in references/testset/README.md). y = (xl, yl, xr, yr, xl', yl', xr', yr', lambda1,
+shipped in the package as `references/testset/published/caraxis_R_gamd_quad_reference.csv` (a copy
+of the test set's file; provenance in references/testset/README.md and published/caraxis.md). y = (xl, yl, xr, yr, xl', yl', xr', yr', lambda1,
 lambda2) with lambda1 = progmo's multiplier of the programme row `road` and lambda2 that of the
 system row `axle` (same sign and scale, README).
 
@@ -23,19 +23,20 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import Provenance, cpu_time, log, repo_root, save_figure, write_csv
+from .. import data
+from .common import Provenance, cpu_time, log, save_figure, write_csv
 
 METHODS: tuple[Literal["dop853", "radau5"], ...] = ("dop853", "radau5")
 
 
 def reference_csv() -> Path:
-    return repo_root().parent / "shared" / "references" / "testset" / "caraxis_R_gamd_quad_reference.csv"
+    return data.testset_dir() / "published" / "caraxis_R_gamd_quad_reference.csv"
 
 
 def load_reference() -> np.ndarray:
     path = reference_csv()
     if not path.exists():
-        raise FileNotFoundError(f"caraxis reference not found at {path} (expected ../shared beside the checkout)")
+        raise FileNotFoundError(f"caraxis reference not found at {path} (it ships with the package: a broken installation?)")
     with path.open() as f:
         rows = list(csv.DictReader(f))
     ref = np.array([float(r["value"]) for r in sorted(rows, key=lambda r: int(r["index"]))])
@@ -52,25 +53,25 @@ def mescd(y: np.ndarray, ref: np.ndarray, ratio: float = 1.0) -> float:
 def caraxis_y(scene, r) -> np.ndarray:
     names = [row["name"] for row in scene.rows]
     road, axle = names.index("road"), names.index("axle")
-    lam = r["lambda"][-1]
-    return np.concatenate((r["q"][-1], r["v"][-1], [lam[road], lam[axle]]))
+    lam = r.lambda_[-1]
+    return np.concatenate((r.q[-1], r.v[-1], [lam[road], lam[axle]]))
 
 
 def run(out: Path, prov: Provenance, tols, repeats: int) -> dict:
     from .. import Scene
 
     ref = load_reference()
-    scene = Scene(str(repo_root() / "references" / "testset" / "caraxis.toml"))
+    scene = Scene(str(data.testset_dir() / "caraxis.toml"))
     rows = []
     for method in METHODS:
         for tol in tols:
             log(f"[testset] caraxis {method} rtol = atol = {tol:.0e}")
             dt, r = cpu_time(lambda: scene.solve(rtol=tol, atol=tol, integrator=method,
                                                  output_dt=scene.t1 - scene.t0), repeats)
-            ok = bool(r["success"]) and abs(r["t"][-1] - scene.t1) < 1e-12
-            st = r["stats"]["integrator"]
+            ok = r.success and abs(r.t[-1] - scene.t1) < 1e-12
+            st = r.stats["integrator"]
             y = caraxis_y(scene, r) if ok else np.full(10, np.nan)
-            rows.append(dict(problem="caraxis", method=method, rtol=tol, atol=tol, code=r["code_name"],
+            rows.append(dict(problem="caraxis", method=method, rtol=tol, atol=tol, code=r.code,
                              mescd_states=mescd(y[:8], ref[:8]) if ok else float("nan"),
                              mescd_all=mescd(y, ref) if ok else float("nan"),
                              cpu_s=dt, rhs_evals=st["rhs_evals"], steps=st["steps"],

@@ -40,7 +40,7 @@ class Reference:
 
 
 def final_state(r) -> np.ndarray:
-    return np.concatenate((r["q"][-1], r["v"][-1]))
+    return np.concatenate((r.q[-1], r.v[-1]))
 
 
 def reference(scene) -> Reference:
@@ -49,11 +49,11 @@ def reference(scene) -> Reference:
         for tol in (REF_TOL, 1e-13):
             dt, r = cpu_time(lambda: scene.solve(rtol=tol, atol=tol, integrator=integ,
                                                  output_dt=scene.t1 - scene.t0), 1)
-            if r["success"] and abs(r["t"][-1] - scene.t1) < 1e-12:
+            if r.success and abs(r.t[-1] - scene.t1) < 1e-12:
                 state[integ], tols[integ], cpu[integ] = final_state(r), tol, dt
                 break
         else:
-            raise RuntimeError(f"{scene.name}: reference with {integ} failed ({r['code_name']})")
+            raise RuntimeError(f"{scene.name}: reference with {integ} failed ({r.code})")
     floor = float(np.abs(state["dop853"] - state["radau5"]).max())
     return Reference(state, tols, cpu, floor)
 
@@ -69,26 +69,26 @@ def sweep(scene, ref: Reference, tols, formulations=FORMULATIONS, integrators=IN
                 dt, r = cpu_time(lambda: scene.solve(rtol=tol, atol=tol, integrator=integ,
                                                      formulation=form, drift=drift,
                                                      output_dt=scene.t1 - scene.t0), repeats)
-                ok = bool(r["success"]) and abs(r["t"][-1] - scene.t1) < 1e-12
+                ok = r.success and abs(r.t[-1] - scene.t1) < 1e-12
                 err = float(np.abs(final_state(r) - ref_state).max()) if ok else float("nan")
-                st = r["stats"]
+                st = r.stats
                 rows.append(dict(scene=scene.name, formulation=form, integrator=integ, rtol=tol,
-                                 atol=tol, code=r["code_name"], error=err, cpu_s=dt,
+                                 atol=tol, code=r.code, error=err, cpu_s=dt,
                                  rhs_evals=st["integrator"]["rhs_evals"],
                                  steps=st["integrator"]["steps"],
                                  rejected=st["integrator"]["rejected"],
                                  factorizations=st["factorizations"], reference=ref_name,
-                                 drift=r["settings"]["drift"]["kind"]))
+                                 drift=r.settings["drift"]["kind"]))
     return rows
 
 
 def residual_run(scene, formulation="null_space", integrator="dop853", tol=1e-8):
     """One run sampled finely: the programme residual |g| (max over rows) against time."""
     r = scene.solve(rtol=tol, atol=tol, integrator=integrator, formulation=formulation)
-    res = np.abs(r["residual"]).max(axis=1) if r["residual"].size else np.zeros(len(r["t"]))
-    return r["t"], res, dict(formulation=formulation, integrator=integrator, rtol=tol,
-                             drift=r["settings"]["drift"], code=r["code_name"],
-                             max_residual=float(np.max(r["max_residual"], initial=0.0)))
+    res = np.abs(r.residuals).max(axis=1) if r.residuals.size else np.zeros(len(r.t))
+    return r.t, res, dict(formulation=formulation, integrator=integrator, rtol=tol,
+                             drift=r.settings["drift"], code=r.code,
+                             max_residual=float(np.max(r.max_residuals, initial=0.0)))
 
 
 COLORS = {"dop853": "tab:blue", "dopri5": "tab:green", "radau5": "tab:red",

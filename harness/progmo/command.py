@@ -1,0 +1,36 @@
+"""The ``progmo`` command of the Python package: every subcommand of the Rust ``progmo`` binary.
+
+``solve``, ``validate``, ``export`` and ``--help`` run the Rust command line in this process
+(``progmo::cli::run`` through the binding; the bundled scenes are found by name); ``check``,
+``debug`` and ``report`` run the harness (``progmo.cli``), ``bench`` the benchmarks
+(``progmo.bench.main``). Exit codes are those of the subcommand (``progmo --help``).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+HARNESS = ("check", "debug", "report")
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = list(sys.argv[1:] if argv is None else argv)
+    if args and args[0] in HARNESS:
+        from .cli import main as harness_main
+
+        return harness_main(args)
+    if args and args[0] == "bench":
+        from .bench.main import main as bench_main
+
+        return int(bench_main(args[1:]) or 0)
+    from . import _core, data
+
+    os.environ.setdefault("PROGMO_REFERENCES", str(data.references()))
+    sys.stdout.flush()
+    sys.stderr.flush()
+    return int(_core.cli(["progmo", *args]))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
