@@ -6,6 +6,20 @@
 //! D A dv/dt = D (G + Q) (2.8)-(2.10) and the differentiated programme give dv/dt without inverting
 //! A, and the control force is u = A dv/dt - G - Q (2.12).
 //!
+//! Use on its own (`progmo = { path = "..." }`): load a scene file, solve it, read the motion and
+//! the control forces (this example runs as a doctest):
+//!
+//! ```
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! # std::env::set_current_dir(env!("CARGO_MANIFEST_DIR"))?;
+//! let scene = progmo::scene::Scene::load("references/scenes/double_pendulum.toml")?;
+//! let sol = scene.solve(&scene.settings);
+//! assert!(sol.code.is_success());
+//! println!("u at t1: {:?}", sol.trajectory.u_at(sol.trajectory.len() - 1));
+//! # Ok(())
+//! # }
+//! ```
+//!
 //! See `ARCHITECTURE.md` for the map of modules.
 
 /// Git revision of this build (empty outside a checkout): provenance of summaries and reports.

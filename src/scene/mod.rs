@@ -85,7 +85,8 @@ pub struct Scene {
 impl Scene {
     /// Load and validate a scene file.
     /// A file that is not UTF-8 is refused at its first invalid byte.
-    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    pub fn load(path: impl AsRef<Path>) -> Result<Scene, SceneError> {
+        let path = path.as_ref();
         let bytes = std::fs::read(path).map_err(|e| error::io_error(path, &e))?;
         let text = match String::from_utf8(bytes) {
             Ok(t) => t,
