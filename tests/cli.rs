@@ -417,3 +417,70 @@ fn a_run_into_an_earlier_runs_folder_leaves_nothing_of_it() {
     assert_eq!(summary["scene"], "double_pendulum");
     assert!(!dir.join("summary.json.tmp").exists());
 }
+
+/// Bundled scenes are named without a path from any directory (the checkout's catalog, or the one
+/// `$PROGMO_REFERENCES` points at); an unknown name lists the bundled ones; `--json` puts one JSON
+/// document on stdout and the line for people on stderr.
+#[test]
+fn bundled_names_from_any_directory_and_json_on_stdout() {
+    let dir = tmp("bundled");
+    let o = progmo()
+        .current_dir(&dir)
+        .args([
+            "solve",
+            "double_pendulum",
+            "--t1",
+            "0.2",
+            "--json",
+            "--quiet",
+        ])
+        .env_remove("PROGMO_REFERENCES")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value =
+        serde_json::from_slice(&o.stdout).expect("stdout is one JSON document");
+    assert_eq!(v["code_name"], "success");
+    assert_eq!(v["output"], "out/double_pendulum");
+    assert!(dir.join("out/double_pendulum/summary.json").is_file());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("double_pendulum: success"));
+
+    let o = progmo()
+        .current_dir(&dir)
+        .args(["validate", "no_such_scene"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("no_such_scene: no such scene file or bundled scene")
+            && err.contains("heavy_top"),
+        "{err}"
+    );
+    // A path is never taken for a name.
+    let o = progmo()
+        .current_dir(&dir)
+        .args(["validate", "sub/double_pendulum.toml"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no such scene file"));
+
+    // $PROGMO_REFERENCES names another catalog (the Python package points it at its own).
+    std::fs::create_dir_all(dir.join("refs/scenes")).unwrap();
+    write(
+        &dir.join("refs/scenes"),
+        "mine.toml",
+        &std::fs::read_to_string(scene("heavy_top")).unwrap(),
+    );
+    let o = progmo()
+        .current_dir(&dir)
+        .args(["validate", "mine", "--json"])
+        .env("PROGMO_REFERENCES", dir.join("refs"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v[0]["name"], "heavy_top");
+    assert_eq!(v[0]["ok"], true);
+}
