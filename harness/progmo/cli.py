@@ -28,6 +28,7 @@ from pathlib import Path
 
 from . import baselines as bl
 from . import cliutil, data
+from . import history as hist
 from . import report as rp
 from .parallel import Task, default_jobs, error_result, last_line, run_all
 from .results import CheckResult, save
@@ -83,6 +84,9 @@ def parser() -> argparse.ArgumentParser:
                    help="replay horizon in seconds (default: the scene's whole time span)")
     c.add_argument("--samples", type=int, default=8, metavar="N",
                    help="sample states of the parity and instantaneous checks (default: 8)")
+    c.add_argument("--history", metavar="DIR", default=None,
+                   help="keep this run's record in DIR (one JSON per run) and draw every metric's trend "
+                   "over the recorded runs in the report, naming the run each failure started")
     c.add_argument("--json", action="store_true",
                    help="print the outcome as one JSON object on stdout (coverage, ok, and every result "
                    "without its plot series); the lines for people go to stderr")
@@ -248,6 +252,14 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
         if ns.accept:
             _accept(run, base_dir, prov)
         prov["wall_seconds"] = round(time.perf_counter() - t_start, 1)
+        if ns.history:
+            try:
+                _say(f"progmo check: history record {hist.save(run, ns.history)}")
+                run.history, problems = hist.load(ns.history)
+                notes.extend(problems)
+            except OSError as e:
+                notes.append(f"history: cannot write or read {ns.history}: {e}")
+                _say(f"progmo check: error: history: {e}")
         report_ok = True
         try:
             paths = rp.write(run, out)

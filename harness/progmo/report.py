@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from . import baselines as bl
+from . import history
 from .results import CheckResult
 
 #: Verdicts in order of attention, the first problems first. ``not_checked`` is a simulator that
@@ -62,6 +63,8 @@ class Run:
     accepted: list[tuple[str, str]] = field(default_factory=list)
     #: Draw the series (the slow part of the report: about 0.5 s per result).
     plots: bool = True
+    #: Records of earlier runs and this one (``history.load``, oldest first) when --history is given.
+    history: list[dict[str, Any]] = field(default_factory=list)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -74,6 +77,7 @@ class Run:
             "notes": self.notes,
             "accepted": [list(p) for p in self.accepted],
             "plots": self.plots,
+            "history": self.history,
         }
 
     @staticmethod
@@ -87,6 +91,7 @@ class Run:
             notes=d.get("notes", []),
             accepted=[tuple(p) for p in d.get("accepted", [])],
             plots=d.get("plots", True),
+            history=d.get("history", []),
         )
 
     # --- derived views -------------------------------------------------------------------------
@@ -352,6 +357,7 @@ td.num{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}
 .v-pass{background:var(--pass)} .v-fail{background:var(--fail)} .v-error{background:var(--error)}
 .v-declared{background:var(--skip)} .v-regression{background:var(--reg)} .v-not-run{background:#bbb}
 .v-not_checked{background:var(--error)}
+td.c-pass{background:#eaf6ee} td.c-warn{background:#fff4d6}
 td.c-fail,td.c-error,td.c-not_checked{background:#fdecea} td.c-regression{background:#fdf0e6} td.c-declared{background:#f4f4f4}
 .reason.warnbox{background:#fff8e6;border-color:#e6a100}
 .small{font-size:12px;color:#555}
@@ -360,8 +366,9 @@ td.c-fail,td.c-error,td.c-not_checked{background:#fdecea} td.c-regression{backgr
 .bad{color:var(--fail);font-weight:600} .warn{color:var(--reg);font-weight:600} .good{color:var(--pass)}
 .bar{display:inline-block;height:8px;background:#e5e5e5;width:60px;border-radius:4px;vertical-align:middle;margin-right:6px;overflow:hidden}
 .bar>i{display:block;height:100%;background:var(--pass)} .bar>i.warm{background:#e6a100} .bar>i.hot{background:var(--fail)}
-section.scene{background:#fff;border:1px solid #e2e2e2;border-radius:6px;padding:6px 16px 12px;margin:14px 0}
-section.scene.attn{border-left:5px solid var(--fail)}
+details.scene{background:#fff;border:1px solid #e2e2e2;border-radius:6px;padding:6px 16px 12px;margin:14px 0}
+details.scene.attn{border-left:5px solid var(--fail)}
+details.scene>summary{cursor:pointer} details.scene>summary>h3{display:inline}
 .sim{border-top:1px dashed #e2e2e2;padding-top:6px;margin-top:8px}
 img.plot{max-width:100%;display:block;margin:4px 0}
 ul.notes{margin:4px 0 8px 18px;padding:0;font-size:12px;color:#444}
@@ -369,6 +376,10 @@ pre{background:#272822;color:#f8f8f2;padding:10px 12px;border-radius:5px;overflo
 footer{margin-top:30px;border-top:2px solid #ccc;padding-top:8px}
 a{color:#1a5fa8;text-decoration:none} a:hover{text-decoration:underline}
 """
+
+
+#: A pass using more than this fraction of a budget is shown amber in the grid ("warn").
+WARN_USE = 0.5
 
 
 def _badge(verdict: str) -> str:
@@ -408,6 +419,11 @@ def _attention(run: Run) -> list[tuple[str, str, str, str]]:
                 why = "; ".join(f"{b.metric} {fmt(b.value)} > budget {fmt(b.budget)}" + (f" first at t = {b.first_time:.4g}" if b.first_time is not None else "") for b in r.breaches) or r.reason
             else:
                 why = r.reason
+            since = history.streak_start(run.history, f"{s}/{m}") if run.history else None
+            if since is not None and since is not run.history[-1]:
+                why += f" [failing since the run of {since.get('date')} (revision {str(since.get('git_revision'))[:12]})]"
+            elif since is not None:
+                why += " [first failing run in the history]"
             out.append((s, m, v, why))
     return out
 
@@ -444,7 +460,10 @@ def render_html(run: Run) -> str:
         for m in run.simulators:
             r = run.result(s, m)
             v = run.verdict(r)
-            a(f"<td class='c-{v.replace(' ', '-')}'>{_badge(v)}</td>")
+            bu_cell = budget_use(r) if r is not None else None
+            cell = "warn" if v == "pass" and bu_cell is not None and bu_cell > WARN_USE else v.replace(" ", "-")
+            tip = f" title='worst budget use {_use_text(bu_cell)}'" if bu_cell is not None else ""
+            a(f"<td class='c-{cell}'{tip}>{_badge(v)}</td>")
             if r is not None:
                 mr, bu = max_residual(r), budget_use(r)
                 if mr is not None:
@@ -467,13 +486,19 @@ def render_html(run: Run) -> str:
             c[v] = c.get(v, 0) + 1
         a("<td class='small'>" + _e(", ".join(f"{n} {label(k)}" for k, n in sorted(c.items(), key=lambda kv: RANK[kv[0]]))) + "</td>")
     a("<td></td><td></td><td></td><td></td></tr></tfoot></table>")
-    a("<p class='small'>Statuses: <b>pass</b> every metric within its budget; <b>fail</b> a metric beyond "
+    a("<p class='small'>Statuses: <b>pass</b> every metric within its budget (the cell is amber when a "
+      f"metric uses more than {WARN_USE:.0%} of its budget); <b>fail</b> a metric beyond "
       "it; <b>regression</b> a pass worse than its accepted baseline; <b>error</b> the check could not "
       "run; <b>not checked</b> the simulator cannot reproduce an element of the scene (fails the run); "
       "<b>not checked (declared)</b> the scene declares it with a reason (does not fail the run). "
       "Budgets marked <i>default</i> are the documented defaults for a scene that gives none "
       "(src/scene/FORMAT.md).</p>")
 
+    if run.history:
+        first, last = run.history[0], run.history[-1]
+        a(f"<p class='small' id='history'>History: {len(run.history)} run(s) from {_e(first.get('date'))} to "
+          f"{_e(last.get('date'))}; each scene shows its metrics' trend, and a failing cell names the run "
+          "its failure started.</p>")
     att = _attention(run)
     if att:
         a("<h2 id='attention'>Needs attention</h2><table><tr><th>scene</th><th>simulator</th><th>verdict</th><th>why</th></tr>")
@@ -486,15 +511,23 @@ def render_html(run: Run) -> str:
     for s in run.scene_names():
         worst = min(RANK[run.verdict(run.result(s, m))] for m in run.simulators)
         info = run.scenes.get(s, {})
-        a(f"<section class='scene{' attn' if worst <= RANK['not run'] else ''}' id='{_anchor(s)}'>")
-        a(f"<h3>{_e(s)} " + " ".join(_badge(run.verdict(run.result(s, m))) for m in run.simulators) + "</h3>")
+        attn = worst <= RANK["not run"]
+        a(f"<details class='scene{' attn' if attn else ''}' id='{_anchor(s)}'{' open' if attn else ''}>")
+        a(f"<summary><h3>{_e(s)} " + " ".join(_badge(run.verdict(run.result(s, m))) for m in run.simulators)
+          + "</h3></summary>")
         if info.get("description"):
             a(f"<p class='small'>{_e(info['description'])}</p>")
         if info.get("path"):
             a(f"<p class='small'>scene file: <code>{_e(info['path'])}</code></p>")
         for m in run.simulators:
             a(_sim_block(run, s, m))
-        a("</section>")
+        if run.history and run.plots:
+            budgets = {m: {b.metric: b.value for b in r.budgets}
+                       for m in run.simulators if (r := run.result(s, m)) is not None}
+            img = history.trend_plot(run.history, s, run.simulators, budgets)
+            if img:
+                a(f"<img class='plot' alt='{_e(s)} history' src='{img}'>")
+        a("</details>")
 
     # Provenance.
     a("<footer id='provenance'><h2>Provenance and how to rerun</h2>")
