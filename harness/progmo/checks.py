@@ -40,7 +40,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .results import Budget, CheckResult, Series, judge
+from .results import Breach, Budget, CheckResult, Series, judge
 
 SIMULATORS = ("mujoco", "pinocchio")
 
@@ -397,14 +397,23 @@ def _replay(c: _Check) -> None:
 
     scene, ref, be, res = c.scene, c.ref, c.backend, c.res
     t0r = _time.perf_counter()
+    blowup: BlowUp | None = None
     try:
         rp = _replay_of(c, ref)
     except BlowUp as e:
-        raise _Stop("error", f"{c.simulator} replay: {e}") from None
-    res.notes.append(f"replay of {ref.steps} steps took {_time.perf_counter() - t0r:.2f} s")
+        # Keep the evidence: judge the replay up to its last finite sample, and report the blow-up
+        # as a breach with its time and quantity (a failure of the forces, not of the check).
+        if e.partial is None or len(e.partial.t) < 2:
+            res.breaches = [Breach("replay_blowup", e.value, e.limit, e.time)]
+            raise _Stop("fail", f"{c.simulator} replay: {e}") from None
+        blowup, rp = e, e.partial
+        res.span = [float(rp.t[-1]) - scene.t0, res.span[1] if res.span else c.horizon]
+        res.notes.append(f"{c.simulator} replay: {e}; the metrics cover the replay up to "
+                         f"t = {rp.t[-1]:.6g}, the last finite sample")
+    res.notes.append(f"replay of {len(rp.t) - 1} of {ref.steps} steps took {_time.perf_counter() - t0r:.2f} s")
     R = _replay_residual(c, ref, rp)
     rabs = np.abs(R).max(axis=1) if R.shape[1] else np.zeros(len(rp.t))
-    rq, rv = ref.q[::2][: ref.steps + 1], ref.v[::2][: ref.steps + 1]
+    rq, rv = ref.q[::2][: len(rp.t)], ref.v[::2][: len(rp.t)]
     dev = np.maximum(quat_aware_diff(be.cm, rp.q, rq).max(axis=1), np.abs(rp.v - rv).max(axis=1))
     if not np.all(np.isfinite(rabs)):
         raise _Stop("error", f"{c.simulator} replay: non-finite programme residual at "
@@ -435,10 +444,14 @@ def _replay(c: _Check) -> None:
     res.status = "pass"
     bval = {b.metric: b.value for b in res.budgets}
     judge(res, _first_times(c.first, bval))
+    if blowup is not None:
+        res.breaches.insert(0, Breach("replay_blowup", blowup.value, blowup.limit, blowup.time))
+        res.status = "fail"
     if res.status == "fail":
         res.reason = "; ".join(
-            f"{b.metric} {b.value:.3g} > {b.budget:.3g}"
-            + (f" first at t = {b.first_time:.6g}" if b.first_time is not None else "")
+            (f"{c.simulator} replay: {blowup}" if b.metric == "replay_blowup" and blowup is not None else
+             f"{b.metric} {b.value:.3g} > {b.budget:.3g}"
+             + (f" first at t = {b.first_time:.6g}" if b.first_time is not None else ""))
             for b in res.breaches)
 
 

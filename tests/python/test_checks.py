@@ -8,8 +8,9 @@ import sys
 import numpy as np
 import pytest
 
+import progmo as ph
 from progmo import checks
-from progmo.checks import CheckOptions, _run, run_check
+from progmo.checks import CheckOptions, Recording, _run, run_check
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 SCENES = ROOT / "references" / "scenes"
@@ -107,10 +108,28 @@ def test_missing_package_is_an_error(monkeypatch, sim, pkg):
     assert pkg in r.reason
 
 
-def test_blow_up_is_an_error():
+def test_blow_up_at_the_start_is_a_failure_naming_it():
     r, _ = _run(scene("double_pendulum"), "mujoco", CheckOptions(horizon=0.1),
                 corrupt_u=lambda t, u: 1e12 * u + 1e12)
-    assert r.status == "error" and "blew up" in r.reason, r.reason
+    assert r.status == "fail" and "blew up" in r.reason, r.reason
+    assert r.breaches[0].metric == "replay_blowup" and r.breaches[0].first_time == 0.0
+
+
+@pytest.mark.parametrize("sim", ["mujoco", "pinocchio"])
+def test_blow_up_keeps_the_evidence_up_to_the_last_finite_state(sim):
+    """Forces that explode at t = 0.3: the replay up to there is judged and recorded, the blow-up
+    is the first breach with its time and quantity, and the span says what was replayed."""
+    rec = Recording()
+    r, _ = _run(scene("double_pendulum"), sim, CheckOptions(horizon=1.0, step=1e-3),
+                corrupt_u=lambda t, u: u if t < 0.3 else 1e14 * (u + 1.0), record=rec)
+    assert r.status == "fail" and "blew up" in r.reason, r.reason
+    b = r.breaches[0]
+    assert b.metric == "replay_blowup" and 0.3 <= b.first_time <= 0.31 and b.value > b.budget
+    assert rec.replay is not None and 250 < len(rec.replay.t) and rec.replay.t[-1] < b.first_time
+    assert np.all(np.isfinite(rec.replay.q)) and np.all(np.isfinite(rec.deviation))
+    full = ph.Scene(scene("double_pendulum"))
+    assert r.span is not None and abs(r.span[0] - rec.replay.t[-1]) < 1e-12 and r.span[1] == full.t1 - full.t0
+    assert np.isfinite(r.metrics["replay_residual"]) and r.series  # plots have data
 
 
 def test_bad_inputs_are_errors(tmp_path):

@@ -73,3 +73,28 @@ def test_corrupted_run_prints_first_breach(tmp_path, capsys):
 def test_bad_input_exit_2(tmp_path, capsys):
     assert debug.main([str(tmp_path / "missing.toml"), "--out", str(tmp_path)]) == 2
     assert debug.main([SCENE, "--simulator", "gazebo"]) == 2
+
+
+def test_blow_up_keeps_mcap_and_csv_up_to_the_last_finite_state(tmp_path, capsys, monkeypatch):
+    """The simulator blows up at t = 0.3 (forces exploding there): the recording and the CSV hold
+    the replay up to the last finite state and the blow-up is the first breach, with its time."""
+    orig = debug._run
+
+    def exploding(*a, **kw):
+        kw["corrupt_u"] = lambda t, u: u if t < 0.3 else 1e14 * (u + 1.0)
+        return orig(*a, **kw)
+
+    monkeypatch.setattr(debug, "_run", exploding)
+    rc = debug.main([SCENE, "--simulator", "mujoco", "--out", str(tmp_path), "--horizon", "1", "--step", "1e-3"])
+    out = capsys.readouterr().out
+    assert rc == 1, out
+    line = next(l for l in out.splitlines() if l.startswith("first tolerance breach"))
+    assert "replay_blowup" in line and 0.3 <= float(line.split(" at t = ")[1].split(" s")[0]) <= 0.31
+    topics, msgs = read(tmp_path / "double_pendulum.mcap")
+    states = msgs["/mujoco/state"]
+    assert 250 < len(states) and states[-1]["t"] < 0.31
+    assert all(v is not None for m in states for v in m["q"].values())
+    assert msgs["/mujoco/breach"][0]["metric"] == "replay_blowup"
+    with open(tmp_path / "double_pendulum_mujoco.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == len(states) and float(rows[-1]["t"]) == states[-1]["t"]

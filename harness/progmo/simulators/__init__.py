@@ -25,11 +25,14 @@ FORCE_KINDS = ("attractor", "spring", "damper", "point_force", "coordinate_force
 
 
 class BlowUp(RuntimeError):
-    """The replay produced a non-finite state or an absurd acceleration."""
+    """The replay produced a non-finite state or an absurd acceleration. ``value`` is the quantity
+    that crossed ``limit`` (inf for a non-finite state); ``partial`` the replay up to the last
+    finite sample (set by the back-end), so the evidence is kept."""
 
-    def __init__(self, time: float, what: str):
+    def __init__(self, time: float, what: str, value: float = float("inf"), limit: float = float("nan")):
         super().__init__(f"simulator blew up at t = {time:.6g}: {what}")
-        self.time = time
+        self.time, self.what, self.value, self.limit = time, what, value, limit
+        self.partial: Any = None
 
 
 class Unsupported(RuntimeError):

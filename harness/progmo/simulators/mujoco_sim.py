@@ -157,7 +157,8 @@ class MujocoBackend:
                 if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
                     raise BlowUp(tk, "non-finite state")
                 if not np.all(np.abs(d.qacc) < ACC_LIMIT):
-                    raise BlowUp(tk, f"|qacc| = {np.abs(d.qacc).max():.3g} > {ACC_LIMIT:g}")
+                    big = float(np.abs(d.qacc).max())
+                    raise BlowUp(tk, f"|qacc| = {big:.3g} > {ACC_LIMIT:g}", big, ACC_LIMIT)
                 Q[k] = qo
                 V[k] = cm.v_from_sim(qo, d.qvel)
                 A[k] = cm.a_from_sim(qo, V[k], d.qacc)
@@ -169,6 +170,9 @@ class MujocoBackend:
                 cur_q[0] = qo
                 d.time = tk
                 mujoco.mj_step(m, d)
+        except BlowUp as e:  # keep the evidence: samples 0 .. k-1 are finite
+            e.partial = Replay(ref.t[::2][:k], Q[:k], V[:k], A[:k], frames, frame_every)
+            raise
         finally:
             mujoco.set_mjcb_control(None)
         return Replay(ref.t[::2][: n + 1], Q, V, A, frames, frame_every)

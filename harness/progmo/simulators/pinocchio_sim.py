@@ -177,7 +177,8 @@ class PinocchioBackend:
         else:
             a = pin.aba(self.model, self.data, qs, vs, tau, fext)
         if not np.all(np.abs(a) < ACC_LIMIT):
-            raise BlowUp(t, f"|ddq| = {np.abs(a).max():.3g} > {ACC_LIMIT:g} (or non-finite)")
+            big = float(np.abs(a).max()) if np.all(np.isfinite(a)) else float("inf")
+            raise BlowUp(t, f"|ddq| = {big:.3g} > {ACC_LIMIT:g} (or non-finite)", big, ACC_LIMIT)
         return np.array(a)
 
     def _dth(self, qs, th, vs):
@@ -187,8 +188,7 @@ class PinocchioBackend:
         return np.linalg.solve(Jd, vs)
 
     def replay(self, ref: Reference, frame_every: int = 0) -> Replay:
-        model, data, cm = self.model, self.data, self.cm
-        h, n, t0 = ref.h, ref.steps, ref.t0
+        cm, n = self.cm, ref.steps
         nq, nv = cm.nq, cm.nv
         Q = np.zeros((n + 1, nq))
         V = np.zeros((n + 1, nv))
@@ -196,7 +196,19 @@ class PinocchioBackend:
         frames = []
         qs = cm.q_to_sim(ref.q[0])
         vs = cm.v_to_sim(ref.q[0], ref.v[0])
+        try:
+            return self._steps(ref, frame_every, Q, V, A, frames, qs, vs)
+        except BlowUp as e:  # keep the evidence: the samples stored before the blow-up
+            k = self._stored
+            e.partial = Replay(ref.t[::2][:k], Q[:k], V[:k], A[:k], frames, frame_every)
+            raise
+
+    def _steps(self, ref: Reference, frame_every, Q, V, A, frames, qs, vs) -> Replay:
+        """The RKMK4 steps of ``replay``: Q, V, A filled in place, ``_stored`` of them so far."""
+        model, data, cm = self.model, self.data, self.cm
+        h, n, t0 = ref.h, ref.steps, ref.t0
         integ = pin.integrate
+        self._stored = 0
         for k in range(n + 1):
             tk = t0 + k * h
             if not (np.all(np.isfinite(qs)) and np.all(np.isfinite(vs))):
@@ -205,6 +217,7 @@ class PinocchioBackend:
             qo = cm.q_from_sim(qs)
             Q[k], V[k] = qo, cm.v_from_sim(qo, vs)
             A[k] = cm.a_from_sim(qo, V[k], a1)
+            self._stored = k + 1
             if frame_every and k % frame_every == 0:
                 pin.framesForwardKinematics(model, data, qs)
                 frames.append((tk, [(name, data.oMf[i].translation.copy(),
