@@ -193,7 +193,7 @@ class PinocchioBackend:
         Q = np.zeros((n + 1, nq))
         V = np.zeros((n + 1, nv))
         A = np.zeros((n + 1, nv))
-        frames = []
+        frames: list = []
         qs = cm.q_to_sim(ref.q[0])
         vs = cm.v_to_sim(ref.q[0], ref.v[0])
         try:
