@@ -151,3 +151,67 @@ def test_report_renders_in_headless_chromium(tmp_path, written):
     r, g, b = px[..., 0], px[..., 1], px[..., 2]
     assert ((r > 170) & (g < 80) & (b < 70)).sum() > 20_000  # #c0392b banner (~1100 x 45 px)
     assert ((g > 110) & (r < 60) & (b < 100)).sum() > 500  # #1e8449 pass badges
+
+
+ARTIFACTS = ROOT / "out" / "test-artifacts"
+
+
+def _blowup_run() -> rp.Run:
+    from progmo.results import Breach
+
+    r = make_result("exploding", "mujoco")
+    r.status, r.span = "fail", [2.94, 10.0]
+    r.breaches = [Breach("replay_blowup", 2.6e26, 1e10, 2.94)]
+    r.reason = "mujoco replay: simulator blew up at t = 2.94: |qacc| = 2.6e+26 > 1e+10"
+    return rp.Run(results=[r, make_result("exploding", "pinocchio")], simulators=["mujoco", "pinocchio"],
+                  provenance=rp.provenance(ROOT, "progmo check exploding"))
+
+
+def _history_run() -> rp.Run:
+    from progmo import history
+
+    run = mixed_run(plots=False)
+    recs = []
+    for night, kind in enumerate(["pass", "pass", "fail", "fail"]):
+        past = rp.Run(results=[make_result("broken", "mujoco", kind)], simulators=["mujoco"],
+                      provenance={"date": f"2026-11-{11 + night} 02:00:00 UTC", "git_revision": f"r{night}"})
+        recs.append(history.record(past))
+    run.history, run.plots = recs, True
+    return run
+
+
+@pytest.mark.parametrize("page", ["passing", "failing", "blowup", "history"])
+def test_pages_render_in_headless_chromium_and_keep_screenshots(tmp_path, page):
+    """Each kind of page a person reads, rendered by a real browser: DOM checks, and the screenshot
+    kept as a test artifact in out/test-artifacts/report-<page>.png (what it shows: the banner,
+    the coloured grid, and for failing pages the open sections of the failing scenes)."""
+    browser = _browser()
+    if browser is None:
+        pytest.skip("SKIPPED: no Chromium and harness/install_chromium.sh could not install one; "
+                    "the browser render of report.html was NOT checked")
+    run = {
+        "passing": lambda: rp.Run(results=[make_result("calm", "mujoco"), make_result("calm", "pinocchio")],
+                                  simulators=["mujoco", "pinocchio"], provenance=rp.provenance(ROOT, "progmo check calm")),
+        "failing": mixed_run,
+        "blowup": _blowup_run,
+        "history": _history_run,
+    }[page]()
+    paths = rp.write(run, tmp_path / page)
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    shot = ARTIFACTS / f"report-{page}.png"
+    flags = ["--headless", "--disable-gpu", "--no-sandbox", "--hide-scrollbars", f"--user-data-dir={tmp_path / 'profile'}"]
+    dom = subprocess.run([browser, *flags, "--dump-dom", f"--screenshot={shot}", "--window-size=1200,1400",
+                          paths["html"].resolve().as_uri()], capture_output=True, text=True, timeout=60).stdout
+    assert '<table id="verdicts">' in dom and shot.stat().st_size > 20_000
+    details = re.findall(r'<details class="scene( attn)?"[^>]*?( open="")?>', dom)
+    if page == "passing":
+        assert 'class="banner b-ok"' in dom and "c-pass" in dom
+        assert details and all(not attn and not is_open for attn, is_open in details)  # folded
+    else:
+        assert 'class="banner b-bad"' in dom and 'id="attention"' in dom
+        assert any(attn and is_open for attn, is_open in details)  # failing scenes open
+    if page == "blowup":
+        assert "replay_blowup" in dom and "blew up at t = 2.94" in dom and "2.94 of 10 s" in dom
+    if page == "history":
+        assert "failing since the run of 2026-11-13 02:00:00 UTC (revision r2)" in dom
+        assert "alt=\"broken history\"" in dom
