@@ -487,7 +487,10 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
         (sol, sink.finish().err())
     } else {
         let mcap = match McapSink::create(out.join("recording.mcap"), &layout) {
-            Ok(m) => m,
+            Ok(m) => match scene.bodies() {
+                Some(b) => m.with_bodies(b),
+                None => m,
+            },
             Err(e) => {
                 errln!("progmo solve: error: {e}");
                 return ExitCode::from(3);

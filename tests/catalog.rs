@@ -440,7 +440,7 @@ t1 = 1.0
 // What the new catalog scenes claim.
 
 fn load(name: &str) -> Scene {
-    Scene::load(&root().join(format!("references/scenes/{name}.toml")))
+    Scene::load(root().join(format!("references/scenes/{name}.toml")))
         .unwrap_or_else(|e| panic!("{e}"))
 }
 

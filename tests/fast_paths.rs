@@ -45,7 +45,7 @@ fn scenes() -> Vec<Scene> {
         .map(|p| Scene::load(&p).unwrap_or_else(|e| panic!("{e}")))
         .collect();
     out.push(
-        Scene::load(&root.join("tests/scenes/all_signals.toml")).unwrap_or_else(|e| panic!("{e}")),
+        Scene::load(root.join("tests/scenes/all_signals.toml")).unwrap_or_else(|e| panic!("{e}")),
     );
     for n in [2, 3, 7] {
         out.push(ChainSpec::uniform(n).scene().unwrap());
@@ -151,7 +151,7 @@ fn chain_rule_jet_matches_the_generic_ad_passes_over_dual_numbers() {
 #[test]
 fn the_comparison_detects_a_wrong_jet() {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let scene = Scene::load(&root.join("tests/scenes/all_signals.toml")).unwrap();
+    let scene = Scene::load(root.join("tests/scenes/all_signals.toml")).unwrap();
     with_problem!(&scene.system, p => {
         let (m, c) = (&p.model, &p.constraints);
         let mut fast = Jet::<_, f64>::new(c, m.segments(), m.nq(), m.nv());

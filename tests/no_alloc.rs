@@ -69,7 +69,7 @@ fn right_hand_side_does_not_allocate() {
     assert_eq!(allocations_per_evaluation(&pendulum::rod_and_swing()), 0);
     let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("references/scenes");
     for name in ["heavy_top", "double_pendulum", "example_2_1"] {
-        let scene = progmo::scene::Scene::load(&dir.join(format!("{name}.toml"))).unwrap();
+        let scene = progmo::scene::Scene::load(dir.join(format!("{name}.toml"))).unwrap();
         let n = progmo::with_problem!(&scene.system, p => allocations_per_evaluation(p));
         assert_eq!(n, 0, "{name}");
     }

@@ -11,7 +11,7 @@ fn root() -> PathBuf {
 }
 
 fn load(name: &str) -> Scene {
-    Scene::load(&root().join("references/testset").join(name)).expect("scene loads")
+    Scene::load(root().join("references/testset").join(name)).expect("scene loads")
 }
 
 /// Car axis reference at t = 3: version (a), R/ex_reference.R "caraxis" (quad-precision GAMD),

@@ -208,6 +208,12 @@ class Scene:
     ) -> float:
         """Wall-clock seconds per right-hand side (dv/dt and u), looped in Rust, at (t0, q0, v0) by default."""
     def export(self, format: Literal["mjcf", "urdf"], *, timestep: float = 1e-3) -> tuple[str, dict[str, Any]]: ...
+    def body_poses(self, q: F64) -> list[tuple[str, list[float], list[float]]]:
+        """World pose of every body at q: (name, position, quaternion w x y z); [] for a lagrangian scene."""
+    def scene_update(self, q: F64, prefix: str, alpha: float = 1.0) -> dict[str, Any] | None:
+        """The foxglove.SceneUpdate drawing the mechanism on frames <prefix>/<body>; None for a lagrangian scene."""
+    def recording_schemas(self) -> dict[str, dict[str, Any]]:
+        """JSON schemas of recordings by schema name (progmo.State, ..., foxglove.SceneUpdate)."""
 
 def version() -> str: ...
 def cli(argv: Sequence[str | os.PathLike[str]]) -> int:

@@ -283,7 +283,8 @@ def _solve_reference(c: _Check, h: float):
     if c.corrupt_u is not None:
         u = np.array([c.corrupt_u(tk, uk) for tk, uk in zip(t, u)])
     return Reference(t, np.asarray(sol.q), np.asarray(sol.v), np.asarray(sol.a), u,
-                     np.asarray(sol.residuals), h, n, scene.t0, _time.perf_counter() - t0s)
+                     np.asarray(sol.residuals), h, n, scene.t0, _time.perf_counter() - t0s,
+                     np.asarray(sol.lambda_), np.asarray(sol.residual_rates))
 
 
 def _replay_of(c: _Check, ref):

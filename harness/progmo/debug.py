@@ -1,13 +1,17 @@
 """``progmo debug SCENE [--simulator mujoco|pinocchio|both] [--out DIR]``: run the check with full
 recording and write what a person needs to see where a replay leaves the programme:
 
-* ``DIR/<scene>.mcap`` (JSON messages, jsonschema schemas; open in Foxglove):
-  ``/solver/state``, ``/solver/u``, ``/solver/residual`` (the core's trajectory at the replay's
-  sample times), ``/<sim>/state``, ``/<sim>/residual``, ``/<sim>/deviation`` (the replay), one
-  ``foxglove.FrameTransform`` per body per recorded sample on ``/<sim>/tf`` (world -> ``<sim>/<body>``
-  from the simulator's own kinematics: MuJoCo ``xpos``/``xquat``, Pinocchio ``oMf``), and the
+* ``DIR/<scene>.mcap`` (JSON messages, jsonschema schemas; open in Foxglove with the layout
+  harness/progmo/foxglove/progmo.json): the solver's motion on the topics and schemas of
+  ``progmo solve`` (``/progmo/state``, ``/progmo/control``, ``/progmo/residual``, ``/progmo/tf``,
+  ``/progmo/scene`` drawn as a translucent ghost) at the replay's sample times; each simulator's
+  replay on ``/<sim>/state``, ``/<sim>/residual`` (same schemas), ``/<sim>/deviation``,
+  ``/<sim>/tf`` (world -> ``<sim>/<body>`` from the simulator's own kinematics: MuJoCo
+  ``xpos``/``xquat``, Pinocchio ``oMf``), ``/<sim>/scene`` (the mechanism on those frames) and the
   breaches on ``/<sim>/breach``;
-* ``DIR/<scene>_<sim>.csv``: replay vs solver per sample (q, v, residual rows, deviation);
+* ``DIR/<scene>_<sim>.csv``: solver columns named as in ``progmo solve``'s CSV (``t``, ``q:<q>``,
+  ``v:<v>``, ``u:<v>``), the replay's (``<sim>.q:<q>``, ``<sim>.v:<v>``, ``<sim>.residual:<row>``)
+  and ``deviation``, per replay sample (up to the last finite state when the simulator blows up);
 * on stdout: where and when the first tolerance breach happened (metric, time, value vs budget), or
   that none did.
 
@@ -20,6 +24,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import math
 import os
 import sys
 
@@ -28,39 +33,11 @@ import numpy as np
 from . import cliutil
 from .checks import SIMULATORS, CheckOptions, Recording, _run
 
-STATE_SCHEMA = {
-    "type": "object",
-    "properties": {
-        "t": {"type": "number"},
-        "q": {"type": "object", "additionalProperties": {"type": "number"}},
-        "v": {"type": "object", "additionalProperties": {"type": "number"}},
-    },
-}
-VECTOR_SCHEMA = {
-    "type": "object",
-    "properties": {"t": {"type": "number"},
-                   "values": {"type": "object", "additionalProperties": {"type": "number"}}},
-}
 SCALAR_SCHEMA = {"type": "object", "properties": {"t": {"type": "number"}, "value": {"type": "number"}}}
 BREACH_SCHEMA = {
     "type": "object",
     "properties": {"metric": {"type": "string"}, "first_time": {"type": ["number", "null"]},
-                   "value": {"type": "number"}, "budget": {"type": "number"}},
-}
-TIME_SCHEMA = {"type": "object", "title": "time",
-               "properties": {"sec": {"type": "integer", "minimum": 0},
-                              "nsec": {"type": "integer", "minimum": 0}}}
-FRAME_TRANSFORM_SCHEMA = {
-    "title": "foxglove.FrameTransform",
-    "description": "A transform between two reference frames in 3D space",
-    "type": "object",
-    "properties": {
-        "timestamp": TIME_SCHEMA,
-        "parent_frame_id": {"type": "string"},
-        "child_frame_id": {"type": "string"},
-        "translation": {"type": "object", "properties": {k: {"type": "number"} for k in "xyz"}},
-        "rotation": {"type": "object", "properties": {k: {"type": "number"} for k in "xyzw"}},
-    },
+                   "value": {"type": ["number", "null"]}, "budget": {"type": ["number", "null"]}},
 }
 
 #: most body-frame samples per simulator in the MCAP (the states are recorded at every step)
@@ -107,57 +84,89 @@ class _Mcap:
         self.w.finish()
 
 
+def _named(names, values) -> dict:
+    return dict(zip(names, map(_num, values)))
+
+
+def _frames(mc: _Mcap, topic: str, prefix: str, t: float, bodies, schemas: dict) -> None:
+    ch = mc.channel(topic, "foxglove.FrameTransform", schemas["foxglove.FrameTransform"])
+    for name, pos, wxyz in bodies:
+        mc.write(ch, t, {
+            "timestamp": _stamp(t), "parent_frame_id": "world", "child_frame_id": f"{prefix}/{name}",
+            "translation": {"x": float(pos[0]), "y": float(pos[1]), "z": float(pos[2])},
+            "rotation": {"x": float(wxyz[1]), "y": float(wxyz[2]), "z": float(wxyz[3]), "w": float(wxyz[0])}})
+
+
+def _geometry(mc: _Mcap, prefix: str, t: float, rec: Recording, schemas: dict, alpha: float) -> None:
+    update = rec.scene.scene_update(np.asarray(rec.ref.q[0]), prefix, alpha)
+    if update is not None:
+        mc.write(mc.channel(f"/{prefix}/scene", "foxglove.SceneUpdate", schemas["foxglove.SceneUpdate"]), t, update)
+
+
 def _write_solver(mc: _Mcap, rec: Recording) -> None:
-    ref = rec.ref
-    cs = mc.channel("/solver/state", "progmo.State", STATE_SCHEMA)
-    cu = mc.channel("/solver/u", "progmo.Vector", VECTOR_SCHEMA)
-    cr = mc.channel("/solver/residual", "progmo.Vector", VECTOR_SCHEMA)
-    for k in range(0, len(ref.t), 2):  # the replay's sample times
+    """The solver's motion on the topics of `progmo solve` (/progmo/state, control, residual, tf,
+    scene), at the replay's sample times; its geometry is drawn as a translucent ghost."""
+    ref, schemas = rec.ref, rec.scene.recording_schemas()
+    cs = mc.channel("/progmo/state", "progmo.State", schemas["progmo.State"])
+    cc = mc.channel("/progmo/control", "progmo.Control", schemas["progmo.Control"])
+    cr = mc.channel("/progmo/residual", "progmo.Residual", schemas["progmo.Residual"])
+    n = len(range(0, len(ref.t), 2))
+    every = max(1, -(-n // MAX_FRAMES))
+    for i, k in enumerate(range(0, len(ref.t), 2)):  # the replay's sample times
         t = float(ref.t[k])
-        mc.write(cs, t, {"t": t, "q": dict(zip(rec.q_names, map(_num, ref.q[k]))),
-                         "v": dict(zip(rec.v_names, map(_num, ref.v[k])))})
-        mc.write(cu, t, {"t": t, "values": dict(zip(rec.v_names, map(_num, ref.u[k])))})
-        mc.write(cr, t, {"t": t, "values": dict(zip(rec.row_names, map(_num, ref.residual[k])))})
+        mc.write(cs, t, {"t": t, "q": _named(rec.q_names, ref.q[k]), "v": _named(rec.v_names, ref.v[k]),
+                         "a": _named(rec.v_names, ref.a[k])})
+        lam = ref.lam[k] if ref.lam is not None else [math.nan] * len(rec.row_names)
+        mc.write(cc, t, {"t": t, "u": _named(rec.v_names, ref.u[k]), "lambda": _named(rec.row_names, lam)})
+        rate = ref.residual_rate[k] if ref.residual_rate is not None else [math.nan] * len(rec.row_names)
+        mc.write(cr, t, {"t": t, "residual": _named(rec.row_names, ref.residual[k]),
+                         "residual_rate": _named(rec.row_names, rate)})
+        if i == 0:
+            _geometry(mc, "progmo", t, rec, schemas, 0.35)
+        if i % every == 0:
+            _frames(mc, "/progmo/tf", "progmo", t, rec.scene.body_poses(np.asarray(ref.q[k])), schemas)
 
 
 def _write_sim(mc: _Mcap, sim: str, rec: Recording, result) -> None:
-    rp = rec.replay
-    cs = mc.channel(f"/{sim}/state", "progmo.State", STATE_SCHEMA)
-    cr = mc.channel(f"/{sim}/residual", "progmo.Vector", VECTOR_SCHEMA)
+    """A simulator's replay on /<sim>/state, residual (the schemas of the solver's), deviation,
+    tf (its own kinematics), scene (the mechanism on its frames) and breach."""
+    rp, schemas = rec.replay, rec.scene.recording_schemas()
+    cs = mc.channel(f"/{sim}/state", "progmo.State", schemas["progmo.State"])
+    cr = mc.channel(f"/{sim}/residual", "progmo.Residual", schemas["progmo.Residual"])
     cd = mc.channel(f"/{sim}/deviation", "progmo.Scalar", SCALAR_SCHEMA)
+    none = [math.nan] * len(rec.row_names)
     for k in range(len(rp.t)):
         t = float(rp.t[k])
-        mc.write(cs, t, {"t": t, "q": dict(zip(rec.q_names, map(_num, rp.q[k]))),
-                         "v": dict(zip(rec.v_names, map(_num, rp.v[k])))})
-        mc.write(cr, t, {"t": t, "values": dict(zip(rec.row_names, map(_num, rec.residual[k])))})
+        mc.write(cs, t, {"t": t, "q": _named(rec.q_names, rp.q[k]), "v": _named(rec.v_names, rp.v[k]),
+                         "a": _named(rec.v_names, rp.a[k])})
+        mc.write(cr, t, {"t": t, "residual": _named(rec.row_names, rec.residual[k]),
+                         "residual_rate": _named(rec.row_names, none)})
         mc.write(cd, t, {"t": t, "value": _num(rec.deviation[k])})
-    ct = mc.channel(f"/{sim}/tf", "foxglove.FrameTransform", FRAME_TRANSFORM_SCHEMA)
+    if len(rp.t):
+        _geometry(mc, sim, float(rp.t[0]), rec, schemas, 1.0)
     for t, bodies in rp.frames:
-        for name, pos, wxyz in bodies:
-            mc.write(ct, t, {
-                "timestamp": _stamp(t), "parent_frame_id": "world", "child_frame_id": f"{sim}/{name}",
-                "translation": {"x": float(pos[0]), "y": float(pos[1]), "z": float(pos[2])},
-                "rotation": {"x": float(wxyz[1]), "y": float(wxyz[2]), "z": float(wxyz[3]),
-                             "w": float(wxyz[0])}})
+        _frames(mc, f"/{sim}/tf", sim, t, bodies, schemas)
     cb = mc.channel(f"/{sim}/breach", "progmo.Breach", BREACH_SCHEMA)
     for b in result.breaches:
         t = b.first_time if b.first_time is not None else float(rp.t[-1])
         mc.write(cb, t, {"metric": b.metric, "first_time": b.first_time, "value": _num(b.value),
-                         "budget": b.budget})
+                         "budget": _num(b.budget)})
 
 
-def _write_csv(path: str, rec: Recording) -> None:
+def _write_csv(path: str, sim: str, rec: Recording) -> None:
+    """Solver columns named as in `progmo solve`'s trajectory.csv (t, q:<q>, v:<v>, u:<v>), the
+    replay's as <sim>.q:<q>, <sim>.v:<v>, <sim>.residual:<row>, then deviation."""
     ref, rp = rec.ref, rec.replay
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["t"] + [f"solver.q.{n}" for n in rec.q_names] + [f"replay.q.{n}" for n in rec.q_names]
-                   + [f"solver.v.{n}" for n in rec.v_names] + [f"replay.v.{n}" for n in rec.v_names]
-                   + [f"solver.u.{n}" for n in rec.v_names]
-                   + [f"replay.residual.{n}" for n in rec.row_names] + ["deviation"])
+        w.writerow(["t"] + [f"q:{n}" for n in rec.q_names] + [f"v:{n}" for n in rec.v_names]
+                   + [f"u:{n}" for n in rec.v_names] + [f"{sim}.q:{n}" for n in rec.q_names]
+                   + [f"{sim}.v:{n}" for n in rec.v_names] + [f"{sim}.residual:{n}" for n in rec.row_names]
+                   + ["deviation"])
         for k in range(len(rp.t)):
             j = 2 * k
             w.writerow([repr(float(rp.t[k]))] + [repr(float(x)) for x in (
-                *ref.q[j], *rp.q[k], *ref.v[j], *rp.v[k], *ref.u[j], *rec.residual[k], rec.deviation[k])])
+                *ref.q[j], *ref.v[j], *ref.u[j], *rp.q[k], *rp.v[k], *rec.residual[k], rec.deviation[k])])
 
 
 def _value_at(rec: Recording, result, metric: str, t: float | None):
@@ -230,7 +239,7 @@ def main(argv: list[str] | None = None) -> int:
                     solver_written = True
                 _write_sim(mc, sim, rec, r)
                 csv_path = os.path.join(a.out, f"{stem}_{sim}.csv")
-                _write_csv(csv_path, rec)
+                _write_csv(csv_path, sim, rec)
         mc.finish()
     print(f"wrote {mcap_path}" + "".join(f", {os.path.join(a.out, f'{stem}_{s}.csv')}"
                                          for s, _, rec in results if rec.replay is not None))

@@ -15,6 +15,8 @@ use crate::solve::{Sample, SampleSink};
 
 /// Topic of the channel added by [`McapSink::add_frame_transform_channel`].
 pub const FRAME_TRANSFORM_TOPIC: &str = "/progmo/tf";
+/// Topic of a tree scene's geometry (`foxglove.SceneUpdate`, written once).
+pub const SCENE_TOPIC: &str = "/progmo/scene";
 /// Schema name of frame transforms (recognized by Foxglove's 3D panel).
 pub const FRAME_TRANSFORM_SCHEMA: &str = "foxglove.FrameTransform";
 
@@ -35,6 +37,8 @@ pub struct McapSink<W: Write + Seek> {
     reaction: Option<u16>,
     tf: Option<u16>,
     warning_channel: Option<McapChannel>,
+    /// Tree scenes: body frames per sample on /progmo/tf and the geometry on /progmo/scene.
+    bodies: Option<(super::Bodies, Option<McapChannel>)>,
     sequence: BTreeMap<u16, u32>,
     q_keys: Vec<String>,
     v_keys: Vec<String>,
@@ -67,6 +71,44 @@ fn object_schema(title: &str, fields: &[(&str, serde_json::Value)]) -> serde_jso
     let mut required: Vec<&str> = vec!["t"];
     required.extend(fields.iter().map(|(k, _)| *k));
     json!({"title": title, "type": "object", "properties": props, "required": required})
+}
+
+/// The JSON schemas of the recordings, by schema name (`progmo.State`, `progmo.Control`,
+/// `progmo.Residual`, `progmo.Reaction`, `foxglove.FrameTransform`, `foxglove.SceneUpdate`): shared with `progmo debug` (through the binding) so its
+/// recordings have the same layout as `progmo solve`'s.
+pub fn recording_schemas(layout: &SampleLayout) -> Vec<(&'static str, serde_json::Value)> {
+    let q = named_numbers(&layout.q_names);
+    let v = named_numbers(&layout.v_names);
+    let rows = named_numbers(&layout.row_names);
+    vec![
+        (
+            "progmo.State",
+            object_schema(
+                "progmo.State",
+                &[("q", q), ("v", v.clone()), ("a", v.clone())],
+            ),
+        ),
+        (
+            "progmo.Control",
+            object_schema(
+                "progmo.Control",
+                &[("u", v.clone()), ("lambda", rows.clone())],
+            ),
+        ),
+        (
+            "progmo.Residual",
+            object_schema(
+                "progmo.Residual",
+                &[("residual", rows.clone()), ("residual_rate", rows)],
+            ),
+        ),
+        (
+            "progmo.Reaction",
+            object_schema("progmo.Reaction", &[("reaction", v)]),
+        ),
+        (FRAME_TRANSFORM_SCHEMA, frame_transform_schema()),
+        ("foxglove.SceneUpdate", super::scene_update_schema()),
+    ]
 }
 
 fn frame_transform_schema() -> serde_json::Value {
@@ -185,6 +227,7 @@ impl<W: Write + Seek> McapSink<W> {
             reaction: None,
             tf: None,
             warning_channel: None,
+            bodies: None,
             sequence: BTreeMap::new(),
             q_keys: keys(&layout.q_names),
             v_keys: keys(&layout.v_names),
@@ -193,35 +236,39 @@ impl<W: Write + Seek> McapSink<W> {
             bytes: Vec::new(),
             error: None,
         };
-        let q = named_numbers(&layout.q_names);
-        let v = named_numbers(&layout.v_names);
-        let rows = named_numbers(&layout.row_names);
-        let state = object_schema(
-            "progmo.State",
-            &[("q", q), ("v", v.clone()), ("a", v.clone())],
-        );
+        let schemas = recording_schemas(layout);
+        let schema = |name: &str| {
+            schemas
+                .iter()
+                .find(|(n, _)| *n == name)
+                .map(|(_, s)| s.clone())
+                .unwrap_or_default()
+        };
         sink.state = sink
-            .add_json_channel("/progmo/state", "progmo.State", &state)?
+            .add_json_channel("/progmo/state", "progmo.State", &schema("progmo.State"))?
             .0;
-        let control = object_schema(
-            "progmo.Control",
-            &[("u", v.clone()), ("lambda", rows.clone())],
-        );
         sink.control = sink
-            .add_json_channel("/progmo/control", "progmo.Control", &control)?
+            .add_json_channel(
+                "/progmo/control",
+                "progmo.Control",
+                &schema("progmo.Control"),
+            )?
             .0;
-        let residual = object_schema(
-            "progmo.Residual",
-            &[("residual", rows.clone()), ("residual_rate", rows)],
-        );
         sink.residual = sink
-            .add_json_channel("/progmo/residual", "progmo.Residual", &residual)?
+            .add_json_channel(
+                "/progmo/residual",
+                "progmo.Residual",
+                &schema("progmo.Residual"),
+            )?
             .0;
         if layout.reactions {
-            let reaction = object_schema("progmo.Reaction", &[("reaction", v)]);
             sink.reaction = Some(
-                sink.add_json_channel("/progmo/reaction", "progmo.Reaction", &reaction)?
-                    .0,
+                sink.add_json_channel(
+                    "/progmo/reaction",
+                    "progmo.Reaction",
+                    &schema("progmo.Reaction"),
+                )?
+                .0,
             );
         }
         Ok(sink)
@@ -252,6 +299,50 @@ impl<W: Write + Seek> McapSink<W> {
             .add_channel(schema_id, topic, "json", &BTreeMap::new())
             .map_err(|e| OutputError::mcap(&file, format!("add channel {topic}"), e))?;
         Ok(McapChannel(id))
+    }
+
+    /// Record the mechanism of a tree scene: at every sample the world pose of each body on
+    /// [`FRAME_TRANSFORM_TOPIC`] (child frame `progmo/<body>`), and at the first sample its
+    /// geometry on [`SCENE_TOPIC`] (see [`super::Bodies::scene_update`]).
+    pub fn with_bodies(mut self, bodies: super::Bodies) -> Self {
+        self.bodies = Some((bodies, None));
+        self
+    }
+
+    fn write_bodies(&mut self, t: f64, q: &[f64]) {
+        let Some((mut bodies, scene)) = self.bodies.take() else {
+            return;
+        };
+        let scene = match scene {
+            Some(ch) => Some(ch),
+            None => {
+                let update = bodies.scene_update(q, "progmo", 1.0);
+                match self.add_json_channel(
+                    SCENE_TOPIC,
+                    "foxglove.SceneUpdate",
+                    &super::scene_update_schema(),
+                ) {
+                    Ok(ch) => {
+                        self.write_json(ch, t, &update);
+                        Some(ch)
+                    }
+                    Err(e) => {
+                        self.error = Some(e);
+                        None
+                    }
+                }
+            }
+        };
+        for p in bodies.poses(q).to_vec() {
+            self.frame_transform(
+                t,
+                "world",
+                &format!("progmo/{}", p.name),
+                p.position,
+                p.quaternion,
+            );
+        }
+        self.bodies = Some((bodies, scene));
     }
 
     /// Add the frame-transform channel ([`FRAME_TRANSFORM_TOPIC`], schema
@@ -413,6 +504,9 @@ impl<W: Write + Seek> SampleSink for McapSink<W> {
             return;
         }
         self.write_sample(s);
+        if self.bodies.is_some() {
+            self.write_bodies(s.t, s.q);
+        }
     }
 
     fn warning(&mut self, w: &crate::solve::Warning) {

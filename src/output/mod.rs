@@ -69,7 +69,8 @@
 //! | `/progmo/control`   | `progmo.Control`    | `{"t", "u": {v name: ..}, "lambda": {row name: ..}}` |
 //! | `/progmo/residual`  | `progmo.Residual`   | `{"t", "residual": {row name: ..}, "residual_rate": {row name: ..}}` |
 //! | `/progmo/reaction`  | `progmo.Reaction`   | `{"t", "reaction": {v name: ..}}`; only if `SampleLayout::reactions` |
-//! | `/progmo/tf` (opt.) | `foxglove.FrameTransform` | see [`McapSink::frame_transform`]              |
+//! | `/progmo/tf` (tree scenes) | `foxglove.FrameTransform` | world -> `progmo/<body>` per body per sample ([`McapSink::with_bodies`], [`McapSink::frame_transform`]) |
+//! | `/progmo/scene` (tree scenes) | `foxglove.SceneUpdate` | once, at the first sample: the mechanism's geometry on the body frames ([`Bodies::scene_update`]) |
 //! | `/progmo/warning`   | `progmo.Warning`    | `{"t", "kind", "rows": [row names], "value", "threshold", "message"}`: one per conditioning warning, at its first crossing; only when there is one |
 //!
 //! One message per sample on each of the first three (four) channels. In Foxglove, plot e.g.
@@ -130,13 +131,16 @@ mod e2e;
 mod error;
 mod mcap_sink;
 mod progress;
+mod scene3d;
 mod sinks;
 mod summary;
 
 pub use csv_sink::{read_csv, read_csv_from, CsvSink};
 pub use error::OutputError;
+pub use mcap_sink::recording_schemas;
 pub use mcap_sink::{McapChannel, McapSink, FRAME_TRANSFORM_SCHEMA, FRAME_TRANSFORM_TOPIC};
 pub use progress::Progress;
+pub use scene3d::{scene_update_schema, Bodies, BodyPose};
 pub use sinks::{Every, Tee};
 pub use summary::{summary_json, write_summary, write_summary_to_path, SummaryInput};
 

@@ -103,6 +103,17 @@ impl Scene {
         })
     }
 
+    /// The mechanism's body frames and geometry for 3D views of recordings (tree scenes; None for
+    /// a lagrangian scene, which has no bodies).
+    pub fn bodies(&self) -> Option<crate::output::Bodies> {
+        match &self.system {
+            SceneSystem::Tree(p) => Some(crate::output::Bodies::new(std::sync::Arc::clone(
+                p.model.tree(),
+            ))),
+            SceneSystem::Lagrangian(_) => None,
+        }
+    }
+
     /// Names of q.
     pub fn q_names(&self) -> Vec<String> {
         use crate::model::Model;

@@ -59,6 +59,7 @@ pub use kinematics::{
     point_acceleration, point_jacobian, point_kinematics, point_position, point_velocity, qdot,
     PointKinematics, TreeData,
 };
+pub(crate) use model::JointKind;
 pub use model::{
     Attractor, Body, BodySpec, Fields, Joint, JointSpec, JointType, Model, ModelError, WORLD,
 };

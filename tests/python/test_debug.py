@@ -30,7 +30,7 @@ def test_clean_run_writes_mcap_and_csv(tmp_path, capsys):
     assert rc == 0, out
     assert "no tolerance breach" in out
     topics, msgs = read(tmp_path / "double_pendulum.mcap")
-    for t in ("/solver/state", "/solver/u", "/solver/residual"):
+    for t in ("/progmo/state", "/progmo/control", "/progmo/residual"):
         assert t in topics and len(msgs[t]) == 1001
     for sim in ("mujoco", "pinocchio"):
         for t in ("state", "residual", "deviation"):
@@ -52,8 +52,8 @@ def test_clean_run_writes_mcap_and_csv(tmp_path, capsys):
     assert a == pytest.approx(b, abs=1e-9)
     with open(tmp_path / "double_pendulum_mujoco.csv") as f:
         rows = list(csv.DictReader(f))
-    assert len(rows) == 1001 and "replay.q.q2" in rows[0] and "solver.q.q2" in rows[0]
-    assert abs(float(rows[-1]["replay.q.q2"]) - float(rows[-1]["solver.q.q2"])) < 1e-10
+    assert len(rows) == 1001 and "mujoco.q:q2" in rows[0] and "q:q2" in rows[0] and "u:q1" in rows[0]
+    assert abs(float(rows[-1]["mujoco.q:q2"]) - float(rows[-1]["q:q2"])) < 1e-10
 
 
 def test_corrupted_run_prints_first_breach(tmp_path, capsys):
@@ -98,3 +98,62 @@ def test_blow_up_keeps_mcap_and_csv_up_to_the_last_finite_state(tmp_path, capsys
     with open(tmp_path / "double_pendulum_mujoco.csv") as f:
         rows = list(csv.DictReader(f))
     assert len(rows) == len(states) and float(rows[-1]["t"]) == states[-1]["t"]
+
+
+def test_one_recording_layout_for_solve_and_debug(tmp_path, capsys):
+    """debug's solver topics carry the schemas of `progmo solve`'s recording; every tree recording
+    has a frame tree (one root, parents exist, unit quaternions, monotonic log times) and geometry."""
+    import progmo
+
+    scene = progmo.load("double_pendulum")
+    scene.solve(output_dt=0.01).write_mcap(tmp_path / "solve.mcap")
+    assert debug.main([SCENE, "--simulator", "both", "--out", str(tmp_path / "d"), "--horizon", "0.5"]) == 0
+    solve_topics, solve_msgs = read(tmp_path / "solve.mcap")
+    debug_topics, debug_msgs = read(tmp_path / "d" / "double_pendulum.mcap")
+    for t in ("/progmo/state", "/progmo/control", "/progmo/residual", "/progmo/tf", "/progmo/scene"):
+        assert solve_topics[t].name == debug_topics[t].name, t
+        assert json.loads(solve_topics[t].data) == json.loads(debug_topics[t].data), t
+        assert set(solve_msgs[t][-1]) == set(debug_msgs[t][-1]), t
+    for sim in ("mujoco", "pinocchio"):
+        assert json.loads(debug_topics[f"/{sim}/state"].data) == json.loads(solve_topics["/progmo/state"].data)
+    for msgs in (solve_msgs, debug_msgs):
+        frames = [m for topic, ms in msgs.items() if topic.endswith("/tf") for m in ms]
+        children = {m["child_frame_id"] for m in frames}
+        parents = {m["parent_frame_id"] for m in frames}
+        assert parents == {"world"} and "world" not in children  # one root, every parent exists
+        for m in frames:
+            q = m["rotation"]
+            assert abs(q["x"] ** 2 + q["y"] ** 2 + q["z"] ** 2 + q["w"] ** 2 - 1) < 1e-12
+        scenes = [m for topic, ms in msgs.items() if topic.endswith("/scene") for m in ms]
+        assert scenes and all(e["frame_id"] in children for s in scenes for e in s["entities"])
+    assert {"progmo/upper", "mujoco/upper", "pinocchio/upper"} <= {
+        m["child_frame_id"] for t, ms in debug_msgs.items() if t.endswith("/tf") for m in ms}
+    ghost = debug_msgs["/progmo/scene"][0]["entities"][0]["cubes"][0]["color"]["a"]
+    assert ghost < 1.0  # the solver's mechanism is drawn as a ghost beside the simulators'
+    from mcap.reader import make_reader
+
+    for f in (tmp_path / "solve.mcap", tmp_path / "d" / "double_pendulum.mcap"):
+        with open(f, "rb") as fh:
+            last: dict = {}
+            for _, ch, m in make_reader(fh).iter_messages(log_time_order=False):
+                assert m.log_time >= last.get(ch.topic, 0), (f, ch.topic)
+                last[ch.topic] = m.log_time
+
+
+def test_the_foxglove_layout_names_topics_the_recordings_have():
+    import pathlib
+    import re
+
+    import progmo
+
+    layout = json.loads((pathlib.Path(progmo.__file__).parent / "foxglove" / "progmo.json").read_text())
+    text = json.dumps(layout["configById"])
+    topics = set(re.findall(r'"(/[a-z]+/[a-z]+)', text))
+    documented = {"/progmo/scene", "/progmo/residual", "/progmo/control", "/progmo/warning",
+                  "/mujoco/scene", "/pinocchio/scene", "/mujoco/residual", "/pinocchio/residual",
+                  "/mujoco/deviation", "/pinocchio/deviation"}
+    assert topics <= documented, topics - documented
+    # every panel in the layout tree is configured
+    def leaves(node):
+        return [node] if isinstance(node, str) else leaves(node["first"]) + leaves(node["second"])
+    assert set(leaves(layout["layout"])) == set(layout["configById"])

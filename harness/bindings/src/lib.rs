@@ -17,6 +17,9 @@ use pyo3::types::{PyDict, PyList};
 use std::path::PathBuf;
 
 mod solution;
+
+/// (body name, world position, orientation w x y z) as Python gets it.
+type BodyPoseTuple = (String, [f64; 3], [f64; 4]);
 use progmo::output::SampleLayout;
 use solution::PySolution;
 
@@ -256,7 +259,7 @@ impl PyScene {
         let started = std::time::Instant::now();
         let sol: Solution = py.detach(|| scene.solve(&s));
         let wall = started.elapsed().as_secs_f64();
-        PySolution::new(py, scene.name.clone(), sol, s, layout, wall)
+        PySolution::new(py, scene.name.clone(), sol, s, layout, scene.bodies(), wall)
     }
 
     /// Residuals of every row along a trajectory (n samples): position rows g(t, q), velocity
@@ -512,6 +515,60 @@ impl PyScene {
             e => PyValueError::new_err(format!("cannot export {}: {e}", self.scene.name)),
         })?;
         Ok((doc, json_to_py(py, &report)?))
+    }
+
+    /// World pose of every body at configuration q: [(name, position[3], quaternion wxyz[4])]
+    /// (empty for a lagrangian scene).
+    fn body_poses(&self, q: PyReadonlyArray1<'_, f64>) -> PyResult<Vec<BodyPoseTuple>> {
+        let q = q.as_slice()?.to_vec();
+        finite("q", &q)?;
+        if q.len() != self.scene.q_names().len() {
+            return Err(PyValueError::new_err(format!(
+                "q needs {} entries",
+                self.scene.q_names().len()
+            )));
+        }
+        Ok(match self.scene.bodies() {
+            Some(mut b) => b
+                .poses(&q)
+                .iter()
+                .map(|p| (p.name.clone(), p.position, p.quaternion))
+                .collect(),
+            None => vec![],
+        })
+    }
+
+    /// The `foxglove.SceneUpdate` drawing the mechanism on frames `<prefix>/<body>` (sized at q;
+    /// alpha < 1: a ghost); None for a lagrangian scene.
+    #[pyo3(signature = (q, prefix, alpha=1.0))]
+    fn scene_update<'py>(
+        &self,
+        py: Python<'py>,
+        q: PyReadonlyArray1<'py, f64>,
+        prefix: &str,
+        alpha: f64,
+    ) -> PyResult<Option<Bound<'py, PyAny>>> {
+        let q = q.as_slice()?.to_vec();
+        finite("q", &q)?;
+        match self.scene.bodies() {
+            Some(mut b) if q.len() == self.scene.q_names().len() => {
+                Ok(Some(json_to_py(py, &b.scene_update(&q, prefix, alpha))?))
+            }
+            Some(_) => Err(PyValueError::new_err("q has the wrong length")),
+            None => Ok(None),
+        }
+    }
+
+    /// The JSON schemas of recordings by schema name (the ones `progmo solve` writes), for this
+    /// scene's names: progmo.State, progmo.Control, progmo.Residual, progmo.Reaction,
+    /// foxglove.FrameTransform, foxglove.SceneUpdate.
+    fn recording_schemas<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let layout = with_problem!(&self.scene.system, p => SampleLayout::from_problem(p));
+        let d = PyDict::new(py);
+        for (name, schema) in progmo::output::recording_schemas(&layout) {
+            d.set_item(name, json_to_py(py, &schema)?)?;
+        }
+        Ok(d)
     }
 
     fn __repr__(&self) -> String {

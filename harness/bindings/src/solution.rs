@@ -4,7 +4,8 @@
 use crate::{json_to_py, matrix};
 use numpy::PyArray1;
 use progmo::output::{
-    replay, write_summary_to_path, CsvSink, McapSink, OutputError, SampleLayout, SummaryInput,
+    replay, write_summary_to_path, Bodies, CsvSink, McapSink, OutputError, SampleLayout,
+    SummaryInput,
 };
 use progmo::solve::{Settings, Solution};
 use pyo3::exceptions::PyOSError;
@@ -19,6 +20,8 @@ pub struct PySolution {
     sol: Solution,
     settings: Settings,
     layout: SampleLayout,
+    /// The mechanism for the MCAP's 3D view (tree scenes).
+    bodies: Option<Bodies>,
     wall_seconds: f64,
     /// (name, array) of every sampled quantity, built once, read-only.
     arrays: Vec<(&'static str, Py<PyAny>)>,
@@ -40,6 +43,7 @@ impl PySolution {
         sol: Solution,
         settings: Settings,
         layout: SampleLayout,
+        bodies: Option<Bodies>,
         wall_seconds: f64,
     ) -> PyResult<Self> {
         let tr = &sol.trajectory;
@@ -90,6 +94,7 @@ impl PySolution {
             sol,
             settings,
             layout,
+            bodies,
             wall_seconds,
             arrays,
         })
@@ -241,6 +246,9 @@ impl PySolution {
     fn write_mcap(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         py.detach(|| {
             let mut sink = McapSink::create(&path, &self.layout)?;
+            if let Some(b) = &self.bodies {
+                sink = sink.with_bodies(b.clone());
+            }
             replay(&self.sol.trajectory, &self.sol.warnings, &mut sink)
         })
         .map_err(os_error)

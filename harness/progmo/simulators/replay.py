@@ -143,6 +143,9 @@ class Reference:
     steps: int
     t0: float
     solve_seconds: float = 0.0
+    #: multipliers and dg/dt of the rows (recordings; None when not kept)
+    lam: np.ndarray | None = None
+    residual_rate: np.ndarray | None = None
 
     def u_at(self, time: float) -> np.ndarray:
         """u at a stage time (exact grid value; linear interpolation off the grid)."""

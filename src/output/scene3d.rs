@@ -1,0 +1,273 @@
+//! The 3D view of a tree scene in recordings (Foxglove's 3D panel): one frame per body moving with
+//! q (`foxglove.FrameTransform`, world -> `<prefix>/<body>`) and geometry fixed to those frames
+//! (`foxglove.SceneUpdate`, frame-locked entities, written once):
+//!
+//! - each body with mass: a box with the body's principal axes and its inertia (the uniform box of
+//!   the same mass and principal moments, sides `sqrt(6 (I_j + I_k - I_i) / m)`), at the CoM; a
+//!   point mass (zero inertia) as a sphere; a massless coordinate body as a small grey sphere;
+//! - each joint: an arrow along its axis at its anchor (hinge: blue, slide: green), a sphere for a
+//!   ball joint;
+//! - a line from each body's origin to each child's origin (the links of the mechanism).
+//!
+//! Sizes of spheres and arrows scale with the mechanism (its largest body-to-body distance). The
+//! solver's motion uses prefix `progmo`; `progmo debug` draws the same geometry for each simulator
+//! (`mujoco`, `pinocchio`) and the solver's as a translucent ghost.
+
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use serde_json::{json, Value};
+use std::sync::Arc;
+
+use crate::tree::{self, spatial::quat_from_rot, JointKind, TreeData};
+
+/// World pose of one body frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BodyPose {
+    /// Body name.
+    pub name: String,
+    /// Origin in the world frame.
+    pub position: [f64; 3],
+    /// Orientation body -> world, (w, x, y, z).
+    pub quaternion: [f64; 4],
+}
+
+/// Poses and geometry of a kinematic tree (forward kinematics with its own workspace).
+pub struct Bodies {
+    model: Arc<tree::Model>,
+    data: TreeData<f64>,
+    poses: Vec<BodyPose>,
+}
+
+impl Clone for Bodies {
+    fn clone(&self) -> Self {
+        Bodies::new(Arc::clone(&self.model))
+    }
+}
+
+impl Bodies {
+    /// For the tree of a scene.
+    pub fn new(model: Arc<tree::Model>) -> Self {
+        let data = TreeData::new(&model);
+        let poses = model
+            .bodies()
+            .iter()
+            .map(|b| BodyPose {
+                name: b.name.clone(),
+                position: [0.0; 3],
+                quaternion: [1.0, 0.0, 0.0, 0.0],
+            })
+            .collect();
+        Bodies { model, data, poses }
+    }
+
+    /// World poses of every body at configuration q.
+    pub fn poses(&mut self, q: &[f64]) -> &[BodyPose] {
+        tree::forward_kinematics(&self.model, &mut self.data, q);
+        for (b, pose) in self.poses.iter_mut().enumerate() {
+            let (r, p) = tree::body_pose(&self.model, &mut self.data, q, b);
+            pose.position = [p[0], p[1], p[2]];
+            pose.quaternion = quat_from_rot(&r);
+        }
+        &self.poses
+    }
+
+    /// Largest distance between body origins at configuration q (the scale of the drawing), at
+    /// least 0.1.
+    fn scale(&mut self, q: &[f64]) -> f64 {
+        let p: Vec<[f64; 3]> = self.poses(q).iter().map(|b| b.position).collect();
+        let mut d: f64 = 0.0;
+        for a in &p {
+            for b in &p {
+                d = d.max(
+                    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt(),
+                );
+            }
+        }
+        d.max(0.1)
+    }
+
+    /// The `foxglove.SceneUpdate` message drawing the mechanism on frames `<prefix>/<body>`, sized
+    /// at configuration q; `alpha` < 1 draws a ghost (the solver's motion beside a simulator's).
+    pub fn scene_update(&mut self, q: &[f64], prefix: &str, alpha: f64) -> Value {
+        let scale = self.scale(q);
+        let small = 0.04 * scale;
+        let model = Arc::clone(&self.model);
+        let mut entities = vec![];
+        for (bi, b) in model.bodies().iter().enumerate() {
+            let mut cubes = vec![];
+            let mut spheres = vec![];
+            let mut arrows = vec![];
+            let mut lines = vec![];
+            if b.massless {
+                spheres.push(sphere([0.0; 3], 0.5 * small, [0.6, 0.6, 0.6, alpha]));
+            } else if let Some((size, rot)) = inertia_box(b.mass, &b.inertia) {
+                cubes.push(json!({
+                    "pose": pose([b.com[0], b.com[1], b.com[2]], quat_from_rot(&rot)),
+                    "size": {"x": size[0], "y": size[1], "z": size[2]},
+                    "color": color([0.85, 0.55, 0.2, alpha]),
+                }));
+            } else {
+                spheres.push(sphere(
+                    [b.com[0], b.com[1], b.com[2]],
+                    small,
+                    [0.85, 0.55, 0.2, alpha],
+                ));
+            }
+            for j in &model.joints()[b.joints.clone()] {
+                let a = [j.anchor[0], j.anchor[1], j.anchor[2]];
+                match j.kind {
+                    JointKind::Hinge(u) => {
+                        arrows.push(arrow(a, &u, 3.0 * small, [0.2, 0.4, 0.9, alpha]))
+                    }
+                    JointKind::Slide(u) => {
+                        arrows.push(arrow(a, &u, 3.0 * small, [0.2, 0.7, 0.3, alpha]))
+                    }
+                    JointKind::Ball => spheres.push(sphere(a, 0.7 * small, [0.2, 0.4, 0.9, alpha])),
+                    JointKind::Free => {}
+                }
+            }
+            // links to the children: from this body's origin to each child's placement
+            for child in model.bodies().iter().filter(|c| c.parent == Some(bi)) {
+                lines.push(json!({
+                    "type": 0, "pose": pose([0.0; 3], [1.0, 0.0, 0.0, 0.0]), "thickness": 0.25 * small,
+                    "scale_invariant": false,
+                    "points": [{"x": 0.0, "y": 0.0, "z": 0.0},
+                               {"x": child.pos[0], "y": child.pos[1], "z": child.pos[2]}],
+                    "color": color([0.3, 0.3, 0.3, alpha]), "colors": [], "indices": [],
+                }));
+            }
+            entities.push(json!({
+                "timestamp": {"sec": 0, "nsec": 0},
+                "frame_id": format!("{prefix}/{}", b.name),
+                "id": format!("{prefix}/{}", b.name),
+                "lifetime": {"sec": 0, "nsec": 0},
+                "frame_locked": true,
+                "metadata": [{"key": "body", "value": b.name}],
+                "arrows": arrows, "cubes": cubes, "spheres": spheres, "cylinders": [],
+                "lines": lines, "triangles": [], "texts": [], "models": [],
+            }));
+        }
+        json!({"deletions": [], "entities": entities})
+    }
+}
+
+/// Side lengths and principal axes (columns of the rotation) of the uniform box with this mass
+/// and inertia about the CoM; None for a point mass (zero inertia).
+fn inertia_box(mass: f64, inertia: &Matrix3<f64>) -> Option<([f64; 3], Matrix3<f64>)> {
+    if !(mass > 0.0) || inertia.norm() == 0.0 {
+        return None;
+    }
+    let eig = SymmetricEigen::new(*inertia);
+    let i = eig.eigenvalues;
+    let side = |a: usize, b: usize, c: usize| (6.0 * (i[b] + i[c] - i[a]) / mass).max(0.0).sqrt();
+    let mut size = [side(0, 1, 2), side(1, 2, 0), side(2, 0, 1)];
+    let thin = 0.05 * size.iter().cloned().fold(0.0, f64::max);
+    for s in &mut size {
+        *s = s.max(thin); // a rod or a plate keeps a visible thickness
+    }
+    let mut rot = eig.eigenvectors;
+    if rot.determinant() < 0.0 {
+        rot.set_column(2, &(-rot.column(2)));
+    }
+    Some((size, rot))
+}
+
+fn color(c: [f64; 4]) -> Value {
+    json!({"r": c[0], "g": c[1], "b": c[2], "a": c[3]})
+}
+
+fn pose(p: [f64; 3], wxyz: [f64; 4]) -> Value {
+    json!({"position": {"x": p[0], "y": p[1], "z": p[2]},
+           "orientation": {"x": wxyz[1], "y": wxyz[2], "z": wxyz[3], "w": wxyz[0]}})
+}
+
+fn sphere(p: [f64; 3], d: f64, c: [f64; 4]) -> Value {
+    json!({"pose": pose(p, [1.0, 0.0, 0.0, 0.0]), "size": {"x": d, "y": d, "z": d}, "color": color(c)})
+}
+
+/// An arrow (Foxglove draws it along +x of its pose) from `at` along the unit vector `u`.
+fn arrow(at: [f64; 3], u: &Vector3<f64>, length: f64, c: [f64; 4]) -> Value {
+    let x = Vector3::x();
+    let axis = x.cross(u);
+    let q = if axis.norm() < 1e-12 {
+        if u[0] >= 0.0 {
+            [1.0, 0.0, 0.0, 0.0]
+        } else {
+            [0.0, 0.0, 0.0, 1.0]
+        }
+    } else {
+        let angle = x.dot(u).clamp(-1.0, 1.0).acos();
+        let a = axis.normalize() * (0.5 * angle).sin();
+        [(0.5 * angle).cos(), a[0], a[1], a[2]]
+    };
+    json!({"pose": pose(at, q), "shaft_length": 0.7 * length, "shaft_diameter": 0.08 * length,
+           "head_length": 0.3 * length, "head_diameter": 0.2 * length, "color": color(c)})
+}
+
+/// Schema of `foxglove.SceneUpdate` messages as written here (the fields Foxglove reads).
+pub fn scene_update_schema() -> Value {
+    json!({
+        "title": "foxglove.SceneUpdate",
+        "description": "An update to the entities displayed in a 3D scene",
+        "type": "object",
+        "properties": {
+            "deletions": {"type": "array"},
+            "entities": {"type": "array", "items": {"type": "object", "properties": {
+                "timestamp": {"type": "object"}, "frame_id": {"type": "string"},
+                "id": {"type": "string"}, "lifetime": {"type": "object"},
+                "frame_locked": {"type": "boolean"}, "metadata": {"type": "array"},
+                "arrows": {"type": "array"}, "cubes": {"type": "array"},
+                "spheres": {"type": "array"}, "cylinders": {"type": "array"},
+                "lines": {"type": "array"}, "triangles": {"type": "array"},
+                "texts": {"type": "array"}, "models": {"type": "array"}}}}
+        }
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn inertia_box_reproduces_a_uniform_box() {
+        // uniform box 0.1 x 0.2 x 0.6, m = 2: I = m/12 (b^2 + c^2, ...)
+        let (m, a, b, c) = (2.0, 0.1, 0.2, 0.6);
+        let i = Matrix3::from_diagonal(&Vector3::new(
+            m / 12.0 * (b * b + c * c),
+            m / 12.0 * (a * a + c * c),
+            m / 12.0 * (a * a + b * b),
+        ));
+        let (size, rot) = inertia_box(m, &i).unwrap();
+        let mut got: Vec<(f64, f64)> = (0..3)
+            .map(|k| {
+                let axis = rot.column(k).iamax();
+                (axis as f64, size[k])
+            })
+            .collect();
+        got.sort_by(|x, y| x.0.partial_cmp(&y.0).unwrap());
+        for (k, want) in [a, b, c].iter().enumerate() {
+            assert!((got[k].1 - want).abs() < 1e-12, "{got:?}");
+        }
+        assert!((rot.determinant() - 1.0).abs() < 1e-12);
+        assert!(inertia_box(1.0, &Matrix3::zeros()).is_none());
+    }
+
+    #[test]
+    fn arrows_point_along_their_axis() {
+        for u in [
+            Vector3::x(),
+            -Vector3::x(),
+            Vector3::y(),
+            Vector3::new(0.0, 0.6, 0.8),
+        ] {
+            let a = arrow([0.0; 3], &u, 1.0, [0.0; 4]);
+            let o = &a["pose"]["orientation"];
+            let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                o["w"].as_f64().unwrap(),
+                o["x"].as_f64().unwrap(),
+                o["y"].as_f64().unwrap(),
+                o["z"].as_f64().unwrap(),
+            ));
+            assert!((q * Vector3::x() - u).norm() < 1e-12, "{u:?}");
+        }
+    }
+}
