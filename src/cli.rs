@@ -8,10 +8,11 @@
 //! - 2: bad input: the scene file (or the command line) is invalid, or its initial state is off
 //!   the programme;
 //! - 3: the results could not be written (including standard output on a full device);
+//! - 130: interrupted (Ctrl-C or SIGTERM during `solve`: the files are finished as partial results);
 //! - 141: standard output was closed early (`| head -1`): the command ends quietly.
 
 use crate::output::{
-    write_summary_to_path, CsvSink, McapSink, OutputSink, Progress, SampleLayout, SummaryInput, Tee,
+    write_summary_to_path, OutputSink, Progress, RunFiles, SampleLayout, StopOn, SummaryInput,
 };
 use crate::scene::{Scene, SceneError};
 use crate::solve::{
@@ -68,7 +69,7 @@ macro_rules! say {
     name = "progmo",
     version,
     about = "Programmed motions of mechanical systems (Do Sanh 1998): motion and control forces from a scene file",
-    after_help = "Exit codes: 0 success, 1 solve stopped early (partial results written), 2 bad input, 3 cannot write results.\nScene format: src/scene/FORMAT.md. A bundled scene is named without a path: `progmo solve double_pendulum`."
+    after_help = "Exit codes: 0 success, 1 solve stopped early (partial results written), 2 bad input, 3 cannot write results, 130 interrupted.\nScene format: src/scene/FORMAT.md. A bundled scene is named without a path: `progmo solve double_pendulum`."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -456,50 +457,29 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
     }
     // A run into the folder of an earlier one first removes that run's outputs, so nothing of it
     // (an old summary saying success, an MCAP of another scene) can pass for this run's.
-    for f in ["summary.json", "trajectory.csv", "recording.mcap"] {
-        match std::fs::remove_file(out.join(f)) {
-            Ok(()) => {}
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => {
-                errln!(
-                    "progmo solve: error: cannot remove the earlier {}: {e}",
-                    out.join(f).display()
-                );
-                return ExitCode::from(3);
-            }
-        }
+    if let Err(e) = crate::output::remove_previous_run(&out) {
+        errln!("progmo solve: error: {e}");
+        return ExitCode::from(3);
     }
     let layout = crate::with_problem!(&scene.system, p => SampleLayout::from_problem(p));
     let (t0, t1) = scene.span();
-    let csv_path = out.join("trajectory.csv");
-    let csv = match CsvSink::create(&csv_path, &layout) {
-        Ok(c) => c,
+    // trajectory.csv and recording.mcap get their names only when whole (`.partial` until then).
+    let files = match RunFiles::create(&out, &layout, !a.no_mcap, scene.bodies()) {
+        Ok(f) => f,
         Err(e) => {
             errln!("progmo solve: error: {e}");
             return ExitCode::from(3);
         }
     };
+    // Ctrl-C / SIGTERM stop the solve at the next step; the files are finished as partial.
+    let interrupt = crate::interrupt::Guard::install();
     let show = !a.quiet && std::io::stderr().is_terminal();
     let started = Instant::now();
-    let (solution, write_error) = if a.no_mcap {
-        let mut sink = Progress::new(csv, &scene.name, t0, t1).enabled(show);
-        let sol = scene.solve_into(&settings, &mut sink);
-        (sol, sink.finish().err())
-    } else {
-        let mcap = match McapSink::create(out.join("recording.mcap"), &layout) {
-            Ok(m) => match scene.bodies() {
-                Some(b) => m.with_bodies(b),
-                None => m,
-            },
-            Err(e) => {
-                errln!("progmo solve: error: {e}");
-                return ExitCode::from(3);
-            }
-        };
-        let mut sink = Progress::new(Tee::new(csv, mcap), &scene.name, t0, t1).enabled(show);
-        let sol = scene.solve_into(&settings, &mut sink);
-        (sol, sink.finish().err())
-    };
+    let mut sink =
+        Progress::new(StopOn::new(files, interrupt.flag()), &scene.name, t0, t1).enabled(show);
+    let solution = scene.solve_into(&settings, &mut sink);
+    let _ = sink.finish(); // the errors of every file are collected next
+    let mut write_errors = sink.into_inner().into_inner().errors();
     let wall = started.elapsed().as_secs_f64();
     let rows = layout.row_names.clone();
     let summary = SummaryInput {
@@ -511,7 +491,7 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
         git_revision: (!GIT_REVISION.is_empty()).then_some(GIT_REVISION),
         command_line,
     };
-    let summary_error = write_summary_to_path(out.join("summary.json"), &summary).err();
+    write_errors.extend(write_summary_to_path(out.join("summary.json"), &summary).err());
     // --json: the summary's content (and where the files are) on stdout, the line on stderr.
     let json = a.json.then(|| {
         let mut v = crate::output::summary_json(&summary).unwrap_or(serde_json::Value::Null);
@@ -529,9 +509,6 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
             None => write_stdout(line, true),
         }
     };
-    for e in write_error.iter().chain(summary_error.iter()) {
-        errln!("progmo solve: error: {e}");
-    }
     let worst = solution.max_residual.iter().cloned().fold(0.0, f64::max);
     let st = &solution.stats.integrator;
     for w in &solution.warnings {
@@ -588,13 +565,18 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
             )) {
                 return code;
             }
-            return ExitCode::from(1);
         }
     }
-    if write_error.is_some() || summary_error.is_some() {
-        return ExitCode::from(3);
+    // A file that could not be written is the last word (exit 3), whatever the solve did.
+    for e in &write_errors {
+        errln!("progmo solve: error: cannot write the results: {e}");
     }
-    ExitCode::SUCCESS
+    match &solution.code {
+        _ if !write_errors.is_empty() => ExitCode::from(3),
+        ReturnCode::Success => ExitCode::SUCCESS,
+        ReturnCode::Interrupted { .. } => ExitCode::from(130),
+        _ => ExitCode::from(1),
+    }
 }
 
 fn validate(scenes: &[PathBuf], json: bool) -> ExitCode {
@@ -712,11 +694,12 @@ fn export(path: &Path, format: FormatArg, out: Option<&Path>, json: bool) -> Exi
     let written = match out {
         None => None,
         Some(o) => {
-            let rp = PathBuf::from(format!("{}.report.json", o.display()));
-            if let Err(e) = std::fs::write(o, &doc).and_then(|_| std::fs::write(&rp, &report_text))
-            {
-                errln!("progmo export: error: cannot write {}: {e}", o.display());
-                return ExitCode::from(3);
+            let rp = crate::output::with_suffix(o, ".report.json");
+            for (file, text) in [(o, doc.as_str()), (rp.as_path(), report_text.as_str())] {
+                if let Err(e) = std::fs::write(file, text) {
+                    errln!("progmo export: error: cannot write {}: {e}", file.display());
+                    return ExitCode::from(3);
+                }
             }
             Some((o.to_path_buf(), rp))
         }

@@ -104,3 +104,30 @@ fn max_samples_is_the_boundary() {
     );
     assert_eq!(code, 0, "{err}");
 }
+
+#[test]
+fn a_huge_span_without_output_dt_stops_in_seconds() {
+    // Every step is a sample without output_dt, so max_samples does not bound the run up front;
+    // at the scene's step rate [0, 1e9] needs ~7e9 steps, and the run stops early saying so
+    // (it used to run 9.4e6 steps into max_steps: 565 s and 7 GB of CSV and MCAP).
+    let dir =
+        std::env::temp_dir().join(format!("progmo-cli-bounds-{}-runaway", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let text = std::fs::read_to_string(scene("double_pendulum"))
+        .unwrap()
+        .replace("t1 = 10.0\noutput_dt = 0.01\n", "t1 = 1e9\n");
+    assert!(!text.contains("output_dt"));
+    let path = dir.join("runaway.toml");
+    std::fs::write(&path, text).unwrap();
+    let start = Instant::now();
+    let (code, err) = solve(&[path.to_str().unwrap()], QUICK);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("(too_many_steps)"), "{err}");
+    assert!(err.contains("more than max_steps = 10000000"), "{err}");
+    assert!(
+        start.elapsed() < Duration::from_secs(10),
+        "{:?}",
+        start.elapsed()
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -10,7 +10,9 @@ help speaks of ``progmo``. Exit codes of ``check`` (stable; the nightly job bran
 * 2: bad usage, an unknown scene or simulator, a scene file that does not load or whose initial
   state the solver refuses (the same located message as ``progmo solve``), or an unreadable
   baseline (the other scenes still run; 2 wins over 1);
-* 130: interrupted (the results so far and the report are still written).
+* 130: interrupted (the results so far and the report are still written);
+* 3: standard output could not be written (a full device), 141: it was closed early (``| head``);
+  see :mod:`progmo._stdio`.
 """
 
 from __future__ import annotations
@@ -377,4 +379,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from ._stdio import run
+
+    sub = sys.argv[1] if len(sys.argv) > 1 and sys.argv[1] in ("check", "debug", "report") else ""
+    sys.exit(run(main, f"progmo {sub}".strip()))

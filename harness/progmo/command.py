@@ -16,14 +16,16 @@ HARNESS = ("check", "debug", "report")
 
 def main(argv: list[str] | None = None) -> int:
     args = list(sys.argv[1:] if argv is None else argv)
+    from ._stdio import run  # standard output as the Rust commands treat it (exit 3, 141, 130)
+
     if args and args[0] in HARNESS:
         from .cli import main as harness_main
 
-        return harness_main(args)
+        return run(lambda: harness_main(args), f"progmo {args[0]}")
     if args and args[0] == "bench":
         from .bench.main import main as bench_main
 
-        return int(bench_main(args[1:]) or 0)
+        return run(lambda: bench_main(args[1:]), "progmo bench")
     from . import _core, data
 
     os.environ.setdefault("PROGMO_REFERENCES", str(data.references()))

@@ -15,7 +15,8 @@ recording and write what a person needs to see where a replay leaves the program
 * on stdout: where and when the first tolerance breach happened (metric, time, value vs budget), or
   that none did.
 
-Exit status: 0 no breach, 1 a breach or an error of the check, 2 bad input.
+Exit status: 0 no breach, 1 a breach or an error of the check, 2 bad input, 3 standard output
+cannot be written, 130 interrupted, 141 standard output closed early.
 ``--corrupt-u-scale F`` multiplies the replayed u by F (a negative control: the run must breach).
 """
 
@@ -274,4 +275,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from ._stdio import run
+
+    sys.exit(run(main, "progmo debug"))

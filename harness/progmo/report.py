@@ -658,6 +658,10 @@ def render_markdown(run: Run) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: Text documents stay valid UTF-8 when they quote a path that is not (a command line's `--out`):
+#: such bytes are written as escapes (`\udcff`).
+TEXT_ERRORS = "backslashreplace"
+
 CSV_FIELDS = ["scene", "simulator", "verdict", "status", "metric", "value", "budget", "budget_source",
               "within_budget", "baseline", "regression_above", "vs_baseline", "checked_span", "reason",
               "wall_seconds"]
@@ -665,7 +669,7 @@ CSV_FIELDS = ["scene", "simulator", "verdict", "status", "metric", "value", "bud
 
 def write_csv(run: Run, path: Path) -> None:
     """One row per (scene, simulator, metric); a result without metrics gets one row."""
-    with open(path, "w", newline="") as f:
+    with open(path, "w", newline="", encoding="utf-8", errors=TEXT_ERRORS) as f:
         w = csv.writer(f)
         w.writerow(CSV_FIELDS)
         for s in run.scene_names():
@@ -703,9 +707,9 @@ def write(run: Run, out_dir: str | os.PathLike) -> dict[str, Path]:
         "run": out / "run.json",
     }
     paths["run"].write_text(json.dumps(_jsonable(run.to_json()), indent=1) + "\n")
-    paths["md"].write_text(render_markdown(run))
+    paths["md"].write_text(render_markdown(run), encoding="utf-8", errors=TEXT_ERRORS)
     write_csv(run, paths["csv"])
-    paths["html"].write_text(render_html(run))
+    paths["html"].write_text(render_html(run), encoding="utf-8", errors=TEXT_ERRORS)
     return paths
 
 

@@ -19,6 +19,18 @@
 //! sink.finish().unwrap();
 //! ```
 //!
+//! # Files of a run (`progmo solve`)
+//!
+//! A result file exists under its real name only when it is whole: [`RunFiles`] writes
+//! `trajectory.csv` and `recording.mcap` as `<name>.partial` ([`Staged`]) and renames each when its
+//! writer finishes without error; `summary.json` is written last, through `summary.json.tmp`
+//! ([`write_summary_to_path`]). A `.partial` file is an incomplete write (a full device: the
+//! command's last line names it and the exit code is 3; or a killed process). A solve that stops
+//! early or is interrupted (Ctrl-C, SIGTERM: [`StopOn`] and [`crate::interrupt`]; code
+//! `interrupted`, exit 130) is not an incomplete write: its files are finished, valid up to the
+//! stop, and the summary's `code` says why it ended. [`remove_previous_run`] clears every one of
+//! these names ([`RUN_FILES`]) before a run into an existing folder.
+//!
 //! # Column names
 //!
 //! All formats use the names of [`SampleLayout`]: `q_names` for q, `v_names` for v, dv/dt, u and the
@@ -93,7 +105,8 @@
 //!   names), `rcond`}; `singular_system` {`t`, `rcond`}; `drift_exceeded` {`t`, `row`,
 //!   `residual`}; `non_finite` {`t`}; `max_steps` {`t`}; `inconsistent_initial_state` {`row`,
 //!   `residual`}; `projection_failed` {`t`, `row`, `residual`}; `ill_conditioned` {`t`,
-//!   `warning` (as in `warnings`)}.
+//!   `warning` (as in `warnings`)}; `interrupted` {`t`} (Ctrl-C or SIGTERM, or a sink's stop
+//!   request); `too_many_steps` {`t`, `needed` (estimated steps for the span), `max_steps`}.
 //! - `code_name`: the machine name, one of the codes above.
 //! - `message`: the code as one sentence naming the quantity, the time and the rows.
 //! - `t_end`: last time reached. On an early stop it is the code's `t` and the time of the last
@@ -133,6 +146,7 @@ mod mcap_sink;
 mod progress;
 mod scene3d;
 mod sinks;
+mod staged;
 mod summary;
 
 pub use csv_sink::{read_csv, read_csv_from, CsvSink};
@@ -141,7 +155,8 @@ pub use mcap_sink::recording_schemas;
 pub use mcap_sink::{McapChannel, McapSink, FRAME_TRANSFORM_SCHEMA, FRAME_TRANSFORM_TOPIC};
 pub use progress::Progress;
 pub use scene3d::{scene_update_schema, Bodies, BodyPose};
-pub use sinks::{Every, Tee};
+pub use sinks::{Every, StopOn, Tee};
+pub use staged::{remove_previous_run, with_suffix, RunFiles, Staged, PARTIAL_SUFFIX, RUN_FILES};
 pub use summary::{summary_json, write_summary, write_summary_to_path, SummaryInput};
 
 use crate::model::Model;

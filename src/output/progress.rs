@@ -105,6 +105,9 @@ impl<S: SampleSink> SampleSink for Progress<S> {
     fn warning(&mut self, w: &crate::solve::Warning) {
         self.inner.warning(w);
     }
+    fn interrupted(&self) -> bool {
+        self.inner.interrupted()
+    }
     fn sample(&mut self, s: &Sample<'_>) {
         self.inner.sample(s);
         if !self.show {

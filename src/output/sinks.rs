@@ -1,4 +1,7 @@
-//! Sink adapters: [`Tee`] (two sinks) and [`Every`] (decimation by time).
+//! Sink adapters: [`Tee`] (two sinks), [`Every`] (decimation by time) and [`StopOn`] (a stop
+//! request from a flag, e.g. set by a signal handler).
+
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::{OutputError, OutputSink, OwnedSample};
 use crate::solve::{Sample, SampleSink};
@@ -30,6 +33,9 @@ impl<A: SampleSink, B: SampleSink> SampleSink for Tee<A, B> {
     fn warning(&mut self, w: &crate::solve::Warning) {
         self.a.warning(w);
         self.b.warning(w);
+    }
+    fn interrupted(&self) -> bool {
+        self.a.interrupted() || self.b.interrupted()
     }
 }
 
@@ -102,11 +108,53 @@ impl<S: SampleSink> SampleSink for Every<S> {
             self.holding = true;
         }
     }
+    fn warning(&mut self, w: &crate::solve::Warning) {
+        self.inner.warning(w);
+    }
+    fn interrupted(&self) -> bool {
+        self.inner.interrupted()
+    }
 }
 
 impl<S: OutputSink> OutputSink for Every<S> {
     fn finish(&mut self) -> Result<(), OutputError> {
         self.flush_last();
+        self.inner.finish()
+    }
+}
+
+/// Forwards everything to `inner` and asks the solve to stop
+/// ([`SampleSink::interrupted`]) once `flag` is set.
+pub struct StopOn<'a, S> {
+    inner: S,
+    flag: &'a AtomicBool,
+}
+
+impl<'a, S: SampleSink> StopOn<'a, S> {
+    /// Stop when `flag` becomes true.
+    pub fn new(inner: S, flag: &'a AtomicBool) -> Self {
+        StopOn { inner, flag }
+    }
+    /// The wrapped sink.
+    pub fn into_inner(self) -> S {
+        self.inner
+    }
+}
+
+impl<S: SampleSink> SampleSink for StopOn<'_, S> {
+    fn sample(&mut self, s: &Sample<'_>) {
+        self.inner.sample(s);
+    }
+    fn warning(&mut self, w: &crate::solve::Warning) {
+        self.inner.warning(w);
+    }
+    fn interrupted(&self) -> bool {
+        self.flag.load(Ordering::Relaxed) || self.inner.interrupted()
+    }
+}
+
+impl<S: OutputSink> OutputSink for StopOn<'_, S> {
+    fn finish(&mut self) -> Result<(), OutputError> {
         self.inner.finish()
     }
 }

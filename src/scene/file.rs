@@ -1,24 +1,87 @@
 //! The scene file as written (TOML), before validation. The reference page is `FORMAT.md` beside
 //! this file and the JSON Schema is `scene.schema.json`; a test keeps the three in step.
 
+use serde::de::{self, Deserializer, SeqAccess, Visitor};
 use serde::Deserialize;
 use std::collections::BTreeMap;
+use std::fmt;
 use toml::Spanned;
 
 /// A number or an expression in the parameters (`"2*pi"`, `"sqrt(mu/r0)"`).
-#[derive(Clone, Debug, Deserialize)]
-#[serde(untagged)]
+#[derive(Clone, Debug)]
 pub enum Number {
     Value(f64),
     Expr(String),
 }
 
 /// One joint coordinate's initial value: a number/expression, or several for ball and free joints.
-#[derive(Clone, Debug, Deserialize)]
-#[serde(untagged)]
+#[derive(Clone, Debug)]
 pub enum Initial {
     One(Number),
     Many(Vec<Number>),
+}
+
+// By hand rather than `#[serde(untagged)]`, so that a wrong type (`q1 = true`) says what was
+// expected instead of "did not match any variant".
+struct NumberVisitor;
+
+impl<'de> Visitor<'de> for NumberVisitor {
+    type Value = Number;
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        f.write_str("a number or an expression string")
+    }
+    fn visit_f64<E: de::Error>(self, x: f64) -> Result<Number, E> {
+        Ok(Number::Value(x))
+    }
+    fn visit_i64<E: de::Error>(self, x: i64) -> Result<Number, E> {
+        Ok(Number::Value(x as f64))
+    }
+    fn visit_u64<E: de::Error>(self, x: u64) -> Result<Number, E> {
+        Ok(Number::Value(x as f64))
+    }
+    fn visit_str<E: de::Error>(self, s: &str) -> Result<Number, E> {
+        Ok(Number::Expr(s.to_string()))
+    }
+}
+
+impl<'de> Deserialize<'de> for Number {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        d.deserialize_any(NumberVisitor)
+    }
+}
+
+struct InitialVisitor;
+
+impl<'de> Visitor<'de> for InitialVisitor {
+    type Value = Initial;
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        f.write_str("a number, an expression string, or an array of them")
+    }
+    fn visit_f64<E: de::Error>(self, x: f64) -> Result<Initial, E> {
+        Ok(Initial::One(Number::Value(x)))
+    }
+    fn visit_i64<E: de::Error>(self, x: i64) -> Result<Initial, E> {
+        Ok(Initial::One(Number::Value(x as f64)))
+    }
+    fn visit_u64<E: de::Error>(self, x: u64) -> Result<Initial, E> {
+        Ok(Initial::One(Number::Value(x as f64)))
+    }
+    fn visit_str<E: de::Error>(self, s: &str) -> Result<Initial, E> {
+        Ok(Initial::One(Number::Expr(s.to_string())))
+    }
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Initial, A::Error> {
+        let mut v = Vec::new();
+        while let Some(n) = seq.next_element::<Number>()? {
+            v.push(n);
+        }
+        Ok(Initial::Many(v))
+    }
+}
+
+impl<'de> Deserialize<'de> for Initial {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        d.deserialize_any(InitialVisitor)
+    }
 }
 
 #[derive(Clone, Debug, Deserialize)]
@@ -95,10 +158,12 @@ pub struct BodyFile {
     pub name: String,
     #[serde(default = "world")]
     pub parent: String,
+    /// Placement in the parent frame (default 0); spanned so that a bad value is located at itself.
     #[serde(default)]
-    pub pos: [f64; 3],
-    #[serde(default = "identity_quat")]
-    pub quat: [f64; 4],
+    pub pos: Option<Spanned<[f64; 3]>>,
+    /// Orientation (w, x, y, z) in the parent frame (default identity).
+    #[serde(default)]
+    pub quat: Option<Spanned<[f64; 4]>>,
     pub mass: Spanned<f64>,
     #[serde(default)]
     pub com: [f64; 3],
@@ -113,10 +178,6 @@ fn world() -> String {
     "world".to_string()
 }
 
-fn identity_quat() -> [f64; 4] {
-    [1.0, 0.0, 0.0, 0.0]
-}
-
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct JointFile {
@@ -125,7 +186,7 @@ pub struct JointFile {
     #[serde(rename = "type")]
     pub kind: Spanned<String>,
     #[serde(default)]
-    pub axis: Option<[f64; 3]>,
+    pub axis: Option<Spanned<[f64; 3]>>,
     #[serde(default)]
     pub anchor: [f64; 3],
     #[serde(default)]

@@ -554,19 +554,60 @@ fn tree_scene(
         } else {
             BodySpec::new(&bf.name, &bf.parent, mass, bf.com, inertia)
         };
-        spec = spec.at(bf.pos).rotated(bf.quat);
+        // Placement, checked here so that a bad value is located at itself (not at the body).
+        let pos = bf.pos.as_ref().map_or([0.0; 3], |p| *p.get_ref());
+        let quat = bf
+            .quat
+            .as_ref()
+            .map_or([1.0, 0.0, 0.0, 0.0], |q| *q.get_ref());
+        if let Some(p) = bf
+            .pos
+            .as_ref()
+            .filter(|p| !p.get_ref().iter().all(|x| x.is_finite()))
+        {
+            return Err(src.error(p.span(), &format!("{field}.pos"), "placement is not finite"));
+        }
+        if let Some(q) = &bf.quat {
+            let n = quat.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if !n.is_finite() {
+                return Err(src.error(
+                    q.span(),
+                    &format!("{field}.quat"),
+                    "placement is not finite",
+                ));
+            }
+            if n < 1e-9 {
+                return Err(src.error(
+                    q.span(),
+                    &format!("{field}.quat"),
+                    "placement quaternion is zero: give a unit quaternion (w, x, y, z)",
+                ));
+            }
+        }
+        spec = spec.at(pos).rotated(quat);
         for (ji, j) in bf.joints.iter().enumerate() {
             let jf = j.get_ref();
             let jfield = format!("{field}.joints[{ji}]");
             let kind = jf.kind.get_ref().as_str();
-            let axis = || {
-                jf.axis.ok_or_else(|| {
-                    src.error(
-                        j.span(),
-                        &format!("{jfield}.axis"),
-                        format!("a {kind} joint needs an axis"),
-                    )
-                })
+            let axis = || match &jf.axis {
+                None => Err(src.error(
+                    j.span(),
+                    &format!("{jfield}.axis"),
+                    format!("a {kind} joint needs an axis"),
+                )),
+                Some(a) => {
+                    let v = *a.get_ref();
+                    let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+                    if n.is_finite() && n >= 1e-12 {
+                        Ok(v)
+                    } else {
+                        Err(src.error(
+                            a.span(),
+                            &format!("{jfield}.axis"),
+                            format!("axis {v:?} is zero or not finite"),
+                        ))
+                    }
+                }
             };
             let mut js = match kind {
                 "hinge" => JointSpec::hinge(&jf.name, axis()?),

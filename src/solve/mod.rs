@@ -312,6 +312,15 @@ pub enum ReturnCode {
     ProjectionFailed { t: f64, row: String, residual: f64 },
     /// With [`Settings::strict`]: a conditioning warning stopped the solve.
     IllConditioned { t: f64, warning: Box<Warning> },
+    /// The sink asked to stop ([`SampleSink::interrupted`]: Ctrl-C or SIGTERM in `progmo solve`).
+    Interrupted { t: f64 },
+    /// At the recent step rate the span needs about `needed` steps, over 10 times `max_steps`:
+    /// stopped early rather than after minutes of steps into the limit.
+    TooManySteps {
+        t: f64,
+        needed: f64,
+        max_steps: usize,
+    },
 }
 
 impl std::fmt::Display for ReturnCode {
@@ -358,6 +367,19 @@ impl std::fmt::Display for ReturnCode {
             ReturnCode::IllConditioned { warning, .. } => {
                 write!(f, "strict mode stopped the solve: {warning}")
             }
+            ReturnCode::Interrupted { t } => write!(
+                f,
+                "the solve was interrupted at t = {t:.6} (Ctrl-C or a termination signal)"
+            ),
+            ReturnCode::TooManySteps {
+                t,
+                needed,
+                max_steps,
+            } => write!(
+                f,
+                "at its step rate up to t = {t:.6} the time span needs about {needed:.1e} steps, \
+                 far more than max_steps = {max_steps}: stopped early (shorten t1)"
+            ),
         }
     }
 }
@@ -381,6 +403,8 @@ impl ReturnCode {
             ReturnCode::InconsistentInitialState { .. } => "inconsistent_initial_state",
             ReturnCode::ProjectionFailed { .. } => "projection_failed",
             ReturnCode::IllConditioned { .. } => "ill_conditioned",
+            ReturnCode::Interrupted { .. } => "interrupted",
+            ReturnCode::TooManySteps { .. } => "too_many_steps",
         }
     }
 
@@ -407,7 +431,9 @@ impl ReturnCode {
             | ReturnCode::NonFinite { t }
             | ReturnCode::MaxSteps { t }
             | ReturnCode::ProjectionFailed { t, .. }
-            | ReturnCode::IllConditioned { t, .. } => Some(t),
+            | ReturnCode::IllConditioned { t, .. }
+            | ReturnCode::Interrupted { t }
+            | ReturnCode::TooManySteps { t, .. } => Some(t),
         }
     }
 }
@@ -594,6 +620,11 @@ pub trait SampleSink {
     /// A conditioning warning was raised (once per warning, at its first crossing). Default:
     /// ignored (it is in [`Solution::warnings`] anyway).
     fn warning(&mut self, _w: &Warning) {}
+    /// Polled after every accepted step: true stops the solve there with
+    /// [`ReturnCode::Interrupted`] (the step's samples are written first). Default: never.
+    fn interrupted(&self) -> bool {
+        false
+    }
 }
 
 impl SampleSink for Trajectory {

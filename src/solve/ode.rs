@@ -35,6 +35,49 @@ pub(crate) enum Stop {
     },
     /// Strict mode: the warning of this index was raised.
     IllConditioned(usize),
+    /// The sink asked to stop.
+    Interrupted,
+    /// At the recent step rate the span needs about this many steps (see [`StepBudget`]).
+    TooManySteps(f64),
+}
+
+/// A run whose step rate says it cannot reach t1 within `max_steps` stops early instead of running
+/// for minutes into the limit (a span of 1e9 s at the scene's own rate): at 10^4 accepted steps and
+/// each doubling after, the steps needed are estimated from the rate since the previous checkpoint
+/// (the recent rate, so an initial transient of small steps does not count against the run); the
+/// run stops when they exceed [`StepBudget::FACTOR`] times `max_steps`.
+struct StepBudget {
+    accepted: usize,
+    next: usize,
+    /// Accepted steps and time at the previous checkpoint.
+    since: (usize, f64),
+}
+
+impl StepBudget {
+    const FIRST: usize = 10_000;
+    const FACTOR: f64 = 10.0;
+
+    fn new(t0: f64) -> Self {
+        StepBudget {
+            accepted: 0,
+            next: Self::FIRST,
+            since: (0, t0),
+        }
+    }
+
+    /// Count a step accepted at `t`; the estimated total if it is beyond the budget.
+    fn step(&mut self, t: f64, t1: f64, max_steps: usize) -> Option<f64> {
+        self.accepted += 1;
+        if self.accepted < self.next {
+            return None;
+        }
+        let (n0, ta) = self.since;
+        let rate = (self.accepted - n0) as f64 / (t - ta);
+        let needed = self.accepted as f64 + rate * (t1 - t);
+        self.since = (self.accepted, t);
+        self.next = self.next.saturating_mul(2);
+        (needed > Self::FACTOR * max_steps as f64).then_some(needed)
+    }
 }
 
 pub(crate) struct MotionOde<'a, M: Model, C: Constraints> {
@@ -79,6 +122,7 @@ pub(crate) struct MotionOde<'a, M: Model, C: Constraints> {
     acc_q: Vec<f64>,
     acc_v: Vec<f64>,
     last_sample_t: f64,
+    budget: StepBudget,
 }
 
 impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
@@ -208,6 +252,7 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
             acc_q: vec![],
             acc_v: vec![],
             last_sample_t: f64::NEG_INFINITY,
+            budget: StepBudget::new(t0),
         };
         me.acc_q = me.q.clone();
         me.acc_v = me.v.clone();
@@ -478,6 +523,12 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
                 t,
                 warning: Box::new(self.warnings[k].clone()),
             },
+            Stop::Interrupted => ReturnCode::Interrupted { t },
+            Stop::TooManySteps(needed) => ReturnCode::TooManySteps {
+                t,
+                needed,
+                max_steps: self.settings.max_steps,
+            },
         }
     }
 
@@ -669,6 +720,16 @@ impl<'a, M: Model, C: Constraints> OdeProblem for MotionOde<'a, M, C> {
         if at_output {
             let (q, v) = (self.q.clone(), self.v.clone());
             self.emit(t1, &q, &v)?;
+        }
+        // A stop request, or a step rate that cannot reach te, ends the run at this step (unless
+        // it completed the span).
+        if t1 < te {
+            if self.sink.interrupted() {
+                return Err(Stop::Interrupted);
+            }
+            if let Some(n) = self.budget.step(t1, te, self.settings.max_steps) {
+                return Err(Stop::TooManySteps(n));
+            }
         }
         Ok(if changed {
             Accept::Changed

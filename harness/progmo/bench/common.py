@@ -43,7 +43,8 @@ class Provenance:
     """The command that reproduces a run and the versions that produced it."""
 
     def __init__(self, argv: Sequence[str]):
-        args = " ".join(argv)
+        # printable: an argument that is not UTF-8 (a path) shows as escapes (`\udcff`)
+        args = " ".join(a.encode("utf-8", "backslashreplace").decode("utf-8") for a in argv)
         self.command = f"progmo bench {args}".strip()
         self.python_command = f"python -m progmo.bench.main {args}".strip()
         self.versions = versions()
