@@ -31,7 +31,6 @@
 use nalgebra::DMatrix;
 
 mod erk;
-mod linalg;
 mod radau5;
 #[cfg(test)]
 mod tests;
