@@ -23,6 +23,7 @@
 
 use nalgebra::{Complex, DMatrix, Matrix3};
 
+use super::control::StepControl;
 use super::{
     fixed_step_count, h_min, initial_step, rms, Accept, DenseOutput, DriverOptions,
     IntegratorStats, OdeProblem, Outcome,
@@ -35,7 +36,7 @@ const NIT: usize = 7;
 const NIT_FIXED: usize = 50;
 /// Safety factor of the step-size controller.
 const SAFE: f64 = 0.9;
-/// Bounds of h_new / h: 1/FACL <= h_new/h <= 1/FACR.
+/// Bounds of h / h_new: FACR <= h / h_new <= FACL.
 const FACL: f64 = 5.0;
 const FACR: f64 = 0.125;
 /// Reuse the Jacobian when the Newton contraction rate stays below THET.
@@ -409,8 +410,8 @@ impl RadauWork {
         let mut faccon = 1.0f64;
         let mut theta = THET;
         let mut hold = h;
-        let (mut hacc, mut erracc) = (h, 1e-2f64);
-        let mut naccpt = 0usize;
+        // Gustafsson's predictive controller (HNW II, IV.8, (8.25)); err = O(h^4).
+        let mut ctl = StepControl::predictive(0.25, SAFE, FACR, FACL);
         loop {
             if stats.steps + stats.rejected >= opts.max_steps {
                 return Outcome::MaxSteps { t };
@@ -561,27 +562,20 @@ impl RadauWork {
                     }
                     continue;
                 }
-                // Step-size proposal, safety factor decreasing with the Newton iterations.
+                // Safety factor decreasing with the Newton iterations.
                 let fac = SAFE.min(SAFE * (1 + 2 * NIT) as f64 / (newt + 2 * NIT) as f64);
-                let mut quot = (err.powf(0.25) / fac).clamp(FACR, FACL);
-                hnew = hs / quot;
                 if err >= 1.0 {
                     stats.rejected += 1;
+                    h = if first {
+                        hs * 0.1
+                    } else {
+                        hs / ctl.rejected(err, fac)
+                    };
                     reject = true;
-                    h = if first { hs * 0.1 } else { hnew };
                     need_jac = !caljac;
                     continue;
                 }
-                // Gustafsson's predictive controller (HNW II, IV.8, (8.25)).
-                naccpt += 1;
-                if naccpt > 1 {
-                    let facgus =
-                        ((hacc / hs) * (err * err / erracc).powf(0.25) / SAFE).clamp(FACR, FACL);
-                    quot = quot.max(facgus);
-                    hnew = hs / quot;
-                }
-                hacc = hs;
-                erracc = err.max(1e-2);
+                hnew = ctl.accepted(err, hs, fac, opts.h_max, reject);
             }
             // Accepted: new y and collocation polynomial.
             first = false;
@@ -631,10 +625,6 @@ impl RadauWork {
             caljac = false;
             if !adaptive {
                 continue;
-            }
-            hnew = hnew.min(opts.h_max);
-            if reject {
-                hnew = hnew.min(hs);
             }
             reject = false;
             let qt = hnew / hs;
