@@ -2,6 +2,8 @@
 //! reproduce what their `purpose` claims (exact solutions, invariants). The scene format's schema
 //! and its agreement with the loader and FORMAT.md: `tests/schema.rs`.
 
+mod common;
+
 use progmo::scene::Scene;
 use std::path::PathBuf;
 
@@ -10,13 +12,7 @@ fn root() -> PathBuf {
 }
 
 fn catalog() -> Vec<PathBuf> {
-    let mut v: Vec<PathBuf> = std::fs::read_dir(root().join("references/scenes"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
-        .collect();
-    v.sort();
-    v
+    common::toml_files("references/scenes")
 }
 
 // ---------------------------------------------------------------------------------------------

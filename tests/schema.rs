@@ -9,6 +9,8 @@
 //!   keys are the backticked names in the first column), and per table the page's keys equal
 //!   the schema's properties.
 
+mod common;
+
 use progmo::scene::schema::json_schema;
 use progmo::scene::Scene;
 use serde_json::Value as Json;
@@ -55,23 +57,13 @@ fn errors(v: &jsonschema::Validator, text: &str) -> Vec<String> {
         .collect()
 }
 
-fn toml_files(dir: &str) -> Vec<PathBuf> {
-    let mut v: Vec<PathBuf> = std::fs::read_dir(root().join(dir))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
-        .collect();
-    v.sort();
-    v
-}
-
 #[test]
 fn every_bundled_scene_matches_the_schema() {
     let v = validator();
     let mut bad = vec![];
     let mut n = 0;
     for dir in ["references/scenes", "references/testset", "tests/scenes"] {
-        for f in toml_files(dir) {
+        for f in common::toml_files(dir) {
             n += 1;
             for e in errors(&v, &std::fs::read_to_string(&f).unwrap()) {
                 bad.push(format!("{}: {e}", f.display()));
