@@ -3,14 +3,59 @@
 //! nalgebra's decompositions consume and allocate and need `RealField`; the right-hand side of a
 //! programmed motion is evaluated millions of times, also over dual numbers (for exact Jacobians), so
 //! the two factorizations it needs are written here on preallocated storage:
-//! - LU with partial pivoting (Golub & Van Loan, *Matrix Computations*, Alg. 3.4.1);
+//! - LU with partial pivoting (Golub & Van Loan, *Matrix Computations*, Alg. 3.4.1), also over
+//!   complex numbers (Radau IIA's complex iteration matrix, [`lu_factor_with`] and [`Modulus`]);
 //! - Householder QR with column pivoting, rank-revealing (ibid., Alg. 5.4.1).
 //!
 //! Pivot choices compare real parts only, so a dual evaluation follows the same branch as the
 //! `f64` one and its derivative parts are the derivatives of that branch.
 
 use crate::scalar::{c, re, Scalar};
-use nalgebra::DMatrix;
+use nalgebra::{Complex, DMatrix};
+use std::ops::{DivAssign, Mul, MulAssign, SubAssign};
+
+/// The field operations LU needs: `f64`, the dual numbers and `Complex<f64>` have them.
+pub trait Field:
+    nalgebra::Scalar + Copy + Mul<Output = Self> + MulAssign + SubAssign + DivAssign
+{
+}
+impl<T: nalgebra::Scalar + Copy + Mul<Output = T> + MulAssign + SubAssign + DivAssign> Field for T {}
+
+/// How LU sizes and inverts a pivot of a [`Field`].
+pub trait Pivot<T> {
+    /// Magnitude compared to choose the pivot.
+    fn size(x: T) -> f64;
+    /// 1 / x.
+    fn recip(x: T) -> T;
+}
+
+/// Pivots of [`Scalar`]s by the real part: a dual evaluation follows the `f64` branch.
+pub struct RealPart;
+
+impl<S: Scalar> Pivot<S> for RealPart {
+    #[inline]
+    fn size(x: S) -> f64 {
+        re(x).abs()
+    }
+    #[inline]
+    fn recip(x: S) -> S {
+        x.recip()
+    }
+}
+
+/// Pivots of complex numbers by the modulus.
+pub struct Modulus;
+
+impl Pivot<Complex<f64>> for Modulus {
+    #[inline]
+    fn size(x: Complex<f64>) -> f64 {
+        x.norm()
+    }
+    #[inline]
+    fn recip(x: Complex<f64>) -> Complex<f64> {
+        Complex::new(1.0, 0.0) / x
+    }
+}
 
 /// A pivot fell to zero (or below `tol` times the largest pivot) during a factorization.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -30,13 +75,23 @@ pub fn lu_factor<S: Scalar>(
     piv: &mut [usize],
     tol: f64,
 ) -> Result<f64, Singular> {
+    lu_factor_with::<S, RealPart>(a, n, piv, tol)
+}
+
+/// [`lu_factor`] over any [`Field`], pivots chosen and inverted by `P`.
+pub fn lu_factor_with<T: Field, P: Pivot<T>>(
+    a: &mut DMatrix<T>,
+    n: usize,
+    piv: &mut [usize],
+    tol: f64,
+) -> Result<f64, Singular> {
     let mut umax = 0.0f64;
     let mut umin = f64::INFINITY;
     for k in 0..n {
         let mut p = k;
-        let mut best = re(a[(k, k)]).abs();
+        let mut best = P::size(a[(k, k)]);
         for i in k + 1..n {
-            let m = re(a[(i, k)]).abs();
+            let m = P::size(a[(i, k)]);
             if m > best {
                 best = m;
                 p = i;
@@ -54,7 +109,7 @@ pub fn lu_factor<S: Scalar>(
         if p != k {
             a.swap_rows(k, p);
         }
-        let inv = a[(k, k)].recip();
+        let inv = P::recip(a[(k, k)]);
         let ld = a.nrows();
         let data = a.as_mut_slice();
         for x in &mut data[k * ld + k + 1..k * ld + n] {
@@ -77,8 +132,8 @@ pub fn lu_factor<S: Scalar>(
     Ok(rcond)
 }
 
-/// Solve A x = b in place with the factors from [`lu_factor`].
-pub fn lu_solve<S: Scalar>(a: &DMatrix<S>, n: usize, piv: &[usize], b: &mut [S]) {
+/// Solve A x = b in place with the factors from [`lu_factor`] (or [`lu_factor_with`]).
+pub fn lu_solve<T: Field>(a: &DMatrix<T>, n: usize, piv: &[usize], b: &mut [T]) {
     for k in 0..n {
         b.swap(k, piv[k]);
     }
@@ -106,7 +161,7 @@ fn two_columns<S>(data: &mut [S], ld: usize, k: usize, j: usize) -> (&[S], &mut 
 
 /// y <- y - alpha x.
 #[inline]
-fn axpy_neg<S: Scalar>(alpha: S, x: &[S], y: &mut [S]) {
+fn axpy_neg<T: Field>(alpha: T, x: &[T], y: &mut [T]) {
     for (yi, &xi) in y.iter_mut().zip(x) {
         *yi -= alpha * xi;
     }
@@ -485,6 +540,29 @@ mod tests {
         lu_solve(&a, n, &piv, &mut x);
         let r = &a0 * nalgebra::DVector::from_vec(x) - nalgebra::DVector::from_vec(b0);
         assert!(r.amax() < 50.0 * f64::EPSILON, "residual {}", r.amax());
+    }
+
+    /// The same LU over complex numbers (Radau IIA's E2), pivoting by modulus: a matrix whose
+    /// first column has its largest real part and its largest modulus in different rows.
+    #[test]
+    fn lu_solves_complex_systems_pivoting_by_modulus() {
+        let n = 6;
+        let (re, im) = (test_matrix(n, n, 5), test_matrix(n, n, 9));
+        let mut a0 = DMatrix::from_fn(n, n, |i, j| Complex::new(re[(i, j)], im[(i, j)]));
+        a0[(0, 0)] = Complex::new(0.6, 0.0);
+        a0[(1, 0)] = Complex::new(0.1, 2.0);
+        let b0: Vec<Complex<f64>> = (0..n).map(|i| Complex::new(i as f64, 1.0)).collect();
+        let mut a = a0.clone();
+        let mut piv = vec![0; n];
+        lu_factor_with::<_, Modulus>(&mut a, n, &mut piv, 0.0).unwrap();
+        assert_eq!(piv[0], 1, "pivot of largest modulus");
+        let mut x = b0.clone();
+        lu_solve(&a, n, &piv, &mut x);
+        let r = &a0 * nalgebra::DVector::from_vec(x) - nalgebra::DVector::from_vec(b0);
+        let worst = r.iter().map(|z| z.norm()).fold(0.0, f64::max);
+        assert!(worst < 50.0 * f64::EPSILON, "residual {worst}");
+        let mut singular = DMatrix::from_element(2, 2, Complex::new(1.0, 1.0));
+        assert!(lu_factor_with::<_, Modulus>(&mut singular, 2, &mut piv, 0.0).is_err());
     }
 
     #[test]

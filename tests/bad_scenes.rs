@@ -13,6 +13,8 @@
 //!
 //! File names start with their category (`time_output_dt_tiny.toml`), one of [`CATEGORIES`].
 
+mod common;
+
 use progmo::scene::{Scene, SceneError};
 use std::path::{Path, PathBuf};
 
@@ -74,14 +76,7 @@ fn parse_header(path: &Path, text: &str) -> Expect {
 }
 
 fn bad_files() -> Vec<PathBuf> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/bad_scenes");
-    let mut v: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .expect("tests/bad_scenes")
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
-        .collect();
-    v.sort();
-    v
+    common::toml_files("tests/bad_scenes")
 }
 
 fn load_err(path: &Path) -> Result<SceneError, String> {

@@ -2,21 +2,16 @@
 //! generated expressions go through the same bodies (`progmo::fuzzing`), which must not panic.
 //! A few thousand cases, a few seconds in release; the long coverage-guided runs are `fuzz/run.sh`.
 
+mod common;
+
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestRunner};
-use std::path::PathBuf;
 
 /// The seed scenes: catalog, test-only scenes and the bad-input set.
 fn seeds() -> Vec<Vec<u8>> {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let mut out = vec![];
     for dir in ["references/scenes", "tests/scenes", "tests/bad_scenes"] {
-        let mut files: Vec<_> = std::fs::read_dir(root.join(dir))
-            .unwrap()
-            .map(|e| e.unwrap().path())
-            .filter(|p| p.extension().is_some_and(|e| e == "toml"))
-            .collect();
-        files.sort();
+        let files = common::toml_files(dir);
         out.extend(files.iter().map(|p| std::fs::read(p).unwrap()));
     }
     out

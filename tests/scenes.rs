@@ -1,18 +1,13 @@
 //! The bundled scene catalog (`references/scenes/`): every scene loads, solves and meets its own
 //! programme-residual tolerance; tree and Lagrangian descriptions agree with the Rust problems.
 
+mod common;
+
 use progmo::scene::Scene;
 use std::path::PathBuf;
 
 fn catalog() -> Vec<PathBuf> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("references/scenes");
-    let mut v: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .expect("catalog")
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
-        .collect();
-    v.sort();
-    v
+    common::toml_files("references/scenes")
 }
 
 #[test]

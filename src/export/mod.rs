@@ -28,9 +28,9 @@
 //! - **Attractors** have no element in either format: they are listed in
 //!   [`ExportReport::harness_forces`] with their formula.
 //!
-//! Parity check: `harness/tools/export_parity.py` loads both documents in MuJoCo 4.0 / Pinocchio 4.1
-//! and compares M(q) and bias(q, v) = C v + g with ours at sample states written by the test
-//! `write_parity_fixtures` (`PROGMO_EXPORT_DIR=dir cargo test --release --lib write_parity`).
+//! Parity check: `tests/python/test_export_parity.py` loads both documents of every bundled tree
+//! scene in MuJoCo and Pinocchio (through the harness back-ends and the reports' q/v maps) and
+//! compares M(q) and every force term with ours at random states, with a negative control.
 //!
 //! ```
 //! use progmo::export::{mjcf, urdf, ExportOptions};

@@ -9,6 +9,7 @@
     clippy::too_many_arguments
 )]
 
+use super::control::StepControl;
 use super::{
     fixed_step_count, h_min, initial_step, rms, Accept, DenseOutput, DriverOptions,
     IntegratorStats, OdeProblem, Outcome,
@@ -405,36 +406,14 @@ impl Kind {
     }
 }
 
-/// Parameters of the PI step-size controller of DOPRI5/DOP853 (HNW I, II.4 and IV.2, (2.43c)):
-/// h_new = h / fac, fac = clamp(err^(expo1) / facold^beta / safe, 1/fac_max, 1/fac_min).
-struct Controller {
-    beta: f64,
-    expo1: f64,
-    fac_min: f64,
-    fac_max: f64,
-    safe: f64,
-}
-
-impl Controller {
-    fn for_kind(kind: Kind) -> Self {
-        match kind {
-            // DOPRI5: beta = 0.04, expo1 = 1/5 - 0.75 beta, 0.2 <= h_new/h <= 10.
-            Kind::Dopri5 | Kind::Rk4 => Controller {
-                beta: 0.04,
-                expo1: 0.2 - 0.04 * 0.75,
-                fac_min: 0.2,
-                fac_max: 10.0,
-                safe: 0.9,
-            },
-            // DOP853: beta = 0 (pure I controller), expo1 = 1/8, 1/3 <= h_new/h <= 6.
-            Kind::Dop853 => Controller {
-                beta: 0.0,
-                expo1: 1.0 / 8.0,
-                fac_min: 0.333,
-                fac_max: 6.0,
-                safe: 0.9,
-            },
-        }
+/// The PI step-size controller of DOPRI5 / DOP853 (HNW I, IV.2, (2.43c)), with their codes'
+/// parameters.
+fn controller(kind: Kind) -> StepControl {
+    match kind {
+        // DOPRI5: beta = 0.04, expo1 = 1/5 - 0.75 beta, 0.2 <= h_new/h <= 10.
+        Kind::Dopri5 | Kind::Rk4 => StepControl::pi(0.2 - 0.04 * 0.75, 0.04, 0.9, 0.2, 10.0),
+        // DOP853: beta = 0 (pure I controller), expo1 = 1/8, 1/3 <= h_new/h <= 6.
+        Kind::Dop853 => StepControl::pi(1.0 / 8.0, 0.0, 0.9, 0.333, 6.0),
     }
 }
 
@@ -682,7 +661,7 @@ impl ErkWork {
     ) -> Outcome<P::Error> {
         let n = self.n;
         let fs = kind.stages();
-        let ctl = Controller::for_kind(kind);
+        let mut ctl = controller(kind);
         let mut t = t0;
         stats.rhs_evals += 1;
         if let Err(error) = problem.rhs(t, y, &mut self.k[..n]) {
@@ -720,7 +699,6 @@ impl ErkWork {
                 }
             }
         };
-        let mut facold: f64 = 1e-4;
         let mut last_rejected = false;
         loop {
             let attempts = stats.steps + stats.rejected;
@@ -786,22 +764,13 @@ impl ErkWork {
             }
             let mut hnew = h;
             if adaptive {
-                let fac11 = err.powf(ctl.expo1);
                 if err > 1.0 {
-                    // Rejected: shrink, h_new = h / min(1/fac_min, fac11 / safe).
                     stats.rejected += 1;
-                    h = hs / (1.0 / ctl.fac_min).min(fac11 / ctl.safe);
+                    h = hs / ctl.rejected(err, ctl.safe);
                     last_rejected = true;
                     continue;
                 }
-                // Lund stabilisation (PI controller), HNW I, IV.2.
-                let fac = (fac11 / facold.powf(ctl.beta) / ctl.safe)
-                    .clamp(1.0 / ctl.fac_max, 1.0 / ctl.fac_min);
-                facold = err.max(1e-4);
-                hnew = (hs / fac).min(opts.h_max);
-                if last_rejected {
-                    hnew = hnew.min(hs);
-                }
+                hnew = ctl.accepted(err, hs, ctl.safe, opts.h_max, last_rejected);
                 last_rejected = false;
             }
             // Accepted.

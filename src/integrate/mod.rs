@@ -17,8 +17,9 @@
 //! - error norm: RMS of err_i / sc_i with sc from [`OdeProblem::error_scale`]`(y0, y1, atol, rtol)`;
 //!   DOP853 combines its 5th- and 3rd-order estimates as HNW I, II.10 (err5^2 / sqrt(err5^2 +
 //!   0.01 err3^2)); Radau5 uses RADAU5's transformed tolerances (see `radau5`);
-//! - PI step-size control (HNW I, IV.2) for DOPRI5 (beta = 0.04) and DOP853 (beta = 0), never
-//!   increasing h right after a rejection; Gustafsson's predictive controller for Radau5;
+//! - one step-size controller (`control`): PI control (HNW I, IV.2) for DOPRI5 (beta = 0.04) and
+//!   DOP853 (beta = 0), Gustafsson's predictive control for Radau5, never increasing h right after
+//!   a rejection;
 //! - non-finite stages or error estimates, and `rhs` errors inside a trial step, reject the step and
 //!   divide h by 4 (an `rhs` error is reported once h < h_min, so a stop is localized);
 //! - after [`Accept::Changed`] the explicit methods re-evaluate f(t1, y) instead of reusing the FSAL
@@ -30,8 +31,8 @@
 
 use nalgebra::DMatrix;
 
+mod control;
 mod erk;
-mod linalg;
 mod radau5;
 #[cfg(test)]
 mod tests;

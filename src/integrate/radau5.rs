@@ -4,7 +4,8 @@
 //!   the exact Jacobian J = df/dy at the step start; with A^{-1} = T diag(gamma, [[alpha, -beta],
 //!   [beta, alpha]]) T^{-1} the 3n x 3n system splits into a real n x n system with
 //!   (gamma/h I - J) and a complex one with ((alpha + i beta)/h I - J) (IV.8, (8.15)-(8.17));
-//!   the complex system is factored and solved in complex arithmetic (own in-place LU);
+//!   the complex system is factored and solved in complex arithmetic (the crate's LU,
+//!   `crate::linalg`, pivoting by modulus);
 //! - Newton stopping and divergence test from the contraction rate theta (IV.8, (8.10)-(8.13));
 //! - error estimate err = (I - h gamma0 J)^{-1} [gamma0 h f(y0) + sum e_i Z_i], filtered once more
 //!   through (I - h gamma0 J)^{-1} after a rejected or first step (IV.8, (8.19)-(8.20));
@@ -22,11 +23,12 @@
 
 use nalgebra::{Complex, DMatrix, Matrix3};
 
-use super::linalg::{lu_factor, lu_solve};
+use super::control::StepControl;
 use super::{
     fixed_step_count, h_min, initial_step, rms, Accept, DenseOutput, DriverOptions,
     IntegratorStats, OdeProblem, Outcome,
 };
+use crate::linalg::{lu_factor, lu_factor_with, lu_solve, Modulus};
 
 /// Maximum Newton iterations per step (RADAU5 default).
 const NIT: usize = 7;
@@ -34,7 +36,7 @@ const NIT: usize = 7;
 const NIT_FIXED: usize = 50;
 /// Safety factor of the step-size controller.
 const SAFE: f64 = 0.9;
-/// Bounds of h_new / h: 1/FACL <= h_new/h <= 1/FACR.
+/// Bounds of h / h_new: FACR <= h / h_new <= FACL.
 const FACL: f64 = 5.0;
 const FACR: f64 = 0.125;
 /// Reuse the Jacobian when the Newton contraction rate stays below THET.
@@ -230,7 +232,8 @@ impl RadauWork {
             self.e1[(j, j)] += fac1;
             self.e2[(j, j)] += e2d;
         }
-        lu_factor(&mut self.e1, &mut self.piv1) && lu_factor(&mut self.e2, &mut self.piv2)
+        lu_factor(&mut self.e1, n, &mut self.piv1, 0.0).is_ok()
+            && lu_factor_with::<_, Modulus>(&mut self.e2, n, &mut self.piv2, 0.0).is_ok()
     }
 
     /// Simplified Newton iteration for the stage increments of a step of size h from (t, y).
@@ -279,11 +282,11 @@ impl RadauWork {
                 self.z[n + i] = g(1) - alphn * w[1] + betan * w[2];
                 self.z[2 * n + i] = g(2) - alphn * w[2] - betan * w[1];
             }
-            lu_solve(&self.e1, &self.piv1, &mut self.z[..n]);
+            lu_solve(&self.e1, n, &self.piv1, &mut self.z[..n]);
             for i in 0..n {
                 self.cbuf[i] = Complex::new(self.z[n + i], self.z[2 * n + i]);
             }
-            lu_solve(&self.e2, &self.piv2, &mut self.cbuf);
+            lu_solve(&self.e2, n, &self.piv2, &mut self.cbuf);
             for i in 0..n {
                 self.z[n + i] = self.cbuf[i].re;
                 self.z[2 * n + i] = self.cbuf[i].im;
@@ -407,8 +410,8 @@ impl RadauWork {
         let mut faccon = 1.0f64;
         let mut theta = THET;
         let mut hold = h;
-        let (mut hacc, mut erracc) = (h, 1e-2f64);
-        let mut naccpt = 0usize;
+        // Gustafsson's predictive controller (HNW II, IV.8, (8.25)); err = O(h^4).
+        let mut ctl = StepControl::predictive(0.25, SAFE, FACR, FACL);
         loop {
             if stats.steps + stats.rejected >= opts.max_steps {
                 return Outcome::MaxSteps { t };
@@ -559,27 +562,20 @@ impl RadauWork {
                     }
                     continue;
                 }
-                // Step-size proposal, safety factor decreasing with the Newton iterations.
+                // Safety factor decreasing with the Newton iterations.
                 let fac = SAFE.min(SAFE * (1 + 2 * NIT) as f64 / (newt + 2 * NIT) as f64);
-                let mut quot = (err.powf(0.25) / fac).clamp(FACR, FACL);
-                hnew = hs / quot;
                 if err >= 1.0 {
                     stats.rejected += 1;
+                    h = if first {
+                        hs * 0.1
+                    } else {
+                        hs / ctl.rejected(err, fac)
+                    };
                     reject = true;
-                    h = if first { hs * 0.1 } else { hnew };
                     need_jac = !caljac;
                     continue;
                 }
-                // Gustafsson's predictive controller (HNW II, IV.8, (8.25)).
-                naccpt += 1;
-                if naccpt > 1 {
-                    let facgus =
-                        ((hacc / hs) * (err * err / erracc).powf(0.25) / SAFE).clamp(FACR, FACL);
-                    quot = quot.max(facgus);
-                    hnew = hs / quot;
-                }
-                hacc = hs;
-                erracc = err.max(1e-2);
+                hnew = ctl.accepted(err, hs, fac, opts.h_max, reject);
             }
             // Accepted: new y and collocation polynomial.
             first = false;
@@ -630,10 +626,6 @@ impl RadauWork {
             if !adaptive {
                 continue;
             }
-            hnew = hnew.min(opts.h_max);
-            if reject {
-                hnew = hnew.min(hs);
-            }
             reject = false;
             let qt = hnew / hs;
             if theta <= THET && (QUOT1..=QUOT2).contains(&qt) {
@@ -671,7 +663,7 @@ impl RadauWork {
                 (dd[0] * self.z[i] + dd[1] * self.z[n + i] + dd[2] * self.z[2 * n + i]) / h;
             self.ecorr[i] = self.ebuf[i] + self.f0[i];
         }
-        lu_solve(&self.e1, &self.piv1, &mut self.ecorr);
+        lu_solve(&self.e1, n, &self.piv1, &mut self.ecorr);
         let mut err = rms(&self.ecorr, &self.scal).max(1e-10);
         if err >= 1.0 && refine && err.is_finite() {
             for i in 0..n {
@@ -682,7 +674,7 @@ impl RadauWork {
             for i in 0..n {
                 self.ecorr[i] = self.fz[i] + self.ebuf[i];
             }
-            lu_solve(&self.e1, &self.piv1, &mut self.ecorr);
+            lu_solve(&self.e1, n, &self.piv1, &mut self.ecorr);
             err = rms(&self.ecorr, &self.scal).max(1e-10);
         }
         Ok(err)

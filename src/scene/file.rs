@@ -1,21 +1,42 @@
-//! The scene file as written (TOML), before validation. The reference page is `FORMAT.md` beside
-//! this file and the JSON Schema is `scene.schema.json`; a test keeps the three in step.
+//! The scene file as written (TOML), before validation: the one source of truth of the format.
+//! The JSON Schema `scene.schema.json` is generated from these types ([`super::schema`]; doc
+//! comments become its descriptions) and `FORMAT.md` is checked against it (`tests/schema.rs`).
 
+use super::schema::{self, Expression, Identifier};
+use crate::solve::{self, Settings};
+use schemars::JsonSchema;
 use serde::de::{self, Deserializer, SeqAccess, Visitor};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::fmt;
 use toml::Spanned;
 
-/// A number or an expression in the parameters (`"2*pi"`, `"sqrt(mu/r0)"`).
-#[derive(Clone, Debug)]
+/// Model kinds (`model.kind`).
+pub const MODEL_KINDS: [&str; 2] = ["lagrangian", "tree"];
+/// Keys of `[model]` only a lagrangian model has.
+pub const LAGRANGIAN_ONLY: [&str; 4] = ["coordinates", "mass_matrix", "mass_diagonal", "potential"];
+/// Keys of `[model]` only a tree model has.
+pub const TREE_ONLY: [&str; 5] = ["bodies", "sites", "gravity", "attractors", "point_forces"];
+/// Joint types (`type` of a joint).
+pub const JOINT_TYPES: [&str; 4] = ["hinge", "slide", "ball", "free"];
+/// Joint types that need an `axis`.
+pub const JOINTS_WITH_AXIS: [&str; 2] = ["hinge", "slide"];
+/// Simulators of the cross-simulator check (keys of `[checks] not_checked`).
+pub const SIMULATORS: [&str; 2] = ["mujoco", "pinocchio"];
+
+/// A number or an expression of parameters ("2*pi", "sqrt(mu/r0)").
+#[derive(Clone, Debug, JsonSchema)]
+#[serde(untagged)]
+#[schemars(rename = "number_or_expression")]
 pub enum Number {
     Value(f64),
     Expr(String),
 }
 
-/// One joint coordinate's initial value: a number/expression, or several for ball and free joints.
-#[derive(Clone, Debug)]
+/// One value, or the values of a ball joint (4 for q, 3 for v) or a free joint (7, 6).
+#[derive(Clone, Debug, JsonSchema)]
+#[serde(untagged)]
+#[schemars(rename = "initial_value")]
 pub enum Initial {
     One(Number),
     Many(Vec<Number>),
@@ -84,93 +105,156 @@ impl<'de> Deserialize<'de> for Initial {
     }
 }
 
-#[derive(Clone, Debug, Deserialize)]
+/// A mechanical system, its programme (ideal constraints whose reactions are the control forces),
+/// the initial state and what to check. Reference: src/scene/FORMAT.md.
+#[derive(Clone, Debug, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(title = "progmo scene file")]
 pub struct SceneFile {
+    /// Scene name, non-empty; in the catalog equal to the file stem.
+    #[schemars(length(min = 1))]
     pub name: String,
+    /// What the scene is.
     #[serde(default)]
     pub description: String,
-    /// Why this scene is in the catalog (what it tests).
+    /// Why it is in the catalog: what it checks.
     #[serde(default)]
     pub purpose: String,
+    /// Named constants: numbers or expressions of other parameters (and pi). Names are
+    /// identifiers other than t and pi.
     #[serde(default)]
+    #[schemars(with = "BTreeMap<String, Number>", transform = schema::parameter_names)]
     pub parameters: BTreeMap<String, Spanned<Number>>,
+    #[schemars(with = "ModelFile")]
     pub model: Spanned<ModelFile>,
+    /// System constraints: the mechanism's own constraints (e.g. loop closures). Rows in file
+    /// order, before the programme.
     #[serde(default)]
     pub constraints: Vec<RowFile>,
+    /// Programme rows g(t, q, v[, dv/dt]) = 0. May be empty or absent: the motion is then the
+    /// (constrained) free motion, u = 0.
     #[serde(default)]
     pub programme: Vec<RowFile>,
+    #[schemars(with = "InitialFile")]
     pub initial: Spanned<InitialFile>,
+    #[schemars(with = "TimeFile")]
     pub time: Spanned<TimeFile>,
     #[serde(default)]
     pub solver: SolverFile,
+    /// Check tolerances by name (programme_residual is required for catalog scenes), each with
+    /// a reason.
     #[serde(default)]
+    #[schemars(with = "BTreeMap<String, ToleranceFile>")]
     pub tolerances: BTreeMap<String, Spanned<ToleranceFile>>,
     #[serde(default)]
     pub checks: ChecksFile,
 }
 
 /// How the cross-simulator check treats the scene.
-#[derive(Clone, Debug, Default, Deserialize)]
+#[derive(Clone, Debug, Default, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(rename = "checks")]
 pub struct ChecksFile {
-    /// Simulators the scene is declared not to be checked in (`mujoco`, `pinocchio`), each with the
-    /// reason: an expected `not_checked` does not fail a run.
+    /// Simulators the scene is declared not to be checked in (mujoco, pinocchio), each with the
+    /// reason: an expected not_checked does not fail a run (an unexpected one does).
     #[serde(default)]
+    #[schemars(with = "BTreeMap<String, String>", transform = schema::simulator_names)]
     pub not_checked: BTreeMap<String, Spanned<String>>,
 }
 
 /// One row of a full mass matrix as written: expressions with their places.
 pub type SpannedRow = Spanned<Vec<Spanned<String>>>;
 
-#[derive(Clone, Debug, Deserialize)]
+/// The mechanical system: kind = lagrangian (coordinates and A(q) as expressions) or tree
+/// (bodies and joints).
+#[derive(Clone, Debug, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = schema::model_kind_rules)]
+#[schemars(rename = "model")]
 pub struct ModelFile {
-    /// "lagrangian" or "tree".
+    /// Model kind.
+    #[schemars(schema_with = "schema::model_kind")]
     pub kind: Spanned<String>,
     // lagrangian
+    /// lagrangian: names of the generalized coordinates q (identifiers, not t, pi or a
+    /// parameter; unique).
     #[serde(default)]
+    #[schemars(with = "Vec<Identifier>", length(min = 1), extend("uniqueItems" = true))]
     pub coordinates: Vec<Spanned<String>>,
+    /// lagrangian: the full symmetric n x n A(q), rows of expressions of q and parameters.
+    /// Exactly one of mass_matrix and mass_diagonal.
     #[serde(default)]
+    #[schemars(with = "Option<Vec<Vec<Expression>>>")]
     pub mass_matrix: Option<Spanned<Vec<SpannedRow>>>,
+    /// lagrangian: the diagonal of A(q), n expressions of q and parameters.
     #[serde(default)]
+    #[schemars(with = "Option<Vec<Expression>>")]
     pub mass_diagonal: Option<Spanned<Vec<Spanned<String>>>>,
+    /// lagrangian: potential energy V(t, q); adds Q = -dV/dq.
     #[serde(default)]
+    #[schemars(with = "Option<Expression>")]
     pub potential: Option<Spanned<String>>,
+    /// Generalized forces by coordinate name (lagrangian: a coordinate; tree: a velocity
+    /// coordinate), expressions of t, q and v.
     #[serde(default)]
+    #[schemars(with = "BTreeMap<String, Expression>")]
     pub forces: BTreeMap<String, Spanned<String>>,
     // tree
+    /// tree: uniform gravity vector (world frame), m/s^2. Default [0, 0, 0].
     #[serde(default)]
     pub gravity: Option<[f64; 3]>,
+    /// tree: bodies in any order; each names its parent (world by default).
     #[serde(default)]
+    #[schemars(with = "Vec<BodyFile>", length(min = 1))]
     pub bodies: Vec<Spanned<BodyFile>>,
+    /// tree: named points fixed in bodies; their signals (tip.x, tip.x', tip.x'', tip.qw,
+    /// tip.wx, tip.wx') may appear in rows.
     #[serde(default)]
+    #[schemars(with = "Vec<SiteFile>")]
     pub sites: Vec<Spanned<SiteFile>>,
+    /// tree: Newtonian attractors acting on every body's mass (potential -mu m / r).
     #[serde(default)]
+    #[schemars(with = "Vec<AttractorFile>")]
     pub attractors: Vec<Spanned<AttractorFile>>,
+    /// tree: forces applied at points of bodies (world-frame components as expressions of t, q,
+    /// v).
     #[serde(default)]
+    #[schemars(with = "Vec<PointForceFile>")]
     pub point_forces: Vec<Spanned<PointForceFile>>,
 }
 
-#[derive(Clone, Debug, Deserialize)]
+/// A rigid body of a tree model.
+#[derive(Clone, Debug, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(rename = "body")]
 pub struct BodyFile {
+    /// Body name (unique).
     pub name: String,
+    /// Parent body name, or world (bodies may be listed in any order).
     #[serde(default = "world")]
     pub parent: String,
-    /// Placement in the parent frame (default 0); spanned so that a bad value is located at itself.
+    /// Frame origin in the parent's frame (m).
     #[serde(default)]
+    #[schemars(with = "[f64; 3]", extend("default" = [0.0, 0.0, 0.0]))]
     pub pos: Option<Spanned<[f64; 3]>>,
-    /// Orientation (w, x, y, z) in the parent frame (default identity).
+    /// Frame orientation in the parent's frame, quaternion (w, x, y, z), normalised implicitly.
     #[serde(default)]
+    #[schemars(with = "[f64; 4]", extend("default" = [1.0, 0.0, 0.0, 0.0]))]
     pub quat: Option<Spanned<[f64; 4]>>,
+    /// Mass (kg), >= 0; 0 with no inertia makes a massless link.
+    #[schemars(with = "f64", range(min = 0.0))]
     pub mass: Spanned<f64>,
+    /// Centre of mass in the body frame (m).
     #[serde(default)]
     pub com: [f64; 3],
-    /// Principal moments [ixx, iyy, izz] or the full [ixx, iyy, izz, ixy, ixz, iyz] about the CoM.
+    /// Inertia about the centre of mass in the body frame (kg m^2): principal [ixx, iyy, izz] or
+    /// full [ixx, iyy, izz, ixy, ixz, iyz]; positive definite, or absent/zero for a point mass.
     #[serde(default)]
+    #[schemars(with = "Option<Vec<f64>>", transform = schema::inertia_lengths)]
     pub inertia: Option<Spanned<Vec<f64>>>,
+    /// Joints acting in sequence between parent and body (none: welded).
     #[serde(default)]
+    #[schemars(with = "Vec<JointFile>")]
     pub joints: Vec<Spanned<JointFile>>,
 }
 
@@ -178,108 +262,203 @@ fn world() -> String {
     "world".to_string()
 }
 
-#[derive(Clone, Debug, Deserialize)]
+/// A joint.
+#[derive(Clone, Debug, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = schema::joint_axis_rule)]
+#[schemars(rename = "joint")]
 pub struct JointFile {
+    /// Joint name: the coordinate name of hinge/slide joints; prefix j. of ball (j.qw..j.qz,
+    /// j.wx..j.wz) and free joints (j.x, j.y, j.z, j.qw.., j.vx.., j.wx..).
     pub name: String,
-    /// "hinge", "slide", "ball" or "free".
+    /// Joint type.
     #[serde(rename = "type")]
+    #[schemars(schema_with = "schema::joint_type")]
     pub kind: Spanned<String>,
+    /// hinge/slide: axis in the frame of the preceding joints (required for them).
     #[serde(default)]
+    #[schemars(with = "Option<[f64; 3]>")]
     pub axis: Option<Spanned<[f64; 3]>>,
+    /// Point on the joint axis / centre of a ball joint, same frame (m). Not for free joints.
     #[serde(default)]
     pub anchor: [f64; 3],
+    /// Spring stiffness (N/m or N m/rad), >= 0.
     #[serde(default)]
+    #[schemars(range(min = 0.0))]
     pub stiffness: f64,
+    /// Spring rest position.
     #[serde(default)]
     pub spring_ref: f64,
+    /// Viscous damping (N s/m or N m s/rad), >= 0.
     #[serde(default)]
+    #[schemars(range(min = 0.0))]
     pub damping: f64,
 }
 
-#[derive(Clone, Debug, Deserialize)]
+/// A point fixed in a body.
+#[derive(Clone, Debug, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(rename = "site")]
 pub struct SiteFile {
+    /// Site name (an identifier, unique, not a joint name): prefix of its signals.
+    #[schemars(with = "Identifier")]
     pub name: String,
+    /// The body it is fixed in.
     pub body: String,
+    /// Position in the body frame (m).
     #[serde(default)]
     pub pos: [f64; 3],
 }
 
-#[derive(Clone, Debug, Deserialize)]
+/// A Newtonian attractor: each body's mass m feels -mu m r / |r|^3 toward `point`.
+#[derive(Clone, Debug, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(rename = "attractor")]
 pub struct AttractorFile {
+    /// Attracting centre, world frame (m).
     #[serde(default)]
     pub point: [f64; 3],
+    /// Gravitational parameter (m^3/s^2).
     pub mu: f64,
 }
 
-#[derive(Clone, Debug, Deserialize)]
+/// A force applied at a body point.
+#[derive(Clone, Debug, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(rename = "point_force")]
 pub struct PointForceFile {
+    /// Body the force acts on.
     pub body: String,
+    /// Point of application in the body frame (m).
     #[serde(default)]
     pub point: [f64; 3],
-    /// World-frame force components as expressions.
+    /// World-frame force components (N), expressions of t, q, v.
+    #[schemars(with = "[Expression; 3]")]
     pub force: [Spanned<String>; 3],
 }
 
-#[derive(Clone, Debug, Deserialize)]
+/// One row; its level (position, velocity, acceleration) is that of the highest-level symbol
+/// it reads.
+#[derive(Clone, Debug, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(rename = "row")]
 pub struct RowFile {
+    /// Row name (an identifier, unique among all rows).
+    #[schemars(with = "Identifier")]
     pub name: Spanned<String>,
+    /// The row's left-hand side: the row is expr = 0.
+    #[schemars(with = "Expression")]
     pub expr: Spanned<String>,
 }
 
-#[derive(Clone, Debug, Deserialize)]
+/// The initial state; it must satisfy every row (and the position rows' first derivatives)
+/// unless assemble = true.
+#[derive(Clone, Debug, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(rename = "initial")]
 pub struct InitialFile {
+    /// Initial configuration by coordinate or joint name (ball: 4 quaternion values, free: 7).
+    /// tree: missing ones take the neutral configuration; lagrangian: every coordinate is
+    /// required.
     #[serde(default)]
+    #[schemars(with = "BTreeMap<String, Initial>")]
     pub q: BTreeMap<String, Spanned<Initial>>,
+    /// Initial velocities by coordinate or joint name (ball: 3, free: 6); missing ones are 0.
     #[serde(default)]
+    #[schemars(with = "BTreeMap<String, Initial>")]
     pub v: BTreeMap<String, Spanned<Initial>>,
     /// Project an inconsistent initial state onto the constraints instead of refusing it.
     #[serde(default)]
     pub assemble: bool,
 }
 
-#[derive(Clone, Debug, Deserialize)]
+/// Time span and output.
+#[derive(Clone, Debug, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(rename = "time")]
 pub struct TimeFile {
+    /// Start time (s). Default 0.
     #[serde(default)]
+    #[schemars(with = "Option<f64>", extend("default" = 0.0))]
     pub t0: Option<Spanned<f64>>,
+    /// End time (s), > t0.
+    #[schemars(with = "f64")]
     pub t1: Spanned<f64>,
-    /// Output sample spacing; absent: one sample per accepted step.
+    /// Output sample spacing (s); absent: one sample per accepted step.
     #[serde(default)]
+    #[schemars(with = "Option<f64>", extend("exclusiveMinimum" = 0.0))]
     pub output_dt: Option<Spanned<f64>>,
-    /// Most output samples a run may write (default `solve::DEFAULT_MAX_SAMPLES`).
+    /// Most output samples a run may write, t0 and t1 included (a longer span or a finer
+    /// output_dt is refused before integrating).
     #[serde(default)]
+    #[schemars(
+        with = "Option<i64>",
+        range(min = 2),
+        extend("default" = solve::DEFAULT_MAX_SAMPLES)
+    )]
     pub max_samples: Option<Spanned<i64>>,
 }
 
-#[derive(Clone, Debug, Default, Deserialize)]
+/// Solver settings; every key optional, defaults those of `Settings::default()`.
+#[derive(Clone, Debug, Default, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(rename = "solver")]
 pub struct SolverFile {
+    /// How the accelerations are computed (null_space: the paper's D A dv/dt = D (G + Q)).
+    #[serde(default)]
+    #[schemars(schema_with = "schema::formulation", extend("default" = Settings::default().formulation.name()))]
     pub formulation: Option<Spanned<String>>,
+    /// Integrator (rk4 needs a step).
+    #[serde(default)]
+    #[schemars(schema_with = "schema::integrator", extend("default" = Settings::default().integrator.name()))]
     pub integrator: Option<Spanned<String>>,
-    /// Fixed step of rk4.
+    /// Fixed step of rk4 (s); required with rk4.
+    #[schemars(with = "Option<f64>", extend("exclusiveMinimum" = 0.0))]
     pub step: Option<Spanned<f64>>,
+    /// Relative local error tolerance.
+    #[schemars(with = "Option<f64>", extend("exclusiveMinimum" = 0.0, "default" = Settings::default().rtol))]
     pub rtol: Option<Spanned<f64>>,
+    /// Absolute local error tolerance.
+    #[schemars(with = "Option<f64>", extend("exclusiveMinimum" = 0.0, "default" = Settings::default().atol))]
     pub atol: Option<Spanned<f64>>,
+    /// Largest step (s). Default unlimited.
+    #[schemars(with = "Option<f64>", extend("exclusiveMinimum" = 0.0))]
     pub max_step: Option<Spanned<f64>>,
-    /// "projection", "baumgarte" or "none".
+    /// Drift control.
+    #[serde(default)]
+    #[schemars(schema_with = "schema::drift", extend("default" = Settings::default().drift.name()))]
     pub drift: Option<Spanned<String>>,
+    /// Residual the post-step projection reaches.
+    #[schemars(
+        with = "Option<f64>",
+        extend("exclusiveMinimum" = 0.0, "default" = solve::DEFAULT_PROJECTION_TOL)
+    )]
     pub projection_tol: Option<Spanned<f64>>,
+    /// Baumgarte alpha (with drift = baumgarte).
+    #[schemars(with = "Option<f64>", extend("default" = solve::DEFAULT_BAUMGARTE.0))]
     pub baumgarte_alpha: Option<Spanned<f64>>,
+    /// Baumgarte beta.
+    #[schemars(with = "Option<f64>", extend("default" = solve::DEFAULT_BAUMGARTE.1))]
     pub baumgarte_beta: Option<Spanned<f64>>,
+    /// Stop (drift_exceeded) when a position- or velocity-level residual exceeds this after a
+    /// step. Default: monitor only.
+    #[schemars(with = "Option<f64>", extend("exclusiveMinimum" = 0.0))]
     pub max_drift: Option<Spanned<f64>>,
-    /// Stop at the first conditioning warning.
+    /// Stop at the first conditioning warning (return code ill_conditioned) instead of
+    /// reporting it.
+    #[schemars(extend("default" = Settings::default().strict))]
     pub strict: Option<bool>,
 }
 
-#[derive(Clone, Debug, Deserialize)]
+/// A check tolerance with its reason.
+#[derive(Clone, Debug, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(rename = "tolerance")]
 pub struct ToleranceFile {
+    /// The tolerance.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub value: f64,
+    /// One line: why this value.
+    #[schemars(length(min = 1), regex(pattern = r"\S"))]
     pub reason: String,
 }

@@ -278,6 +278,14 @@ fn parents_first(specs: Vec<BodySpec>) -> Vec<BodySpec> {
     }
 }
 
+/// "a, b and c".
+fn and_list(names: &[&str]) -> String {
+    match names.split_last() {
+        Some((last, rest)) if !rest.is_empty() => format!("{} and {last}", rest.join(", ")),
+        _ => names.join(""),
+    }
+}
+
 fn is_identifier(s: &str) -> bool {
     let mut c = s.chars();
     matches!(c.next(), Some(ch) if ch.is_ascii_alphabetic() || ch == '_')
@@ -312,7 +320,7 @@ fn lagrangian(
         return Err(src.error(
             m.kind.span(),
             "model",
-            "bodies, sites, gravity, attractors and point_forces belong to `tree` models",
+            format!("{} belong to `tree` models", and_list(&TREE_ONLY)),
         ));
     }
     if m.coordinates.is_empty() {
@@ -486,7 +494,10 @@ fn tree_scene(
         return Err(src.error(
             m.kind.span(),
             "model",
-            "coordinates, mass_matrix, mass_diagonal and potential belong to `lagrangian` models",
+            format!(
+                "{} belong to `lagrangian` models",
+                and_list(&LAGRANGIAN_ONLY)
+            ),
         ));
     }
     if m.bodies.is_empty() {
@@ -1134,9 +1145,6 @@ fn expected_not_checked(src: &Source, file: &SceneFile) -> R<Vec<(String, String
     }
     Ok(out)
 }
-
-/// Simulators of the cross-simulator check.
-pub const SIMULATORS: [&str; 2] = ["mujoco", "pinocchio"];
 
 fn tolerances(src: &Source, file: &SceneFile) -> R<Vec<Tolerance>> {
     let mut out = vec![];

@@ -16,6 +16,7 @@ pub mod lagrangian;
 pub mod layout;
 mod load;
 pub mod rows;
+pub mod schema;
 pub mod signals;
 pub mod tree_model;
 

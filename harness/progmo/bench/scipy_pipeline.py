@@ -2,7 +2,7 @@
 constrained accelerations from Pinocchio.
 
 The pipeline is independent of progmo's core except for the model file: the URDF comes from
-`scene.export("urdf")` (checked against our mass matrix elsewhere: harness/tools/export_parity.py).
+`scene.export("urdf")` (checked against our mass matrix elsewhere: tests/python/test_export_parity.py).
 The programme's Jacobian J and gamma are written by hand in numpy, as a user would, for the two
 programme families of the bench scenes:
 

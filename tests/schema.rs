@@ -1,0 +1,458 @@
+//! The scene format is kept once, in the serde types of `src/scene/file.rs`:
+//! - `src/scene/scene.schema.json` is generated from them (`progmo::scene::schema::json_schema`)
+//!   and must equal the committed file; regenerate it with
+//!   `PROGMO_BLESS=1 cargo test --release --test schema`;
+//! - every bundled scene (catalog, Test Set, test scenes) validates against it (a JSON Schema
+//!   validator, draft 2020-12), and the maximal example scenes, which load, use every key it has;
+//! - `FORMAT.md` documents exactly its keys: each key table of the page is marked with the
+//!   table it documents (`<!-- keys: model.bodies[] -->` on the line before the table; the
+//!   keys are the backticked names in the first column), and per table the page's keys equal
+//!   the schema's properties.
+
+mod common;
+
+use progmo::scene::schema::json_schema;
+use progmo::scene::Scene;
+use serde_json::Value as Json;
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+const SCHEMA_FILE: &str = "src/scene/scene.schema.json";
+
+/// The generated schema as committed: pretty JSON, two-space indent, final newline.
+fn schema_text() -> String {
+    serde_json::to_string_pretty(&json_schema()).unwrap() + "\n"
+}
+
+#[test]
+fn the_committed_schema_is_the_generated_one() {
+    let path = root().join(SCHEMA_FILE);
+    let generated = schema_text();
+    if std::env::var_os("PROGMO_BLESS").is_some() {
+        std::fs::write(&path, &generated).unwrap();
+        return;
+    }
+    let committed = std::fs::read_to_string(&path).unwrap_or_default();
+    assert!(
+        committed == generated,
+        "{SCHEMA_FILE} differs from the schema generated from src/scene/file.rs; regenerate it \
+         with `PROGMO_BLESS=1 cargo test --release --test schema` and commit it"
+    );
+}
+
+fn validator() -> jsonschema::Validator {
+    jsonschema::draft202012::new(&json_schema()).expect("the generated schema is valid")
+}
+
+/// Schema errors of a TOML scene text (converted to JSON), one line each.
+fn errors(v: &jsonschema::Validator, text: &str) -> Vec<String> {
+    let toml: toml::Value = toml::from_str(text).expect("TOML");
+    let json = serde_json::to_value(toml).unwrap();
+    v.iter_errors(&json)
+        .map(|e| format!("{}: {e}", e.instance_path()))
+        .collect()
+}
+
+#[test]
+fn every_bundled_scene_matches_the_schema() {
+    let v = validator();
+    let mut bad = vec![];
+    let mut n = 0;
+    for dir in ["references/scenes", "references/testset", "tests/scenes"] {
+        for f in common::toml_files(dir) {
+            n += 1;
+            for e in errors(&v, &std::fs::read_to_string(&f).unwrap()) {
+                bad.push(format!("{}: {e}", f.display()));
+            }
+        }
+    }
+    assert!(n >= 15, "only {n} bundled scenes found");
+    assert!(bad.is_empty(), "\n{}", bad.join("\n"));
+}
+
+/// The annotated example of FORMAT.md matches the schema, loads and solves within its tolerance
+/// (the page cannot drift from the loader unnoticed).
+#[test]
+fn the_annotated_example_of_format_md_matches_the_schema_and_solves() {
+    let page = std::fs::read_to_string(root().join("src/scene/FORMAT.md")).unwrap();
+    let section = page
+        .split_once("## A complete annotated example")
+        .expect("section")
+        .1;
+    let block = section.split_once("```toml\n").unwrap().1;
+    let block = block.split_once("```").unwrap().0;
+    let e = errors(&validator(), block);
+    assert!(e.is_empty(), "{e:?}");
+    let s = Scene::from_text(Path::new("FORMAT.md"), block).unwrap_or_else(|e| panic!("{e}"));
+    let sol = s.solve(&s.settings);
+    assert!(sol.code.is_success(), "{:?}", sol.code);
+    let worst = sol.max_residual.iter().cloned().fold(0.0, f64::max);
+    assert!(worst <= s.tolerance("programme_residual").unwrap());
+}
+
+/// Negative controls: each change of a maximal example is refused by the schema and by the loader.
+#[test]
+fn the_schema_rejects_unknown_keys_bad_values_and_mixed_model_kinds() {
+    let v = validator();
+    let tree: [(&str, &str); 8] = [
+        ("mass = 1.0\n", "mass = 1.0\ncolour = \"red\"\n"),
+        ("integrator = \"rk4\"", "integrator = \"euler\""),
+        ("strict = false", "strict = false\nfoo = 1"),
+        ("type = \"ball\"", "type = \"hinge\""), // a hinge needs an axis
+        ("kind = \"tree\"", "kind = \"tree\"\npotential = \"0\""),
+        ("inertia = [0.01, 0.01, 0.01]", "inertia = [0.01, 0.01]"),
+        ("b = \"2*a\"", "pi = \"2*a\""),
+        ("\"Baumgarte keeps the drift small, not zero\"", "\" \""),
+    ];
+    let lagrangian: [(&str, &str); 2] = [
+        ("potential", "gravity = [0.0, 0.0, 1.0]\npotential"),
+        ("potential", "mass_diagonal = [\"1\", \"1\"]\npotential"),
+    ];
+    let cases = tree
+        .iter()
+        .map(|c| (MAXIMAL_TREE, c))
+        .chain(lagrangian.iter().map(|c| (MAXIMAL_LAGRANGIAN, c)));
+    for (example, (from, to)) in cases {
+        assert_eq!(errors(&v, example), Vec::<String>::new());
+        assert!(example.contains(from), "{from}");
+        let text = example.replacen(from, to, 1);
+        let e = errors(&v, &text);
+        assert!(e.len() == 1, "`{to}` for `{from}`: schema errors {e:?}");
+        assert!(
+            Scene::from_text(Path::new("probe"), &text).is_err(),
+            "the loader accepts `{to}` for `{from}`"
+        );
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Tables of the schema.
+
+/// Follow `$ref` (local `#/$defs/...` only).
+fn resolve<'a>(root: &'a Json, node: &'a Json) -> &'a Json {
+    match node.get("$ref").and_then(|r| r.as_str()) {
+        Some(r) => {
+            let name = r.strip_prefix("#/$defs/").expect("local $ref");
+            resolve(root, &root["$defs"][name])
+        }
+        None => node,
+    }
+}
+
+/// Name of the top-level table.
+const TOP: &str = "(top level)";
+
+/// The schema's tables with fixed keys, as TOML paths into a scene (`[]`: every element of an
+/// array, `*`: every value of a map; the scene itself is [`TOP`]), with their keys.
+fn tables(schema: &Json) -> BTreeMap<String, BTreeSet<String>> {
+    fn walk(root: &Json, node: &Json, path: &str, out: &mut BTreeMap<String, BTreeSet<String>>) {
+        let node = resolve(root, node);
+        if let Some(items) = node.get("items") {
+            walk(root, items, &format!("{path}[]"), out);
+        }
+        if let Some(Json::Object(p)) = node.get("properties") {
+            let name = if path.is_empty() { TOP } else { path };
+            out.insert(name.to_string(), p.keys().cloned().collect());
+            for (k, s) in p {
+                let sub = if path.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{path}.{k}")
+                };
+                walk(root, s, &sub, out);
+            }
+        }
+        if let Some(ap) = node.get("additionalProperties").filter(|a| a.is_object()) {
+            walk(root, ap, &format!("{path}.*"), out);
+        }
+    }
+    let mut out = BTreeMap::new();
+    walk(schema, schema, "", &mut out);
+    out
+}
+
+/// The sub-table of `v` at a table path (first element of arrays, first map entry).
+fn table_at<'a>(v: &'a toml::Value, path: &str) -> Option<&'a toml::Table> {
+    let mut cur = v;
+    for seg in path.split('.').filter(|&s| s != TOP) {
+        let (key, arrays) = (seg.trim_end_matches("[]"), seg.matches("[]").count());
+        cur = if key == "*" {
+            cur.as_table()?.values().next()?
+        } else {
+            cur.as_table()?.get(key)?
+        };
+        for _ in 0..arrays {
+            cur = cur.as_array()?.first()?;
+        }
+    }
+    cur.as_table()
+}
+
+#[test]
+fn the_maximal_examples_load_match_the_schema_and_use_every_key() {
+    let s = json_schema();
+    let v = validator();
+    let examples = [
+        MAXIMAL_TREE,
+        MAXIMAL_LAGRANGIAN,
+        MAXIMAL_LAGRANGIAN_DIAGONAL,
+    ];
+    for text in examples {
+        Scene::from_text(Path::new("maximal"), text).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(errors(&v, text), Vec::<String>::new());
+    }
+    let parsed: Vec<toml::Value> = examples
+        .iter()
+        .map(|t| toml::from_str(t).unwrap())
+        .collect();
+    let mut unused = vec![];
+    for (path, keys) in tables(&s) {
+        for k in keys {
+            if !parsed
+                .iter()
+                .any(|v| table_at(v, &path).is_some_and(|t| t.contains_key(&k)))
+            {
+                unused.push(format!("{path}.{k}"));
+            }
+        }
+    }
+    assert!(
+        unused.is_empty(),
+        "keys no maximal example uses: {unused:?}"
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// FORMAT.md against the schema.
+
+/// The key tables of FORMAT.md: for each `<!-- keys: PATH... -->` marker, the backticked names
+/// in the first column of the table that follows it (blank lines between allowed), for each
+/// path the marker names (union over the markers of one path).
+fn format_md_tables(page: &str) -> BTreeMap<String, BTreeSet<String>> {
+    let mut out: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    let mut lines = page.lines().peekable();
+    while let Some(line) = lines.next() {
+        let Some(paths) = line
+            .trim()
+            .strip_prefix("<!-- keys:")
+            .and_then(|r| r.strip_suffix("-->"))
+        else {
+            continue;
+        };
+        let paths = match paths.trim() {
+            TOP => vec![TOP],
+            p => p.split_whitespace().collect(),
+        };
+        while lines.next_if(|l| l.trim().is_empty()).is_some() {}
+        let mut keys = BTreeSet::new();
+        let mut rows = 0;
+        while let Some(row) = lines.next_if(|l| l.starts_with('|')) {
+            rows += 1;
+            let first = row.split('|').nth(1).unwrap_or("").trim();
+            if rows <= 2 {
+                continue; // header and separator
+            }
+            let key = first.trim_matches('`');
+            assert!(
+                first.starts_with('`') && first.ends_with('`') && !key.contains('`'),
+                "FORMAT.md, table {paths:?}: first column `{first}` is not one backticked key"
+            );
+            keys.insert(key.to_string());
+        }
+        assert!(
+            rows > 2,
+            "FORMAT.md: no table after the marker of {paths:?}"
+        );
+        for p in paths {
+            out.entry(p.to_string())
+                .or_default()
+                .extend(keys.iter().cloned());
+        }
+    }
+    out
+}
+
+#[test]
+fn format_md_documents_exactly_the_schema_keys() {
+    let page = std::fs::read_to_string(root().join("src/scene/FORMAT.md")).unwrap();
+    let documented = format_md_tables(&page);
+    let schema = tables(&json_schema());
+    let mut problems = vec![];
+    for (path, keys) in &schema {
+        match documented.get(path) {
+            None => problems.push(format!("table `{path}` has no key table in FORMAT.md")),
+            Some(doc) => {
+                for k in keys.difference(doc) {
+                    problems.push(format!(
+                        "`{path}`: `{k}` is in the schema, not in FORMAT.md"
+                    ));
+                }
+                for k in doc.difference(keys) {
+                    problems.push(format!(
+                        "`{path}`: `{k}` is in FORMAT.md, not in the schema"
+                    ));
+                }
+            }
+        }
+    }
+    for path in documented.keys().filter(|p| !schema.contains_key(*p)) {
+        problems.push(format!(
+            "FORMAT.md documents table `{path}`, which the schema lacks"
+        ));
+    }
+    assert!(problems.is_empty(), "\n{}", problems.join("\n"));
+}
+
+/// The FORMAT.md check can fail: a key the page leaves out and a key the schema lacks are found.
+#[test]
+fn the_format_md_check_finds_missing_and_extra_keys() {
+    let page =
+        "<!-- keys: time -->\n| key | meaning |\n|--|--|\n| `t1` | end |\n| `t2` | no such key |\n";
+    let doc = format_md_tables(page);
+    let schema = &tables(&json_schema())["time"];
+    assert_eq!(
+        schema.difference(&doc["time"]).cloned().collect::<Vec<_>>(),
+        ["max_samples", "output_dt", "t0"]
+    );
+    assert_eq!(
+        doc["time"].difference(schema).cloned().collect::<Vec<_>>(),
+        ["t2"]
+    );
+}
+
+/// Uses every field a tree scene can have (it loads; it is not meant to be solved).
+const MAXIMAL_TREE: &str = r#"
+name = "maximal_tree"
+description = "Every field of a tree scene."
+purpose = "Keeps the schema and the loader in step."
+
+[parameters]
+a = 0.5
+b = "2*a"
+
+[model]
+kind = "tree"
+gravity = [0.0, 0.0, -9.81]
+forces = { q1 = "-0.1*q1'" }
+attractors = [{ point = [0.0, 0.0, -10.0], mu = 1.0 }]
+point_forces = [{ body = "upper", point = [0.0, 0.0, -0.5], force = ["0", "0", "-0.1*t"] }]
+
+[[model.bodies]]
+name = "upper"
+parent = "world"
+pos = [0.0, 0.0, 0.0]
+quat = [1.0, 0.0, 0.0, 0.0]
+mass = 1.0
+com = [0.0, 0.0, -0.5]
+inertia = [0.01, 0.01, 0.01, 0.0, 0.0, 0.0]
+joints = [{ name = "q1", type = "hinge", axis = [0.0, 1.0, 0.0], anchor = [0.0, 0.0, 0.0], stiffness = 1.0, spring_ref = 0.1, damping = 0.05 }]
+
+[[model.bodies]]
+name = "lower"
+parent = "upper"
+pos = [0.0, 0.0, -1.0]
+mass = 1.0
+com = [0.0, 0.0, -0.5]
+inertia = [0.01, 0.01, 0.01]
+joints = [{ name = "j", type = "ball" }]
+
+[[model.sites]]
+name = "tip"
+body = "lower"
+pos = [0.0, 0.0, -1.0]
+
+[[constraints]]
+name = "no_spin"
+expr = "j.wz"
+
+[[programme]]
+name = "reach"
+expr = "tip.x - a*sin(t)"
+
+[initial]
+q = { q1 = 0.1, j = [1.0, 0.0, 0.0, 0.0] }
+v = { q1 = 0.0, j = [0.0, 0.0, 0.0] }
+assemble = true
+
+[time]
+t0 = 0.0
+t1 = 1.0
+output_dt = 0.1
+max_samples = 1000
+
+[solver]
+formulation = "kkt"
+integrator = "rk4"
+step = 0.01
+rtol = 1e-8
+atol = 1e-10
+max_step = 0.1
+drift = "baumgarte"
+projection_tol = 1e-12
+baumgarte_alpha = 2.0
+baumgarte_beta = 1.0
+max_drift = 1e-3
+strict = false
+
+[tolerances]
+programme_residual = { value = 1e-6, reason = "Baumgarte keeps the drift small, not zero" }
+
+[checks]
+not_checked = { pinocchio = "an example of a declared not_checked" }
+"#;
+
+/// Every field of a lagrangian scene with a full mass matrix.
+const MAXIMAL_LAGRANGIAN: &str = r#"
+name = "maximal_lagrangian"
+description = "Every field of a lagrangian scene."
+purpose = "Keeps the schema and the loader in step."
+
+[parameters]
+m = 1.0
+
+[model]
+kind = "lagrangian"
+coordinates = ["x", "y"]
+mass_matrix = [["m", "0"], ["0", "m*(1 + x^2)"]]
+potential = "0.5*(x^2 + y^2)"
+forces = { x = "-0.1*x'" }
+
+[[constraints]]
+name = "c"
+expr = "y' - 0.1"
+
+[[programme]]
+name = "p"
+expr = "x - 0.1*sin(t)"
+
+[initial]
+q = { x = 0.0, y = 0.0 }
+v = { x = 0.1, y = 0.1 }
+
+[time]
+t1 = 1.0
+"#;
+
+/// A lagrangian scene with a diagonal mass matrix.
+const MAXIMAL_LAGRANGIAN_DIAGONAL: &str = r#"
+name = "maximal_lagrangian_diagonal"
+
+[model]
+kind = "lagrangian"
+coordinates = ["x", "y"]
+mass_diagonal = ["1", "2"]
+
+[[programme]]
+name = "p"
+expr = "x - 0.1*sin(t)"
+
+[initial]
+q = { x = 0.0, y = 0.0 }
+
+[time]
+t1 = 1.0
+"#;
