@@ -391,6 +391,10 @@ def _parity(c: _Check) -> None:
         raise _Stop(c.res.status, c.res.reason)
 
 
+#: coordinates whose solver and replay q(t) the report overlays
+Q_OVERLAY = 4
+
+
 def _replay(c: _Check) -> None:
     """Open-loop replay of u in the simulator, its metrics and the verdict."""
     from .simulators import BlowUp
@@ -430,11 +434,16 @@ def _replay(c: _Check) -> None:
                             if "replay_horizon" in c.tol else ")"))
     c.first.update({"replay_residual": (rp.t, rabs), "replay_deviation": (rp.t, dev)})
     sel = downsample(len(rp.t))
-    res.series.append(Series("replay_residual", rp.t[sel].tolist(), rabs[sel].tolist(), "row units"))
-    res.series.append(Series("replay_deviation", rp.t[sel].tolist(), dev[sel].tolist(), "q/v units"))
+    res.series.append(Series("replay_residual", rp.t[sel].tolist(), rabs[sel].tolist(),
+                             "row units (m, rad, m/s ...)"))
+    res.series.append(Series("replay_deviation", rp.t[sel].tolist(), dev[sel].tolist(), "m, rad (q); m/s, rad/s (v)"))
     selu = downsample(len(ref.t))
     for j, name in enumerate(scene.v_names):
         res.series.append(Series(f"u.{name}", ref.t[selu].tolist(), ref.u[selu, j].tolist(), "N or N m"))
+    # q(t) of the solver and of the replay, overlaid (the first few coordinates)
+    for j, name in enumerate(scene.q_names[:Q_OVERLAY]):
+        res.series.append(Series(f"q.{name}", ref.t[selu].tolist(), ref.q[selu, j].tolist(), "m or rad"))
+        res.series.append(Series(f"q.{name} replay", rp.t[sel].tolist(), rp.q[sel, j].tolist(), "m or rad"))
     if c.record is not None:
         rec = c.record
         rec.scene, rec.ref, rec.replay = scene, ref, rp

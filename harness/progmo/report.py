@@ -268,6 +268,7 @@ GROUPS = [
     ("programme residual", re.compile(r"residual", re.I), True),
     ("deviation from the solver", re.compile(r"deviation|error|drift", re.I), True),
     ("control forces u", re.compile(r"^u\b|^u[_\[(\d]|control|force|torque", re.I), False),
+    ("q(t): solver (solid), replay (dashed)", re.compile(r"^q\."), False),
     ("other", re.compile(r""), False),
 ]
 MAX_POINTS = 2000
@@ -295,12 +296,19 @@ def plot(r: CheckResult) -> str | None:
 
     from matplotlib.ticker import FuncFormatter, LogLocator, NullLocator
 
-    fig = Figure(figsize=(3.9 * len(groups), 2.7), dpi=90)
+    ncol = min(3, len(groups))
+    nrow = -(-len(groups) // ncol)
+    fig = Figure(figsize=(3.9 * ncol, 2.7 * nrow), dpi=90)
     FigureCanvasAgg(fig)
     # Fixed margins and plain tick labels: constrained layout and mathtext cost ~1 s per figure.
-    fig.subplots_adjust(left=0.07 if len(groups) > 1 else 0.14, right=0.985, bottom=0.17, top=0.9, wspace=0.28)
-    axes = fig.subplots(1, len(groups), squeeze=False)[0]
+    fig.subplots_adjust(left=0.07 if ncol > 1 else 0.14, right=0.985, bottom=0.17 / nrow, top=1 - 0.1 / nrow,
+                        wspace=0.28, hspace=0.45)
+    grid = fig.subplots(nrow, ncol, squeeze=False)
+    axes = [grid[k // ncol][k % ncol] for k in range(len(groups))]
+    for k in range(len(groups), nrow * ncol):
+        grid[k // ncol][k % ncol].set_visible(False)
     for ax, (title, series, log) in zip(axes, groups):
+        colors: dict[str, str] = {}
         for s in series[:12]:
             t = np.asarray([math.nan if x is None else x for x in s.t], dtype=float)
             y = np.asarray([math.nan if x is None else x for x in s.values], dtype=float)
@@ -314,25 +322,36 @@ def plot(r: CheckResult) -> str | None:
             if log:
                 y = np.abs(y)
                 y[~(y > 0)] = np.nan
-            label = s.name + (f" [{s.unit}]" if s.unit else "")
-            ax.plot(t, y, lw=1.1, label=label)
+            replay = s.name.endswith(" replay")
+            label = None if replay else s.name
+            color = colors.get(s.name[: -len(" replay")]) if replay else None
+            line = ax.plot(t, y, lw=1.1, label=label, ls="--" if replay else "-", color=color)[0]
+            colors[s.name] = line.get_color()
         if log:
             ax.set_yscale("log")
             ax.yaxis.set_major_locator(LogLocator(numticks=6))
             ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:.0e}"))
             ax.yaxis.set_minor_locator(NullLocator())
             key = "residual" if "residual" in title else "deviation"
-            for b in r.budgets:
-                if key in b.metric:
-                    ax.axhline(b.value, color="#c0392b", ls="--", lw=1)
-                    ax.annotate(f"budget {b.metric}", (0.01, b.value), xycoords=("axes fraction", "data"),
-                                fontsize=7, color="#c0392b", va="bottom")
+            for i, b in enumerate(bb for bb in r.budgets if key in bb.metric):
+                ax.axhline(b.value, color="#c0392b", ls="--", lw=1)
+                ax.annotate(f"budget {b.metric}", (0.01 + 0.34 * i, b.value),  # staggered: no overlap
+                            xycoords=("axes fraction", "data"), fontsize=7, color="#c0392b", va="bottom")
+            for br in r.breaches:  # where each breach began
+                if br.first_time is not None and (key in br.metric or br.metric == "replay_blowup"):
+                    ax.axvline(br.first_time, color="#c0392b", ls=":", lw=1.2)
+                    ax.annotate(f"first breach: {br.metric}\nt = {br.first_time:.4g}", (br.first_time, 0.97),
+                                xycoords=("data", "axes fraction"), fontsize=6.5, color="#c0392b",
+                                va="top", ha="left")
         ax.set_title(title, fontsize=9)
         ax.set_xlabel("t [s]", fontsize=8)
+        units = list(dict.fromkeys(s.unit for s in series[:12] if s.unit))
+        if units:
+            ax.set_ylabel("; ".join(units), fontsize=7)
         ax.tick_params(labelsize=7)
         ax.grid(True, which="major", alpha=0.3)
         if len(series) <= 8:
-            ax.legend(fontsize=6.5, loc="lower right" if log else "upper right", frameon=False)
+            ax.legend(fontsize=6.5, loc="best", frameon=False)
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
