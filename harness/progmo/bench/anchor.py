@@ -21,10 +21,12 @@ Per call, on the chains of common.chain_toml (rows tip_height and shoulder):
 Before timing, dv/dt and u of every C++ variant are compared with progmo's kkt formulation
 (`Scene.accelerations`) at the initial state and at random states (and ABA with pin.aba): more than
 1e-10 relative (to max |dv/dt|, max |u|) fails the part.
-Timing: `rounds` alternating rounds (progmo first in even rounds, C++ first in odd ones); in each
-round every figure is one loop of the same number of calls (progmo: Scene.rhs_benchmark, a Rust loop;
-C++: a C++ loop), both alternating q and q + 1e-9; the table holds the minimum over rounds and the
-ratios are taken from those minima.
+Timing: `rounds` rounds of 5 short loops per figure, progmo and C++ strictly alternated (progmo
+first, then C++ first, ...); every loop is the same number of calls (progmo: Scene.rhs_benchmark,
+a Rust loop; C++: a C++ loop), both alternating q and q + 1e-9 and both measured in thread CPU
+time (the machine is shared: wall time would add the time spent waiting for a core); the table
+holds the minimum over all loops and the ratios are taken from those minima (short loops and
+minima: the figures least disturbed by the other processes).
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
@@ -340,29 +343,38 @@ def _rel(x, ref) -> float:
     return float(np.abs(x - ref).max() / max(np.abs(ref).max(), 1e-300))
 
 
-def measure(scene, proc: Process, rounds: int, budget_s: float) -> dict[str, Any]:
+def rhs_cpu(scene, iters: int, formulation: str) -> float:
+    """Thread CPU seconds per call of progmo's RHS: Scene.rhs_benchmark's Rust loop runs on this
+    thread (GIL released), timed with time.thread_time as anchor.cpp times its loops."""
+    t = time.thread_time()
+    scene.rhs_benchmark(iters, formulation)
+    return (time.thread_time() - t) / iters
+
+
+def measure(scene, proc: Process, rounds: int, budget_s: float, reps: int = 5) -> dict[str, Any]:
     """Per-call seconds (minimum over alternating rounds) of progmo's null_space and kkt right-hand
-    sides and of every C++ variant, at the initial state."""
+    sides and of every C++ variant, at the initial state. A round is `reps` short loops of each
+    side, strictly alternated; each figure spends about `budget_s` per round."""
     t, q, v = scene.t0, np.array(scene.q0), np.array(scene.v0)
-    probe = min(scene.rhs_benchmark(20, "null_space") for _ in range(3))
-    iters = int(max(20, min(200000, budget_s / max(probe, 1e-9))))
+    probe = min(rhs_cpu(scene, 20, "null_space") for _ in range(3))
+    iters = int(max(10, min(200000, budget_s / reps / max(probe, 1e-9))))
     best: dict[str, float] = {}
 
     def keep(k: str, x: float):
         best[k] = min(best.get(k, np.inf), x)
 
-    for r in range(rounds):
-        def progmo():
-            for f in ("null_space", "kkt"):
-                keep(f"progmo_{f}", scene.rhs_benchmark(iters, f))
+    def progmo():
+        for f in ("null_space", "kkt"):
+            keep(f"progmo_{f}", rhs_cpu(scene, iters, f))
 
-        def cpp():
-            for k, x in proc.bench(iters, t, q, v).items():
-                keep(k, x)
+    def cpp():
+        for k, x in proc.bench(iters, t, q, v).items():
+            keep(k, x)
 
-        for step in ((progmo, cpp) if r % 2 == 0 else (cpp, progmo)):
+    for i in range(rounds * reps):
+        for step in ((progmo, cpp) if i % 2 == 0 else (cpp, progmo)):
             step()
-    row: dict[str, Any] = dict(n=len(v), iterations=iters, rounds=rounds)
+    row: dict[str, Any] = dict(n=len(v), iterations=iters, rounds=rounds, loops_per_round=reps)
     row.update({f"{k}_s": x for k, x in best.items()})
     row["same_best"] = min(SAME, key=lambda k: best[k])
     row["same_best_s"] = best[row["same_best"]]
@@ -374,7 +386,7 @@ def measure(scene, proc: Process, rounds: int, budget_s: float) -> dict[str, Any
 
 HEADER = ["n", "aba_s", "kkt_s", "same_cat_s", "same_sep_s", "same_minv_s", "same_abaunit_s", "same_best",
           "same_best_s", "progmo_null_space_s", "progmo_kkt_s", "ratio_null_space", "ratio_kkt",
-          "ratio_null_space_kkt", "agreement", "agreement_tol", "iterations", "rounds"]
+          "ratio_null_space_kkt", "agreement", "agreement_tol", "iterations", "rounds", "loops_per_round"]
 
 
 def run(out: Path, prov: Provenance, ns: Sequence[int] = NS, rounds: int = 7, budget_s: float = 0.05,

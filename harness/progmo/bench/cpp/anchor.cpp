@@ -6,7 +6,8 @@
 // Usage: anchor MODEL_FILE, then commands on stdin, one per line; answers on stdout:
 //   check t q[nv] v[nv] J[s*nv] gamma[s]    ->  "a <variant> x1 .. xn" and "u <variant> ..." lines,
 //                                               then "end"
-//   bench iters t q[nv] v[nv] J[s*nv] gamma[s] -> "time <variant> seconds_per_call" lines, then "end"
+//   bench iters t q[nv] v[nv] J[s*nv] gamma[s] -> "time <variant> seconds_per_call" lines (thread
+//                                               CPU time of one loop of iters calls), then "end"
 //   quit
 // J and gamma are the programme rows in Pinocchio's convention (J a + gamma = 0) at (t, q, v); only
 // the `kkt` variant uses them (the "given J, gamma" call); every `same_*` variant rebuilds J and
@@ -40,7 +41,6 @@
 #include <pinocchio/multibody.hpp>
 
 #include <Eigen/Cholesky>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -48,6 +48,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <time.h>
 #include <vector>
 
 using namespace pinocchio;
@@ -251,14 +252,21 @@ void print_vec(const char *what, const char *variant, const VectorXd &x) {
   std::printf("\n");
 }
 
+// CPU time of this thread (the machine is shared: wall time would count the time the process waits
+// for a core); the Python side times progmo's Rust loop the same way (time.thread_time).
+double thread_seconds() {
+  timespec ts;
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+
 template <class F>
 double time_loop(long iters, const VectorXd &q, F &&f) {
   VectorXd qb = q.array() + 1e-9;
   const VectorXd *states[2] = {&q, &qb};
-  const auto start = std::chrono::steady_clock::now();
+  const double start = thread_seconds();
   for (long i = 0; i < iters; ++i) f(*states[i % 2]);
-  const auto stop = std::chrono::steady_clock::now();
-  return std::chrono::duration<double>(stop - start).count() / double(iters);
+  return (thread_seconds() - start) / double(iters);
 }
 
 }  // namespace
