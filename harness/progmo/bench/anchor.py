@@ -21,8 +21,9 @@ Per call, on the chains of common.chain_toml (rows tip_height and shoulder):
 Before timing, dv/dt and u of every C++ variant are compared with progmo's kkt formulation
 (`Scene.accelerations`) at the initial state and at random states (and ABA with pin.aba): more than
 1e-10 relative (to max |dv/dt|, max |u|) fails the part.
-Timing: `rounds` rounds of 5 short loops per figure, progmo and C++ strictly alternated (progmo
-first, then C++ first, ...); every loop is the same number of calls (progmo: Scene.rhs_benchmark,
+Timing: `rounds` rounds, each visiting every n (so each n's samples spread over the whole run), of
+5 short loops per figure, progmo and C++ strictly alternated (progmo first, then C++ first, ...);
+every loop is the same number of calls (progmo: Scene.rhs_benchmark,
 a Rust loop; C++: a C++ loop), both alternating q and q + 1e-9 and both measured in thread CPU
 time (the machine is shared: wall time would add the time spent waiting for a core); the table
 holds the minimum over all loops and the ratios are taken from those minima (short loops and
@@ -351,37 +352,49 @@ def rhs_cpu(scene, iters: int, formulation: str) -> float:
     return (time.thread_time() - t) / iters
 
 
-def measure(scene, proc: Process, rounds: int, budget_s: float, reps: int = 5) -> dict[str, Any]:
-    """Per-call seconds (minimum over alternating rounds) of progmo's null_space and kkt right-hand
-    sides and of every C++ variant, at the initial state. A round is `reps` short loops of each
-    side, strictly alternated; each figure spends about `budget_s` per round."""
-    t, q, v = scene.t0, np.array(scene.q0), np.array(scene.v0)
-    probe = min(rhs_cpu(scene, 20, "null_space") for _ in range(3))
-    iters = int(max(10, min(200000, budget_s / reps / max(probe, 1e-9))))
-    best: dict[str, float] = {}
+class Timing:
+    """Per-call seconds of progmo's null_space and kkt right-hand sides and of every C++ variant on
+    one scene at its initial state: the minimum over every loop of every round. A round is `reps`
+    short loops of each side, strictly alternated; each figure spends about `budget_s` per round."""
 
-    def keep(k: str, x: float):
-        best[k] = min(best.get(k, np.inf), x)
+    def __init__(self, scene, proc: Process, budget_s: float, reps: int = 5):
+        self.scene, self.proc, self.reps = scene, proc, reps
+        probe = min(rhs_cpu(scene, 20, "null_space") for _ in range(3))
+        self.iters = int(max(10, min(200000, budget_s / reps / max(probe, 1e-9))))
+        self.best: dict[str, float] = {}
+        self.rounds = 0
 
-    def progmo():
-        for f in ("null_space", "kkt"):
-            keep(f"progmo_{f}", rhs_cpu(scene, iters, f))
+    def _keep(self, k: str, x: float):
+        self.best[k] = min(self.best.get(k, np.inf), x)
 
-    def cpp():
-        for k, x in proc.bench(iters, t, q, v).items():
-            keep(k, x)
+    def round(self):
+        sc = self.scene
+        t, q, v = sc.t0, np.array(sc.q0), np.array(sc.v0)
 
-    for i in range(rounds * reps):
-        for step in ((progmo, cpp) if i % 2 == 0 else (cpp, progmo)):
-            step()
-    row: dict[str, Any] = dict(n=len(v), iterations=iters, rounds=rounds, loops_per_round=reps)
-    row.update({f"{k}_s": x for k, x in best.items()})
-    row["same_best"] = min(SAME, key=lambda k: best[k])
-    row["same_best_s"] = best[row["same_best"]]
-    row["ratio_null_space"] = best["progmo_null_space"] / row["same_best_s"]
-    row["ratio_kkt"] = best["progmo_kkt"] / row["same_best_s"]
-    row["ratio_null_space_kkt"] = best["progmo_null_space"] / best["kkt"]
-    return row
+        def progmo():
+            for f in ("null_space", "kkt"):
+                self._keep(f"progmo_{f}", rhs_cpu(sc, self.iters, f))
+
+        def cpp():
+            for k, x in self.proc.bench(self.iters, t, q, v).items():
+                self._keep(k, x)
+
+        for i in range(self.reps):
+            for step in ((progmo, cpp) if i % 2 == 0 else (cpp, progmo)):
+                step()
+        self.rounds += 1
+
+    def row(self) -> dict[str, Any]:
+        best = self.best
+        row: dict[str, Any] = dict(n=len(self.scene.v0), iterations=self.iters, rounds=self.rounds,
+                                   loops_per_round=self.reps)
+        row.update({f"{k}_s": x for k, x in best.items()})
+        row["same_best"] = min(SAME, key=lambda k: best[k])
+        row["same_best_s"] = best[row["same_best"]]
+        row["ratio_null_space"] = best["progmo_null_space"] / row["same_best_s"]
+        row["ratio_kkt"] = best["progmo_kkt"] / row["same_best_s"]
+        row["ratio_null_space_kkt"] = best["progmo_null_space"] / best["kkt"]
+        return row
 
 
 HEADER = ["n", "aba_s", "kkt_s", "same_cat_s", "same_sep_s", "same_minv_s", "same_abaunit_s", "same_best",
@@ -391,27 +404,36 @@ HEADER = ["n", "aba_s", "kkt_s", "same_cat_s", "same_sep_s", "same_minv_s", "sam
 
 def run(out: Path, prov: Provenance, ns: Sequence[int] = NS, rounds: int = 7, budget_s: float = 0.05,
         check_states: int = 3) -> dict[str, Any]:
-    """Builds (or reuses) the anchor, checks agreement, times every n. Returns dict(rows, build):
-    raises Unavailable (skip with the reason) or AnchorFailed (fail loudly)."""
+    """Builds (or reuses) the anchor, checks agreement on every chain, then times them all round by
+    round (a round visits every n, so each n's samples spread over the whole run rather than one
+    stretch of a neighbour's load). Returns dict(rows, build): raises Unavailable (skip with the
+    reason) or AnchorFailed (fail loudly)."""
+    from contextlib import ExitStack
+
     from .. import Scene
 
     tc = toolchain()
     exe, cached = build(tc)
     build_info = dict(compiler=tc.cxx_version, flags=" ".join(tc.flags), pin=tc.pin_version, eigen=tc.eigen_version,
                       binary=str(exe), cached=cached, command=" ".join(shlex.quote(c) for c in tc.command(exe)))
-    rows = []
-    with SceneDir() as d, tempfile.TemporaryDirectory(prefix="progmo-anchor-") as work:
+    checks, timings = [], []
+    with SceneDir() as d, tempfile.TemporaryDirectory(prefix="progmo-anchor-") as work, ExitStack() as stack:
         for n in ns:
             scene = Scene(str(d.write(f"chain_{n}", chain_toml(n, name=f"chain_{n}"))))
-            with Process(exe, scene, Path(work)) as proc:
-                worst, tol = agreement(scene, proc, check_states)
-                log(f"[anchor] n = {n}: agreement {max(worst.values()):.1e} (tolerance {tol:.1e}); "
-                    f"timing {rounds} rounds")
-                row = measure(scene, proc, rounds, budget_s)
-            row["agreement"] = max(worst.values())
-            row["agreement_tol"] = tol
-            row["agreement_by_variant"] = worst
-            rows.append(row)
+            proc = stack.enter_context(Process(exe, scene, Path(work)))
+            worst, tol = agreement(scene, proc, check_states)
+            log(f"[anchor] n = {n}: agreement {max(worst.values()):.1e} (tolerance {tol:.1e})")
+            checks.append((worst, tol))
+            timings.append(Timing(scene, proc, budget_s))
+        for r in range(rounds):
+            log(f"[anchor] timing round {r + 1} of {rounds} (n = {', '.join(map(str, ns))})")
+            for tm in timings:
+                tm.round()
+    rows = []
+    for tm, (worst, tol) in zip(timings, checks):
+        row = tm.row()
+        row.update(agreement=max(worst.values()), agreement_tol=tol, agreement_by_variant=worst)
+        rows.append(row)
     write_csv(out / "anchor.csv", prov, HEADER, ([r[h] for h in HEADER] for r in rows))
     return dict(rows=rows, build=build_info)
 
