@@ -12,8 +12,9 @@ targets of the scipy and drift parts), puts them in a table at the top of the pa
   8 digits interpolated in log-log on each method's digits-vs-CPU front (the cheapest run reaching
   8 digits when the front does not bracket 8), best method;
 - no regression of the small-problem cost (n = 2 and 4): the ratio progmo / C++ same work of this
-  run against the accepted ratio in bench/accepted.json (which names its command, date and commit),
-  met while no more than ACCEPTED_SLACK above it. The ratio, not the absolute time, is judged: both
+  run against the accepted ratio in bench/accepted.json (which names its command, date and commit;
+  `progmo bench --accept` records one run, the shipped file the median of ten), met while no more
+  than ACCEPTED_SLACK above it. The ratio, not the absolute time, is judged: both
   sides are measured in the same rounds, so machine speed and load largely cancel; the absolute
   times are shown beside it.
 """
@@ -35,9 +36,10 @@ N_BIG, T_BIG_MAX = 128, 60e-6
 GROWTH_FROM, GROWTH_MAX = 30, 1.2
 DIGITS, DIGITS_CPU_MAX = 8.0, 5e-3
 SMALL_NS = (2, 4)
-#: relative rise of the small-problem ratio over the accepted one that counts as a regression
-#: (three back-to-back runs of the same build, 2026-11-23: the ratios at n = 2 and 4 within 2 %)
-ACCEPTED_SLACK = 0.10
+#: relative rise of the small-problem ratio over the accepted one that counts as a regression: ten
+#: back-to-back runs of one build (2026-11-23, accepted.json's note) put the n = 2 ratio at 1.19-1.40
+#: (median 1.25; bimodal from one process to the next), n = 4 at 1.01-1.26 (median 1.17)
+ACCEPTED_SLACK = 0.15
 
 
 @dataclass
