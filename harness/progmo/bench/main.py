@@ -10,9 +10,10 @@ Run times measured on the shared 2-core x86-64 machine (2026-11-21):
            drift control over 10^4 periods, 7 alternating rounds)
   --quick  about 60 s (2 scenes, 4 tolerances, 3 repeats, chains up to 64 links)
   --smoke  about 10 s (the test's end-to-end run; its numbers mean nothing)
-The C++ anchor (part `anchor`, bench/anchor.py) is compiled on first use and cached: about 5 min
-of CPU (13 min wall on the loaded 2-core machine) for g++ on Pinocchio's headers; the part then
-takes about 40 s in a full run (7 chains, 7 rounds), 10 s with --quick.
+  2026-11-23: full 313 s with the C++ anchor (part `anchor`, bench/anchor.py), the machine shared.
+The anchor is compiled on first use and cached: about 5 min of CPU (4-13 min wall on the shared
+2-core machine) for g++ on Pinocchio's headers; the part then takes about 20 s in a full run (7
+chains, 7 rounds of 5 loops), 7 s with --quick.
 """
 
 from __future__ import annotations
