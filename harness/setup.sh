@@ -2,7 +2,9 @@
 # Prepares everything the harness needs on a fresh machine, idempotently:
 #   .venv with numpy, scipy, MuJoCo, Pinocchio, matplotlib, mcap, pytest (the ranges of
 #   pyproject.toml, at the locked versions of harness/constraints.txt) and the Rust core built
-#   into it as the package progmo (maturin develop, release).
+#   into it as the package progmo (maturin develop, release);
+#   Eigen's headers for the C++ anchor of `progmo bench` (apt-get install libeigen3-dev when
+#   missing, as root or with passwordless sudo; without them the bench skips the anchor and says why).
 # Run by harness/nightly.sh and harness/test.sh; prints what it does, fails loudly.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -33,3 +35,5 @@ echo "setup: building the Rust core into .venv (maturin develop --release)" >&2
   echo "setup: error: building the Python extension failed (run 'maturin develop --release' in .venv for details)" >&2
   exit 1
 }
+bash harness/progmo/bench/cpp/install_eigen.sh >/dev/null \
+  || echo "setup: warning: no Eigen headers: progmo bench will skip its C++ anchor (and say so)" >&2

@@ -37,6 +37,23 @@ def test_bench_runs_end_to_end_and_every_output_names_its_rerun_command(tmp_path
         assert e[1e-8] < 1e-2 * e[1e-5], (f, e)
     html = (out / "index.html").read_text()
     assert "Omissions" in html and "conditioning.png" in html
+    # the targets table at the top, every issue-15 target listed (measured or saying why not)
+    from html import escape
+
+    from progmo.bench import anchor, targets as tg
+
+    assert html.index("<h3>Targets</h3>") < html.index("<h2>1. Work-precision")
+    for name in ("the leanest Pinocchio C++ same-work sequence at n = 7", "RHS at n = 128 <= 60 us",
+                 "growth exponent", "car axis: 8 significant digits", "no regression of the small-problem RHS"):
+        assert escape(name) in html, name
+    try:
+        anchor.toolchain()
+    except anchor.Unavailable as e:  # skipped, and the page says why
+        assert f"SKIPPED: {e}" in html
+    else:
+        assert (out / "anchor.csv").stat().st_size > 0 and rerun in (out / "anchor.csv").read_text()
+        assert "C++ KKT forwardDynamics, J and gamma given (us)" in html
+    assert tg.Target("x", "y", "met").met
     # the car axis against the published reference: digits at rtol 1e-6 (the Rust test measured
     # 4.57 for dop853 and 4.74 for radau5 with the same settings)
     ts = list(csv.DictReader(line for line in open(out / "testset.csv") if not line.startswith("#")))
@@ -130,3 +147,148 @@ def test_time_at_error_interpolates_log_log_on_the_pareto_front():
     assert common.time_at_error(errs, times, 1e-3) == pytest.approx(1e-3 ** -0.25, rel=1e-12)
     assert np.isnan(common.time_at_error(errs, times, 1e-8))
     assert common.common_error_levels([(errs, times), ([1e-3, 1e-7], [1, 2])]) == [1e-6, 1e-5, 1e-4, 1e-3]
+
+
+# ---------------------------------------------------------------------------------------------
+# The C++ anchor (bench/anchor.py, bench/cpp/anchor.cpp) and the targets table (bench/targets.py)
+
+
+def _anchor_toolchain():
+    """The anchor's toolchain; Eigen is installed when missing (bench/cpp/install_eigen.sh, as
+    harness/setup.sh does). Skips, saying why, only when it cannot be had here."""
+    import subprocess
+
+    from progmo.bench import anchor
+
+    if anchor.eigen_include() is None:
+        r = subprocess.run(["bash", str(anchor.INSTALL_EIGEN)], capture_output=True, text=True, timeout=900)
+        if anchor.eigen_include() is None:
+            pytest.skip(f"SKIPPED: no Eigen headers and {anchor.INSTALL_EIGEN.name} could not install them "
+                        f"({r.stderr.strip()}); the C++ anchor was NOT checked")
+    try:
+        return anchor.toolchain()
+    except anchor.Unavailable as e:
+        pytest.skip(f"SKIPPED: the C++ anchor cannot be built here: {e}; it was NOT checked")
+
+
+def test_cpp_anchor_agrees_with_progmo_and_reports_every_column(tmp_path):
+    from progmo.bench import anchor
+
+    _anchor_toolchain()
+    res = anchor.run(tmp_path, common.Provenance(["--only", "anchor"]), ns=[2, 7], rounds=1, budget_s=0.002)
+    rows = res["rows"]
+    assert [r["n"] for r in rows] == [2, 7]
+    for r in rows:
+        # dv/dt and u of every C++ variant against progmo's kkt (ABA against pin.aba), 3 states
+        assert set(r["agreement_by_variant"]) == set(anchor.VARIANTS)
+        assert r["agreement"] <= r["agreement_tol"] == anchor.AGREEMENT, r
+        for k in ("aba_s", "kkt_s", "progmo_null_space_s", "progmo_kkt_s") + tuple(f"{v}_s" for v in anchor.SAME):
+            assert np.isfinite(r[k]) and r[k] > 0, k
+        assert r["same_best"] in anchor.SAME and r["same_best_s"] == r[f"{r['same_best']}_s"]
+        assert r["ratio_null_space"] == pytest.approx(r["progmo_null_space_s"] / r["same_best_s"])
+    csv_rows = list(csv.DictReader(line for line in open(tmp_path / "anchor.csv") if not line.startswith("#")))
+    assert list(csv_rows[0]) == anchor.HEADER and [int(r["n"]) for r in csv_rows] == [2, 7]
+    assert "-O3" in res["build"]["command"] and "-march=native" not in res["build"]["command"]
+    assert res["build"]["pin"] == pin.__version__
+
+
+def test_cpp_anchor_check_fails_on_a_wrong_programme_row(tmp_path, monkeypatch):
+    # negative control: the C++ side with the tip row's amplitude flipped (a wrong gamma) must fail
+    from progmo.bench import anchor
+
+    _anchor_toolchain()
+    exe, _ = anchor.build()
+    p = tmp_path / "c7.toml"
+    p.write_text(common.chain_toml(7, name="c7"))
+    scene = Scene(str(p))
+    worst, _ = _agreement_with(anchor, exe, scene, tmp_path)
+    assert max(worst.values()) < 1e-10
+    good = anchor.model_text
+    monkeypatch.setattr(anchor, "model_text", lambda sc: good(sc).replace("one_minus_cos 0.1 ", "one_minus_cos -0.1 "))
+    with pytest.raises(anchor.AnchorFailed, match="disagree"):
+        _agreement_with(anchor, exe, scene, tmp_path)
+
+
+def _agreement_with(anchor, exe, scene, workdir):
+    with anchor.Process(exe, scene, workdir) as proc:
+        return anchor.agreement(scene, proc, 2)
+
+
+def test_bench_skips_the_anchor_with_the_reason_when_it_cannot_be_built(tmp_path, monkeypatch, capsys):
+    from progmo.bench import anchor
+
+    def unavailable():
+        raise anchor.Unavailable("no C++ compiler (g++ or $CXX) on PATH")
+
+    monkeypatch.setattr(anchor, "toolchain", unavailable)
+    assert main(["--smoke", "--out", str(tmp_path), "--only", "anchor"]) == 0
+    out = capsys.readouterr().out
+    html = (tmp_path / "index.html").read_text()
+    for text in (out, html):
+        assert "SKIPPED: no C++ compiler (g++ or $CXX) on PATH" in text
+        assert "not measured: C++ anchor skipped: no C++ compiler" in text
+    assert "<h3>Targets</h3>" in html
+
+
+def test_bench_fails_loudly_when_the_anchor_disagrees(tmp_path, monkeypatch, capsys):
+    from progmo.bench import anchor
+
+    def broken(*a, **k):
+        raise anchor.AnchorFailed("chain_2: C++ and progmo disagree beyond 1.0e-10 relative: kkt 1.0e-03")
+
+    monkeypatch.setattr(anchor, "run", broken)
+    assert main(["--smoke", "--out", str(tmp_path), "--only", "anchor"]) == 1
+    html = (tmp_path / "index.html").read_text()
+    assert "FAILED" in html and "disagree" in html
+    assert "FAILED: anchor" in capsys.readouterr().err
+
+
+def _anchor_row(n, progmo_s, cpp_s):
+    return dict(n=n, progmo_null_space_s=progmo_s, same_best="same_minv", same_best_s=cpp_s,
+                ratio_null_space=progmo_s / cpp_s)
+
+
+def test_targets_say_met_or_missed_by_how_much():
+    from progmo.bench import targets as tg
+
+    rows = [_anchor_row(7, 2.0e-6, 4.0e-6), _anchor_row(30, 20e-6, 10e-6), _anchor_row(128, 240e-6, 300e-6)]
+    got = {t.target: t for t in tg.anchor_targets(rows)}
+    (r7, r30, big, growth) = got.values()
+    assert r7.verdict == "met" and "0.50x" in r7.measured
+    assert r30.verdict == "MISSED by 2.86x"  # 2.0 / 0.7
+    assert big.verdict == "MISSED by 4.00x"  # 240 us / 60 us
+    e = np.log(12) / np.log(128 / 30)
+    assert growth.verdict.startswith(f"MISSED by {e - 1.2:.2f} in the exponent") and f"{e:.2f}" in growth.measured
+    # nothing measured: every target says so, with the reason
+    for t in tg.anchor_targets(None, "C++ anchor skipped: no compiler"):
+        assert t.verdict == "not measured: C++ anchor skipped: no compiler"
+
+
+def test_caraxis_target_interpolates_digits_against_cpu():
+    from progmo.bench import targets as tg
+
+    # 6 digits in 2 ms, 10 digits in 8 ms: 8 digits at 4 ms on the log-log front
+    rows = [dict(method="dop853", code="success", rtol=r, mescd_all=d, cpu_s=c)
+            for r, d, c in ((1e-8, 6.0, 2e-3), (1e-12, 10.0, 8e-3))]
+    t = tg.caraxis_target(rows)
+    assert t.verdict == "met" and t.measured.startswith("4.00 ms")
+    slow = [dict(r, cpu_s=r["cpu_s"] * 3) for r in rows]
+    assert tg.caraxis_target(slow).verdict == "MISSED by 2.40x"
+    short = [dict(rows[0])]
+    assert tg.caraxis_target(short).verdict.startswith("not measured: no run of this sweep reached 8 digits")
+
+
+def test_small_problem_target_compares_against_the_accepted_figures():
+    from progmo.bench import targets as tg
+
+    acc = tg.load_accepted()  # the shipped record names its provenance
+    prov = acc["small_problem_rhs"]["provenance"]
+    assert prov["command"].startswith("progmo bench") and prov["date"] and prov["commit"]
+    fake = dict(small_problem_rhs=dict(provenance=prov, rows=[
+        dict(n=2, ratio_null_space=1.0, progmo_null_space_us=1.0), dict(n=4, ratio_null_space=1.0, progmo_null_space_us=2.0)]))
+    ok = [_anchor_row(2, 1.1e-6, 1e-6), _anchor_row(4, 2.0e-6, 2e-6)]
+    assert tg.small_problem_target(ok, accepted=fake).verdict == "met"
+    worse = [_anchor_row(2, 1.3e-6, 1e-6), _anchor_row(4, 2.0e-6, 2e-6)]
+    assert tg.small_problem_target(worse, accepted=fake).verdict == "MISSED by 1.30x (regression)"
+    rec = tg.accepted_record(ok, prov)
+    assert [r["n"] for r in rec["small_problem_rhs"]["rows"]] == [2, 4]

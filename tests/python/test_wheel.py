@@ -39,6 +39,10 @@ def test_wheel_in_a_fresh_venv_runs_solve_check_and_the_readme(tmp_path):
     where = run([py, "-c", "import progmo; print(progmo.__file__)"], cwd=work, env=env).stdout.strip()
     assert where.startswith(str(venv)), where  # the installed package, not the checkout
 
+    # the bench's C++ anchor source, its Eigen installer and the accepted figures ship in the package
+    run([py, "-c", "from progmo.bench import anchor, targets; assert anchor.SOURCE.is_file(), anchor.SOURCE; "
+         "assert anchor.INSTALL_EIGEN.is_file(); targets.load_accepted()"], cwd=work, env=env)
+
     r = run([exe, "solve", "double_pendulum"], cwd=work, env=env)
     assert "double_pendulum: success" in r.stdout
     assert {p.name for p in (work / "out" / "double_pendulum").iterdir()} >= {

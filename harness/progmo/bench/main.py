@@ -1,4 +1,4 @@
-"""`progmo bench [--quick] [--out DIR] [--only workprecision,scipy,conditioning,scaling]`
+"""`progmo bench [--quick] [--out DIR] [--only workprecision,scipy,conditioning,scaling,anchor,testset,drift]`
 
 Speed against error: writes CSV, PNG and index.html to DIR (default out/bench) and prints the key
 numbers. The `progmo` binary forwards `progmo bench ...` to `python -m progmo.bench.main ...`.
@@ -10,6 +10,10 @@ Run times measured on the shared 2-core x86-64 machine (2026-11-21):
            drift control over 10^4 periods, 7 alternating rounds)
   --quick  about 60 s (2 scenes, 4 tolerances, 3 repeats, chains up to 64 links)
   --smoke  about 10 s (the test's end-to-end run; its numbers mean nothing)
+  2026-11-23: full 313 s with the C++ anchor (part `anchor`, bench/anchor.py), the machine shared.
+The anchor is compiled on first use and cached: about 5 min of CPU (4-13 min wall on the shared
+2-core machine) for g++ on Pinocchio's headers; the part then takes about 20 s in a full run (7
+chains, 7 rounds of 5 loops), 7 s with --quick.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from __future__ import annotations
 from typing import Any
 
 import argparse
+import html as _html
 import sys
 import time
 from pathlib import Path
@@ -25,21 +30,22 @@ import numpy as np
 
 from .. import cliutil
 
-PARTS = ("workprecision", "scipy", "conditioning", "scaling", "testset", "drift")
+PARTS = ("workprecision", "scipy", "conditioning", "scaling", "anchor", "testset", "drift")
 
 # sweep sizes; --quick is the default a test or a shared 2-core machine can afford
 QUICK: dict[str, Any] = dict(scenes=("double_pendulum", "chain_8"), tols=[1e-4, 1e-6, 1e-8, 1e-10], repeats=3,
              scipy_tols=[1e-4, 1e-6, 1e-8, 1e-10], radau_min_tol=1e-8, states=3,
-             testset_tols=[1e-4, 1e-6, 1e-8, 1e-10], drift_rounds=3)
+             testset_tols=[1e-4, 1e-6, 1e-8, 1e-10], drift_rounds=3, anchor_rounds=3, anchor_budget=0.02)
 # full: every bundled scene in the work-precision sweep (scipy only where a hand-written pipeline exists)
 FULL: dict[str, Any] = dict(scenes=("double_pendulum", "chain_8", "example_2_1", "example_2_1_through_rd0", "example_3_1_free",
                     "heavy_top", "planar_arm_line", "knife_edge", "appell_hamel", "slider_crank"),
             tols=[10.0 ** -k for k in range(4, 13)], repeats=5,
             scipy_tols=[10.0 ** -k for k in range(4, 13)], radau_min_tol=1e-10, states=5,
-            testset_tols=[10.0 ** -k for k in range(4, 13)], drift_rounds=7)
+            testset_tols=[10.0 ** -k for k in range(4, 13)], drift_rounds=7, anchor_rounds=7, anchor_budget=0.05)
 # --smoke: the smallest end-to-end run (tests): one scene, two tolerances, two chain lengths
 SMOKE: dict[str, Any] = dict(scenes=("double_pendulum",), tols=[1e-5, 1e-8], repeats=1, scipy_tols=[1e-5, 1e-8],
-             radau_min_tol=1e-8, states=2, scaling_ns=[2, 7], conditioning="smoke", testset_tols=[1e-6], drift_rounds=1)
+             radau_min_tol=1e-8, states=2, scaling_ns=[2, 7], conditioning="smoke", testset_tols=[1e-6], drift_rounds=1,
+             anchor_ns=[2, 7], anchor_rounds=1, anchor_budget=0.002)
 
 
 def parser() -> argparse.ArgumentParser:
@@ -50,6 +56,9 @@ def parser() -> argparse.ArgumentParser:
                    help=f"comma-separated parts to run (default all: {','.join(PARTS)})")
     p.add_argument("--smoke", action="store_true",
                    help="smallest end-to-end run (for tests; numbers not meaningful)")
+    p.add_argument("--accept", action="store_true",
+                   help="record this run's small-problem figures (anchor part, n = 2 and 4) as the accepted "
+                        "ones (bench/accepted.json) that later runs are judged against")
     p.add_argument("--scenes", default=None,
                    help="comma-separated bundled scene names for workprecision/scipy "
                         "(default double_pendulum,chain_8)")
@@ -71,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
 
     from .. import Scene
-    from . import conditioning, page, scaling, scipy_pipeline, testset, workprecision
+    from . import anchor, conditioning, page, scaling, scipy_pipeline, targets as tg, testset, workprecision
     from .common import Provenance, log, scene_path, write_csv
 
     prov = Provenance(argv)
@@ -98,7 +107,8 @@ def main(argv: list[str] | None = None) -> int:
         "references/hard/README.md.",
     ]
     summary: list[str] = []
-    targets: list[str] = []  # issue 5's targets, met or missed, with the measured numbers
+    targets: list[tg.Target] = []  # the targets, met or missed, with the measured numbers
+    failed: list[str] = []  # parts that failed (exit code 1)
     scenes = []
     if "workprecision" in only or "scipy" in only:
         scenes = [Scene(str(scene_path(n))) for n in cfg["scenes"]]
@@ -180,8 +190,8 @@ def main(argv: list[str] | None = None) -> int:
             if best:
                 lo, hi = min(best), max(best)
                 verdict = "met" if lo >= 100 else f"MISSED by {100 / hi:.0f}-{100 / lo:.0f}x"
-                targets.append(f"whole solve >= 100x faster than scipy + Pinocchio at equal error, {name}: "
-                               f"{lo:.1f}-{hi:.1f}x: {verdict}")
+                targets.append(tg.Target(f"whole solve >= 100x faster than scipy + Pinocchio at equal error, {name}",
+                                         f"{lo:.1f}-{hi:.1f}x", verdict))
         hdr = ["scene", "method", "rtol", "atol", "code", "error", "cpu_s", "rhs_evals", "jacobian_evals", "lu", "reference"]
         write_csv(out / "scipy.csv", prov, hdr, ([r[h] for h in hdr] for r in scipy_rows_all))
         hdr = ["scene", "comparison", "error", "cpu_scipy", "cpu_progmo", "ratio"]
@@ -228,18 +238,71 @@ def main(argv: list[str] | None = None) -> int:
             at_n = scaling.at(rows, n)
             if at_n:
                 ratio = at_n["progmo_null_space_s"] / at_n["pin_fd_u_s"]
-                targets.append(f"one RHS <= Pinocchio forwardDynamics (+u) at n = {n}: progmo null_space / pin = "
-                               f"{ratio:.2f}: {'met' if ratio <= 1 else f'MISSED by {ratio:.2f}x'}")
+                targets.append(tg.Target(f"one RHS <= Pinocchio forwardDynamics (+u) through the Python binding at n = {n}",
+                                         f"progmo null_space / pin = {ratio:.2f}",
+                                         "met" if ratio <= 1 else f"MISSED by {ratio:.2f}x"))
                 summary.append(f"scaling n = {n}: progmo null_space {at_n['progmo_null_space_s'] * 1e6:.1f} us, kkt "
                                f"{at_n['progmo_kkt_s'] * 1e6:.1f} us; pin.forwardDynamics + u "
                                f"{at_n['pin_fd_u_s'] * 1e6:.1f} us (Python loop); ratio progmo/pin = {ratio:.2f}")
         summary.append(f"scaling: Python call overhead {sc['python_overhead_s'] * 1e6:.3f} us per call (not subtracted)")
 
+    anchor_rows, anchor_why = None, "the anchor part did not run (--only)"
+    if "anchor" in only:
+        title = "4b. The C++ anchor: Pinocchio's C++ on the same chains and rows"
+        try:
+            an = anchor.run(out, prov, ns=cfg.get("anchor_ns", anchor.NS), rounds=cfg["anchor_rounds"],
+                            budget_s=cfg["anchor_budget"])
+        except anchor.Unavailable as e:
+            anchor_why = f"C++ anchor skipped: {e}"
+            omissions.append(anchor_why)
+            sections.append((title, f"<p><b>SKIPPED</b>: {_html.escape(str(e))}</p>"))
+            summary.append(f"anchor: SKIPPED: {e}")
+        except (anchor.AnchorFailed, NotImplementedError) as e:
+            anchor_why = "the C++ anchor FAILED (section 4b)"
+            failed.append(f"anchor: {e}")
+            sections.append((title, f"<p><b>FAILED</b>:</p><pre>{_html.escape(str(e))}</pre>"))
+            summary.append(f"anchor: FAILED: {e}")
+        else:
+            anchor_rows = an["rows"]
+            b = an["build"]
+            us = lambda x: f"{x * 1e6:.2f}"  # noqa: E731
+            trs = [[r["n"], us(r["aba_s"]), us(r["kkt_s"]), f"{us(r['same_best_s'])} ({r['same_best']})",
+                    us(r["progmo_null_space_s"]), us(r["progmo_kkt_s"]), f"{r['ratio_null_space']:.2f}",
+                    f"{r['ratio_kkt']:.2f}", f"{r['ratio_null_space_kkt']:.2f}",
+                    f"{r['agreement']:.1e} ({r['agreement_tol']:.0e})"] for r in anchor_rows]
+            hdr = ["n", "C++ ABA (us)", "C++ KKT forwardDynamics, J and gamma given (us)",
+                   "C++ same work, best (us)", "progmo null_space (us)", "progmo kkt (us)",
+                   "progmo null_space / C++ same work", "progmo kkt / C++ same work",
+                   "progmo null_space / C++ KKT", "max rel. disagreement (tolerance)"]
+            vrs = [[r["n"]] + [us(r[f"{v}_s"]) for v in anchor.SAME] for r in anchor_rows]
+            inner = (page.doc(anchor.__doc__) + page.table(hdr, trs)
+                     + "<p>Every same-work variant (us per call):</p>" + page.table(["n", *anchor.SAME], vrs)
+                     + f"<p>Build ({'cached' if b['cached'] else 'built in this run'}): <code>{_html.escape(b['command'])}</code>; "
+                     f"{_html.escape(b['compiler'])}, Pinocchio {b['pin']}, Eigen {b['eigen']}.</p>"
+                     "<p>Data: <a href='anchor.csv'>anchor.csv</a>.</p>")
+            sections.append((title, inner))
+            for r in anchor_rows:
+                summary.append(f"anchor n = {r['n']}: C++ ABA {us(r['aba_s'])} us, KKT (J, gamma given) {us(r['kkt_s'])} us, "
+                               f"same work {us(r['same_best_s'])} us ({r['same_best']}); progmo null_space "
+                               f"{us(r['progmo_null_space_s'])} us, kkt {us(r['progmo_kkt_s'])} us; progmo/C++ same work "
+                               f"{r['ratio_null_space']:.2f} (null_space), {r['ratio_kkt']:.2f} (kkt)")
+            if ns.accept:
+                import json as _json
+
+                rec = tg.accepted_record(anchor_rows, dict(command=prov.command, date=time.strftime("%Y-%m-%d"),
+                                                           commit=prov.versions.get("commit", "unknown"),
+                                                           machine=prov.versions.get("machine", "unknown")))
+                tg.ACCEPTED.write_text(_json.dumps(rec, indent=1) + "\n")
+                summary.append(f"anchor: accepted the small-problem figures into {tg.ACCEPTED}")
+
+    ts = None
+    testset_why = "the testset part did not run (--only)"
     if "testset" in only:
         try:
             ts = testset.run(out, prov, cfg["testset_tols"], cfg["repeats"])
         except (FileNotFoundError, ValueError) as e:
             omissions.append(f"IVP Test Set skipped: {e}")
+            testset_why = f"IVP Test Set skipped: {e}"
             ts = None
         if ts is not None:
             trs = [[r["method"], f"{r['rtol']:.0e}", r["code"], f"{r['mescd_states']:.2f}", f"{r['mescd_all']:.2f}",
@@ -263,8 +326,9 @@ def main(argv: list[str] | None = None) -> int:
                 f"with projection, {d['residual_none']:.1e} without (min of {d['rounds']} alternating rounds)")
         summary.append(line)
         ok = d["residual_projection"] < 1e-12 and extra <= 0.15
-        targets.append(f"projection over 10^4 periods: residual {d['residual_projection']:.1e} (< 1e-12) for "
-                       f"{extra * 100:+.1f} % CPU (<= 15 %): {'met' if ok else 'MISSED'}")
+        targets.append(tg.Target("projection over 10^4 periods: residual < 1e-12 for <= 15 % more CPU",
+                                 f"residual {d['residual_projection']:.1e} for {extra * 100:+.1f} % CPU",
+                                 "met" if ok else "MISSED"))
         write_csv(out / "drift.csv", prov, ["rounds", "projection_s", "none_s", "residual_projection",
                                             "residual_none", "steps"],
                   [[d["rounds"], d["projection_s"], d["none_s"], d["residual_projection"], d["residual_none"],
@@ -275,26 +339,44 @@ def main(argv: list[str] | None = None) -> int:
                          "on and off alternate; the minimum wall time of each is compared.</p><p>"
                          + line + "</p><p>Data: <a href='drift.csv'>drift.csv</a>.</p>"))
 
-    elapsed = time.perf_counter() - t_start
-    if summary:
-        import html as _html
+    if ns.accept and anchor_rows is None:
+        summary.append(f"--accept: nothing accepted ({anchor_why})")
+    # issue 15's targets: always listed, measured or not (and then why not)
+    targets += tg.anchor_targets(anchor_rows, anchor_why)
+    targets.append(tg.caraxis_target(ts["rows"] if ts else None, testset_why))
+    targets.append(tg.small_problem_target(anchor_rows, anchor_why))
 
+    elapsed = time.perf_counter() - t_start
+    if summary or targets:
         head = ""
         if targets:
-            head += "<h3>Targets</h3><ul>" + "".join(f"<li>{_html.escape(t)}</li>" for t in targets) + "</ul>"
+            head += "<h3>Targets</h3>" + page.table(["target", "measured (this run)", "verdict"],
+                                                    [[t.target, t.measured, t.verdict] for t in targets])
             head += ("<p>Why the scipy ratio stays near 10x: per RHS the scipy pipeline costs Pinocchio's "
                      "forwardDynamics plus numpy J, gamma plus solve_ivp's Python step code (section 4, 'user "
-                     "pipeline'); progmo's RHS is a few times cheaper than forwardDynamics alone, so at equal "
-                     "RHS counts the ratio is bounded by (pipeline + scipy overhead) / progmo RHS.</p>")
+                     "pipeline'); progmo's RHS costs about what Pinocchio's own C++ KKT call costs (section 4b) and "
+                     "less than forwardDynamics called from Python, so at equal RHS counts the ratio is bounded by "
+                     "(pipeline + scipy overhead) / progmo RHS.</p>")
         head += "<h3>Key numbers</h3><pre>" + _html.escape("\n".join(summary)) + "</pre>"
         sections.insert(0, ("Summary", head))
     page.write(out, prov, sections, omissions, elapsed)
     print(f"progmo bench: wrote {out}/index.html in {elapsed:.0f} s")
-    for line in summary + targets:
+    for line in summary:
         print(line)
+    print(_targets_text(targets))
     for line in prov.lines():
         print(line)
-    return 0
+    for f in failed:
+        print(f"progmo bench: FAILED: {f}", file=sys.stderr)
+    return 1 if failed else 0
+
+
+def _targets_text(targets) -> str:
+    """The targets as a plain-text table (stdout): verdict | target | measured."""
+    w = max((len(t.verdict) for t in targets), default=7)
+    lines = ["targets (from this run):", f"  {'verdict'.ljust(w)} | target | measured"]
+    lines += [f"  {t.verdict.ljust(w)} | {t.target} | {t.measured}" for t in targets]
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

@@ -35,6 +35,9 @@ class Row:
     fdd: Callable[[float], float]  # its second derivative
     k: int = 0  # joint index (0-based) of a joint row
     length: float = 0.0  # link length of a tip_z row
+    # the law's family and constants, for the C++ anchor (bench/cpp/anchor.cpp):
+    # ("one_minus_cos", amp, w): c + amp (1 - cos w t); ("sin", amp, w): c + amp sin w t
+    law: tuple[str, float, float] | None = None
 
 
 @dataclass
@@ -100,7 +103,8 @@ def pipeline_for(scene) -> Pipeline:
         raise NotImplementedError(f"{scene.name}: lagrangian scene, no URDF")
     if scene.name == "double_pendulum" and names == ["elbow"]:
         amp, w = p["amp"], p["w"]
-        rows = [Row("joint", lambda t: amp * np.sin(w * t), lambda t: -amp * w * w * np.sin(w * t), k=1)]
+        rows = [Row("joint", lambda t: amp * np.sin(w * t), lambda t: -amp * w * w * np.sin(w * t), k=1,
+                    law=("sin", amp, w))]
     elif set(names) <= {"tip_height", "shoulder"} and "tip_height" in names:
         A, B, w, q0 = p["A"], p["B"], p["w"], p["q0"]
         l = p.get("l", 0.25)
@@ -109,10 +113,10 @@ def pipeline_for(scene) -> Pipeline:
         for nm in names:
             if nm == "tip_height":
                 rows.append(Row("tip_z", lambda t: ztip0 + A * (1 - np.cos(w * t)),
-                                lambda t: A * w * w * np.cos(w * t), length=l))
+                                lambda t: A * w * w * np.cos(w * t), length=l, law=("one_minus_cos", A, w)))
             else:
                 rows.append(Row("joint", lambda t: q0 + B * (1 - np.cos(w * t)),
-                                lambda t: B * w * w * np.cos(w * t), k=0))
+                                lambda t: B * w * w * np.cos(w * t), k=0, law=("one_minus_cos", B, w)))
         _check_planar_chain(scene, l)
     else:
         raise NotImplementedError(f"{scene.name}: no hand-written programme rows for {names}")

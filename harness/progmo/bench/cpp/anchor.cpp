@@ -1,0 +1,353 @@
+// The C++ anchor of `progmo bench`: Pinocchio's own algorithms, compiled against the headers that
+// the `pin` wheel ships (header-only: no link to libpinocchio_default.so) plus Eigen, on the model
+// and programme rows the Python side writes (bench/anchor.py). Built and run by the bench; see
+// anchor.py for the protocol, the build command and the cache.
+//
+// Usage: anchor MODEL_FILE, then commands on stdin, one per line; answers on stdout:
+//   check t q[nv] v[nv] J[s*nv] gamma[s]    ->  "a <variant> x1 .. xn" and "u <variant> ..." lines,
+//                                               then "end"
+//   bench iters t q[nv] v[nv] J[s*nv] gamma[s] -> "time <variant> seconds_per_call" lines (thread
+//                                               CPU time of one loop of iters calls), then "end"
+//   quit
+// J and gamma are the programme rows in Pinocchio's convention (J a + gamma = 0) at (t, q, v); only
+// the `kkt` variant uses them (the "given J, gamma" call); every `same_*` variant rebuilds J and
+// gamma of the rows from the kinematics at (t, q, v), solves for dv/dt and forms u = J^T lambda,
+// the work progmo's right-hand side does.
+//
+// Variants:
+//   aba           aba(q, v, 0): unconstrained forward dynamics (no rows), the floor
+//   kkt           forwardDynamics(q, v, 0, J, gamma): computeAllTerms + tree Cholesky KKT, J and
+//                 gamma given (fixed), u = J^T lambda_c
+//   same_cat      computeAllTerms(q, v) (M, nle, joint Jacobians, drift accelerations in one
+//                 sweep) + frame Jacobian rows and classical drift + forwardDynamics(tau, J, gamma)
+//                 on the computed terms + u
+//   same_sep      forwardKinematics(q, v, 0) + computeJointJacobians + crba + nonLinearEffects +
+//                 forwardDynamics(tau, J, gamma) + u (separate Pinocchio algorithms)
+//   same_minv     forwardKinematics(q, v, 0) + aba (world convention: free acceleration) +
+//                 computeMinverse from the ABA factorization (O(n^2)) + dense Schur complement + u
+//   same_abaunit  forwardKinematics(q, v, 0) + aba for the free acceleration + s more ABA passes
+//                 (zero gravity, zero velocity, tau = J_k^T) for M^-1 J^T: O(n s) + Schur + u
+// Every call alternates between q and q + 1e-9 (as progmo's Scene.rhs_benchmark does) so nothing
+// can be reused between calls.
+
+#include <pinocchio/algorithm/aba.hpp>
+#include <pinocchio/algorithm/compute-all-terms.hpp>
+#include <pinocchio/algorithm/contact-dynamics.hpp>
+#include <pinocchio/algorithm/crba.hpp>
+#include <pinocchio/algorithm/frames.hpp>
+#include <pinocchio/algorithm/jacobian.hpp>
+#include <pinocchio/algorithm/kinematics.hpp>
+#include <pinocchio/algorithm/rnea.hpp>
+#include <pinocchio/multibody.hpp>
+
+#include <Eigen/Cholesky>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <time.h>
+#include <vector>
+
+using namespace pinocchio;
+using Eigen::MatrixXd;
+using Eigen::VectorXd;
+
+namespace {
+
+[[noreturn]] void fail(const std::string &msg) {
+  std::fprintf(stderr, "anchor: error: %s\n", msg.c_str());
+  std::exit(2);
+}
+
+struct Row {
+  bool tip = false;   // tip: one axis of a point's world position; else a joint coordinate
+  JointIndex joint = 0;  // tip: the parent joint of the point
+  SE3 placement = SE3::Identity();  // tip: the point in the joint frame
+  int axis = 2;       // tip: world axis 0, 1, 2
+  int k = 0;          // joint row: velocity index
+  bool law_sin = false;  // law f(t) = c + amp (1 - cos w t) (false) or c + amp sin w t (true)
+  double amp = 0.0, w = 0.0;
+  double fdd(double t) const {
+    return law_sin ? -amp * w * w * std::sin(w * t) : amp * w * w * std::cos(w * t);
+  }
+};
+
+struct Anchor {
+  Model model, model0;  // model0: zero gravity (unit-force ABA passes)
+  std::vector<Row> rows;
+  Data data, data0;
+  int nv = 0, s = 0;
+  // work space, allocated once
+  MatrixXd J, Jf, MinvJt, S;
+  VectorXd gamma, tau, zero, a, u, lambda, tmp;
+  Eigen::LLT<MatrixXd> llt;
+
+  void load(const std::string &path) {
+    std::ifstream in(path);
+    if (!in) fail("cannot open " + path);
+    std::string tag;
+    int version = 0;
+    in >> tag >> version;
+    if (tag != "progmo-anchor" || version != 1) fail(path + ": not a progmo-anchor v1 model file");
+    int njoints = 0;
+    in >> tag >> njoints;
+    if (tag != "joints" || njoints < 1) fail("expected 'joints N'");
+    Eigen::Vector3d g;
+    in >> tag >> g[0] >> g[1] >> g[2];
+    if (tag != "gravity") fail("expected 'gravity gx gy gz'");
+    for (int j = 0; j < njoints; ++j) {
+      std::string type;
+      long parent = 0;
+      Eigen::Matrix3d R, I;
+      Eigen::Vector3d p, c;
+      double mass = 0;
+      in >> tag >> type >> parent;
+      if (tag != "joint") fail("expected 'joint TYPE PARENT ...'");
+      for (int r = 0; r < 3; ++r)
+        for (int cc = 0; cc < 3; ++cc) in >> R(r, cc);
+      in >> p[0] >> p[1] >> p[2] >> mass >> c[0] >> c[1] >> c[2];
+      for (int r = 0; r < 3; ++r)
+        for (int cc = 0; cc < 3; ++cc) in >> I(r, cc);
+      if (!in) fail("truncated joint record");
+      const SE3 M(R, p);
+      const std::string name = "j" + std::to_string(j + 1);
+      JointIndex id;
+      if (type == "JointModelRX") id = model.addJoint(parent, JointModelRX(), M, name);
+      else if (type == "JointModelRY") id = model.addJoint(parent, JointModelRY(), M, name);
+      else if (type == "JointModelRZ") id = model.addJoint(parent, JointModelRZ(), M, name);
+      else if (type == "JointModelPX") id = model.addJoint(parent, JointModelPX(), M, name);
+      else if (type == "JointModelPY") id = model.addJoint(parent, JointModelPY(), M, name);
+      else if (type == "JointModelPZ") id = model.addJoint(parent, JointModelPZ(), M, name);
+      else fail("unsupported joint type " + type);
+      model.appendBodyToJoint(id, Inertia(mass, c, Symmetric3(I)), SE3::Identity());
+    }
+    model.gravity.linear(g);
+    in >> tag >> s;
+    if (tag != "rows" || s < 1) fail("expected 'rows S'");
+    for (int i = 0; i < s; ++i) {
+      Row r;
+      std::string kind, law;
+      in >> tag >> kind;
+      if (tag != "row") fail("expected 'row KIND ...'");
+      if (kind == "tip") {
+        long joint = 0;
+        Eigen::Vector3d p;
+        in >> joint >> p[0] >> p[1] >> p[2] >> r.axis;
+        r.tip = true;
+        r.joint = JointIndex(joint);
+        r.placement = SE3(Eigen::Matrix3d::Identity(), p);
+        if (joint < 1 || joint >= model.njoints || r.axis < 0 || r.axis > 2) fail("bad tip row");
+      } else if (kind == "joint") {
+        in >> r.k;
+      } else {
+        fail("unsupported row kind " + kind);
+      }
+      in >> law >> r.amp >> r.w;
+      if (law != "one_minus_cos" && law != "sin") fail("unsupported time law " + law);
+      r.law_sin = law == "sin";
+      rows.push_back(r);
+    }
+    if (!in) fail("truncated row records");
+    nv = model.nv;
+    for (const Row &r : rows)
+      if (!r.tip && (r.k < 0 || r.k >= nv)) fail("joint row index out of range");
+    model0 = model;
+    model0.gravity.setZero();
+    data = Data(model);
+    data0 = Data(model0);
+    J.setZero(s, nv);
+    Jf.setZero(6, nv);
+    MinvJt.setZero(nv, s);
+    S.setZero(s, s);
+    gamma.setZero(s);
+    tau.setZero(nv);
+    zero.setZero(nv);
+    a.setZero(nv);
+    u.setZero(nv);
+    lambda.setZero(s);
+    tmp.setZero(nv);
+    llt = Eigen::LLT<MatrixXd>(s);
+  }
+
+  // J and gamma of the rows at (t, q, v) from data.oMi, data.v, data.a (a = 0 drift) and data.J:
+  // the caller ran the kinematics (and joint Jacobians) first.
+  void rows_from_kinematics(double t) {
+    for (int i = 0; i < s; ++i) {
+      const Row &r = rows[i];
+      if (r.tip) {
+        Jf.setZero();
+        getFrameJacobian(model, data, r.joint, r.placement, LOCAL_WORLD_ALIGNED, Jf);
+        J.row(i) = Jf.row(r.axis);
+        const Motion acc =
+            getFrameClassicalAcceleration(model, data, r.joint, r.placement, LOCAL_WORLD_ALIGNED);
+        gamma[i] = acc.linear()[r.axis] - r.fdd(t);
+      } else {
+        J.row(i).setZero();
+        J(i, r.k) = 1.0;
+        gamma[i] = -r.fdd(t);
+      }
+    }
+  }
+
+  // a = a0 + MinvJt lambda, (J MinvJt) lambda = -(J a0 + gamma); u = J^T lambda.
+  void schur(const VectorXd &a0) {
+    S.noalias() = J * MinvJt;
+    lambda.noalias() = -(J * a0);
+    lambda -= gamma;
+    llt.compute(S);
+    llt.solveInPlace(lambda);
+    a = a0;
+    a.noalias() += MinvJt * lambda;
+    u.noalias() = J.transpose() * lambda;
+  }
+
+  void same_cat(double t, const VectorXd &q, const VectorXd &v) {
+    computeAllTerms(model, data, q, v);
+    rows_from_kinematics(t);
+    a = forwardDynamics(model, data, tau, J, gamma, 0.0);
+    u.noalias() = J.transpose() * data.lambda_c;
+  }
+
+  void same_sep(double t, const VectorXd &q, const VectorXd &v) {
+    forwardKinematics(model, data, q, v, zero);
+    computeJointJacobians(model, data);
+    rows_from_kinematics(t);
+    crba(model, data, q, Convention::WORLD);
+    nonLinearEffects(model, data, q, v);
+    a = forwardDynamics(model, data, tau, J, gamma, 0.0);
+    u.noalias() = J.transpose() * data.lambda_c;
+  }
+
+  void same_minv(double t, const VectorXd &q, const VectorXd &v) {
+    forwardKinematics(model, data, q, v, zero);
+    computeJointJacobians(model, data);
+    rows_from_kinematics(t);
+    tmp = aba(model, data, q, v, tau, Convention::WORLD);
+    computeMinverse(model, data);
+    MinvJt.noalias() = data.Minv.selfadjointView<Eigen::Upper>() * J.transpose();
+    schur(tmp);
+  }
+
+  void same_abaunit(double t, const VectorXd &q, const VectorXd &v) {
+    forwardKinematics(model, data, q, v, zero);
+    computeJointJacobians(model, data);
+    rows_from_kinematics(t);
+    tmp = aba(model, data, q, v, tau);
+    for (int i = 0; i < s; ++i) MinvJt.col(i) = aba(model0, data0, q, zero, J.row(i).transpose());
+    schur(tmp);
+  }
+
+  void kkt(const VectorXd &q, const VectorXd &v, const MatrixXd &Jg, const VectorXd &gg) {
+    a = forwardDynamics(model, data, q, v, tau, Jg, gg);
+    u.noalias() = Jg.transpose() * data.lambda_c;
+  }
+};
+
+void print_vec(const char *what, const char *variant, const VectorXd &x) {
+  std::printf("%s %s", what, variant);
+  for (Eigen::Index i = 0; i < x.size(); ++i) std::printf(" %.17g", x[i]);
+  std::printf("\n");
+}
+
+// CPU time of this thread (the machine is shared: wall time would count the time the process waits
+// for a core); the Python side times progmo's Rust loop the same way (time.thread_time).
+double thread_seconds() {
+  timespec ts;
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+
+template <class F>
+double time_loop(long iters, const VectorXd &q, F &&f) {
+  VectorXd qb = q.array() + 1e-9;
+  const VectorXd *states[2] = {&q, &qb};
+  const double start = thread_seconds();
+  for (long i = 0; i < iters; ++i) f(*states[i % 2]);
+  return (thread_seconds() - start) / double(iters);
+}
+
+}  // namespace
+
+int main(int argc, char **argv) {
+  if (argc != 2) fail("usage: anchor MODEL_FILE (commands on stdin)");
+  Anchor an;
+  an.load(argv[1]);
+  const int n = an.nv, s = an.s;
+  std::printf("ready nv %d rows %d pinocchio %s eigen %d.%d.%d\n", n, s, PINOCCHIO_VERSION,
+              EIGEN_WORLD_VERSION, EIGEN_MAJOR_VERSION, EIGEN_MINOR_VERSION);
+  std::fflush(stdout);
+  std::string line;
+  VectorXd q(n), v(n), gg(s);
+  MatrixXd Jg(s, n);
+  while (std::getline(std::cin, line)) {
+    std::istringstream in(line);
+    std::string cmd;
+    in >> cmd;
+    if (cmd.empty()) continue;
+    if (cmd == "quit") break;
+    long iters = 0;
+    if (cmd == "bench") in >> iters;
+    else if (cmd != "check") fail("unknown command " + cmd);
+    double t = 0;
+    in >> t;
+    for (int i = 0; i < n; ++i) in >> q[i];
+    for (int i = 0; i < n; ++i) in >> v[i];
+    for (int i = 0; i < s; ++i)
+      for (int j = 0; j < n; ++j) in >> Jg(i, j);
+    for (int i = 0; i < s; ++i) in >> gg[i];
+    if (!in) fail("truncated command " + cmd);
+    if (cmd == "check") {
+      print_vec("a", "aba", aba(an.model, an.data, q, v, an.tau));
+      an.kkt(q, v, Jg, gg);
+      print_vec("a", "kkt", an.a);
+      print_vec("u", "kkt", an.u);
+      an.same_cat(t, q, v);
+      print_vec("a", "same_cat", an.a);
+      print_vec("u", "same_cat", an.u);
+      an.same_sep(t, q, v);
+      print_vec("a", "same_sep", an.a);
+      print_vec("u", "same_sep", an.u);
+      an.same_minv(t, q, v);
+      print_vec("a", "same_minv", an.a);
+      print_vec("u", "same_minv", an.u);
+      an.same_abaunit(t, q, v);
+      print_vec("a", "same_abaunit", an.a);
+      print_vec("u", "same_abaunit", an.u);
+    } else {
+      if (iters < 1) fail("bench needs iters >= 1");
+      const double t_aba = time_loop(iters, q, [&](const VectorXd &x) {
+        const VectorXd &r = aba(an.model, an.data, x, v, an.tau);
+        asm volatile("" : : "g"(r.data()) : "memory");
+      });
+      const double t_kkt = time_loop(iters, q, [&](const VectorXd &x) {
+        an.kkt(x, v, Jg, gg);
+        asm volatile("" : : "g"(an.u.data()) : "memory");
+      });
+      const double t_cat = time_loop(iters, q, [&](const VectorXd &x) {
+        an.same_cat(t, x, v);
+        asm volatile("" : : "g"(an.u.data()) : "memory");
+      });
+      const double t_sep = time_loop(iters, q, [&](const VectorXd &x) {
+        an.same_sep(t, x, v);
+        asm volatile("" : : "g"(an.u.data()) : "memory");
+      });
+      const double t_minv = time_loop(iters, q, [&](const VectorXd &x) {
+        an.same_minv(t, x, v);
+        asm volatile("" : : "g"(an.u.data()) : "memory");
+      });
+      const double t_unit = time_loop(iters, q, [&](const VectorXd &x) {
+        an.same_abaunit(t, x, v);
+        asm volatile("" : : "g"(an.u.data()) : "memory");
+      });
+      std::printf("time aba %.9e\ntime kkt %.9e\ntime same_cat %.9e\ntime same_sep %.9e\n"
+                  "time same_minv %.9e\ntime same_abaunit %.9e\n",
+                  t_aba, t_kkt, t_cat, t_sep, t_minv, t_unit);
+    }
+    std::printf("end\n");
+    std::fflush(stdout);
+  }
+  return 0;
+}
