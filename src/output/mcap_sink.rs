@@ -38,7 +38,8 @@ pub struct McapSink<W: Write + Seek> {
     tf: Option<u16>,
     warning_channel: Option<McapChannel>,
     /// Tree scenes: body frames per sample on /progmo/tf and the geometry on /progmo/scene.
-    bodies: Option<(super::Bodies, Option<McapChannel>)>,
+    /// (bodies, the scene channel once written, the child frame id of each body)
+    bodies: Option<(super::Bodies, Option<McapChannel>, Vec<String>)>,
     sequence: BTreeMap<u16, u32>,
     q_keys: Vec<String>,
     v_keys: Vec<String>,
@@ -305,12 +306,13 @@ impl<W: Write + Seek> McapSink<W> {
     /// [`FRAME_TRANSFORM_TOPIC`] (child frame `progmo/<body>`), and at the first sample its
     /// geometry on [`SCENE_TOPIC`] (see [`super::Bodies::scene_update`]).
     pub fn with_bodies(mut self, bodies: super::Bodies) -> Self {
-        self.bodies = Some((bodies, None));
+        let frames = bodies.names().map(|n| format!("progmo/{n}")).collect();
+        self.bodies = Some((bodies, None, frames));
         self
     }
 
     fn write_bodies(&mut self, t: f64, q: &[f64]) {
-        let Some((mut bodies, scene)) = self.bodies.take() else {
+        let Some((mut bodies, scene, frames)) = self.bodies.take() else {
             return;
         };
         let scene = match scene {
@@ -333,16 +335,10 @@ impl<W: Write + Seek> McapSink<W> {
                 }
             }
         };
-        for p in bodies.poses(q).to_vec() {
-            self.frame_transform(
-                t,
-                "world",
-                &format!("progmo/{}", p.name),
-                p.position,
-                p.quaternion,
-            );
+        for (p, frame) in bodies.poses(q).iter().zip(&frames) {
+            self.frame_transform(t, "world", frame, p.position, p.quaternion);
         }
-        self.bodies = Some((bodies, scene));
+        self.bodies = Some((bodies, scene, frames));
     }
 
     /// Add the frame-transform channel ([`FRAME_TRANSFORM_TOPIC`], schema

@@ -59,6 +59,11 @@ impl Bodies {
         Bodies { model, data, poses }
     }
 
+    /// Body names, in the order of [`Bodies::poses`].
+    pub fn names(&self) -> impl Iterator<Item = &str> {
+        self.poses.iter().map(|p| p.name.as_str())
+    }
+
     /// World poses of every body at configuration q.
     pub fn poses(&mut self, q: &[f64]) -> &[BodyPose] {
         tree::forward_kinematics(&self.model, &mut self.data, q);
