@@ -435,6 +435,13 @@ v = { x = 0.1, y = 0.1 }
 
 [time]
 t1 = 1.0
+
+[[reference]]
+t = "0.5*m"
+source = "the programme and the constraint solved by hand"
+q = { x = "0.1*sin(t)", y = 0.05 }
+v = { y = 0.1 }
+u = { y = 0.0 }
 "#;
 
 /// A lagrangian scene with a diagonal mass matrix.

@@ -191,6 +191,10 @@ class Scene:
     @property
     def expected_not_checked(self) -> list[tuple[str, str]]:
         """[checks] not_checked of the scene: (simulator, reason)."""
+    @property
+    def references(self) -> list[dict[str, Any]]:
+        """[[reference]] of the scene: one dict per value (t, quantity "q"/"v"/"u", name, index,
+        value, source, field)."""
     def expression_forces(self, t: float, q: F64, v: F64) -> ExpressionForces: ...
     def residuals(self, t: F64, q: F64, v: F64, a: F64 | None = None) -> F64: ...
     def dynamics(self, t: float, q: F64, v: F64) -> Dynamics: ...

@@ -54,7 +54,7 @@ def repo_root() -> Path:
 
 
 def parser() -> argparse.ArgumentParser:
-    from .checks import SIMULATORS
+    from .checks import CHECKERS, SIMULATORS
 
     p = cliutil.parser("progmo", "Cross-simulator checks of progmo (also: python -m progmo.cli).")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
@@ -71,8 +71,10 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument("scenes", nargs="*", metavar="SCENE",
                    help="scene files (TOML), folders of them, or names of bundled scenes "
                    "(default: every bundled scene)")
-    c.add_argument("-s", "--simulator", action="append", choices=SIMULATORS, metavar="NAME",
-                   help=f"simulator to check in, repeatable: {', '.join(SIMULATORS)} (default: all)")
+    c.add_argument("-s", "--simulator", action="append", choices=CHECKERS, metavar="NAME",
+                   help=f"simulator to check in, repeatable: {', '.join(SIMULATORS)} (default: both), or "
+                   "solver_only (a second formulation and the scene's [[reference]] values; every "
+                   "lagrangian scene is checked this way, whatever the simulators)")
     c.add_argument("-j", "--jobs", type=int, default=None, metavar="N",
                    help="checks run at once, one process each (default: number of CPUs; 1 runs in this process)")
     c.add_argument("-o", "--out", default="out/check", metavar="DIR", help="output folder (default: out/check)")
@@ -152,6 +154,7 @@ def _say(msg: str) -> None:
 def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
     from . import Scene, SceneError
     from .checks import SIMULATORS, CheckOptions
+    from .results import SOLVER_ONLY
 
     t_start = time.perf_counter()
     root = repo_root()
@@ -177,6 +180,7 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
         notes.append(pr)
         usage_problem = True
     tasks: list[Task] = []
+    planned: list[tuple[str, str]] = []
     scenes: dict[str, dict[str, str]] = {}
     for f in files:
         try:
@@ -185,6 +189,12 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
             if name in scenes:
                 raise ValueError(f"scene name {name!r} already used by {scenes[name]['path']}")
             scenes[name] = {"path": _rel(f, root), "description": sc.description, "purpose": sc.purpose}
+            # A model no simulator document describes is checked solver-only, never skipped.
+            targets = sims
+            if sc.kind == "lagrangian":
+                targets = [SOLVER_ONLY]
+                scenes[name]["solver_only"] = "a lagrangian model: no MJCF/URDF element describes it"
+            planned += [(name, m) for m in targets]
             try:
                 sc.check_initial()
             except SceneError as e:
@@ -193,9 +203,9 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
                 notes.append(f"{_rel(f, root)}: the solver refuses the scene: {last_line(e)}")
                 usage_problem = True
                 results += [error_result(Task(str(f), name, m), f"the solver refuses the scene: {e}")
-                            for m in sims]
+                            for m in targets]
                 continue
-            tasks += [Task(str(f), name, m) for m in sims]
+            tasks += [Task(str(f), name, m) for m in targets]
         except Exception as e:  # noqa: BLE001 - SceneError or worse: report it, run the rest
             msg = f"scene does not load: {last_line(e)}"
             _say(f"progmo check: error: {f}: {msg}")
@@ -204,13 +214,15 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
             name = f.stem if f.stem not in scenes else f"{f.stem} ({f})"
             scenes[name] = {"path": _rel(f, root)}
             results += [error_result(Task(str(f), name, m), msg) for m in sims]
+            planned += [(name, m) for m in sims]
+    columns = sims + [SOLVER_ONLY] if SOLVER_ONLY not in sims and any(m == SOLVER_ONLY for _, m in planned) else sims
 
     options = CheckOptions(step=ns.step, horizon=ns.horizon, samples=ns.samples)
     prov = rp.provenance(root, rerun_command(argv, Path.cwd(), root))
     prov["jobs"] = jobs
     prov["baselines"] = _rel(base_dir, root)
-    run = rp.Run(results=results, simulators=sims, provenance=prov, scenes=scenes, notes=notes,
-                 plots=not ns.no_plots)
+    run = rp.Run(results=results, simulators=columns, provenance=prov, scenes=scenes, notes=notes,
+                 plots=not ns.no_plots, planned=planned)
 
     order = {(t.scene, t.simulator): i for i, t in enumerate(tasks)}
     interrupted = False
@@ -218,7 +230,7 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
     old_term = signal.getsignal(signal.SIGTERM)
     if _main_thread():
         signal.signal(signal.SIGTERM, _raise_interrupt)
-    _say(f"progmo check: {len(scenes)} scene(s) x {len(sims)} simulator(s) = {n_total} check(s), {jobs} job(s)")
+    _say(f"progmo check: {len(scenes)} scene(s), {n_total} check(s) ({', '.join(columns)}), {jobs} job(s)")
     done = 0
     other_versions: dict[str, list[str]] = {}
     try:

@@ -148,6 +148,12 @@ pub struct SceneFile {
     pub tolerances: BTreeMap<String, Spanned<ToleranceFile>>,
     #[serde(default)]
     pub checks: ChecksFile,
+    /// Reference values at given times, of an origin independent of the solver (a closed form, a
+    /// published solution), each entry with its source; judged by the solver_only check's
+    /// `reference_error` (FORMAT.md, "Reference values").
+    #[serde(default)]
+    #[schemars(with = "Vec<ReferenceFile>")]
+    pub reference: Vec<Spanned<ReferenceFile>>,
 }
 
 /// How the cross-simulator check treats the scene.
@@ -461,4 +467,29 @@ pub struct ToleranceFile {
     /// One line: why this value.
     #[schemars(length(min = 1), regex(pattern = r"\S"))]
     pub reason: String,
+}
+
+/// Reference values of the motion at one time (`[[reference]]`).
+#[derive(Clone, Debug, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+#[schemars(rename = "reference")]
+pub struct ReferenceFile {
+    /// The time (s): a number or an expression of parameters, inside the scene's span.
+    #[schemars(with = "Number")]
+    pub t: Spanned<Number>,
+    /// Where the values come from (a closed form, a publication): required, one line or more.
+    #[schemars(length(min = 1), regex(pattern = r"\S"))]
+    pub source: String,
+    /// Coordinates: name -> number or expression of parameters and `t`.
+    #[serde(default)]
+    #[schemars(with = "BTreeMap<String, Number>")]
+    pub q: BTreeMap<String, Spanned<Number>>,
+    /// Velocities (by velocity name, e.g. `phi1` for phi1'): numbers or expressions of parameters and `t`.
+    #[serde(default)]
+    #[schemars(with = "BTreeMap<String, Number>")]
+    pub v: BTreeMap<String, Spanned<Number>>,
+    /// Control forces u (by velocity name): numbers or expressions of parameters and `t`.
+    #[serde(default)]
+    #[schemars(with = "BTreeMap<String, Number>")]
+    pub u: BTreeMap<String, Spanned<Number>>,
 }

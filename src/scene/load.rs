@@ -137,6 +137,12 @@ pub(super) fn load(src: Source) -> R<Scene> {
     crate::with_problem!(&system, p => check_acceleration_rows(&src, p, &spans, n_system)?);
     let tolerances = tolerances(&src, &file)?;
     let expected_not_checked = expected_not_checked(&src, &file)?;
+    let references = {
+        let (q_names, v_names) =
+            crate::with_problem!(&system, p => (p.model.q_names(), p.model.v_names()));
+        let (t0, t1) = span(&file);
+        super::reference::references(&src, &file, &params, &q_names, &v_names, (t0, t1))?
+    };
     Ok(Scene {
         name: file.name.clone(),
         description: file.description.clone(),
@@ -147,6 +153,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
         settings,
         tolerances,
         expected_not_checked,
+        references,
         source: src,
         row_spans: spans,
     })

@@ -15,12 +15,14 @@ pub mod file;
 pub mod lagrangian;
 pub mod layout;
 mod load;
+mod reference;
 pub mod rows;
 pub mod schema;
 pub mod signals;
 pub mod tree_model;
 
 pub use error::{SceneError, Source};
+pub use reference::ReferenceValue;
 
 use crate::solve::{self, Problem, SampleSink, Settings, Solution};
 use lagrangian::LagrangianModel;
@@ -77,6 +79,8 @@ pub struct Scene {
     pub tolerances: Vec<Tolerance>,
     /// `[checks] not_checked`: (simulator, reason) pairs the check expects not to run.
     pub expected_not_checked: Vec<(String, String)>,
+    /// `[[reference]]`: values of independent origin at given times, one per quantity.
+    pub references: Vec<ReferenceValue>,
     /// The file's text, for locating later errors.
     pub source: Source,
     /// Byte span of each row's expression in the file (row order of the constraints).

@@ -453,6 +453,25 @@ impl PyScene {
         self.scene.expected_not_checked.clone()
     }
 
+    /// `[[reference]]` of the scene, one dict per value: t, quantity ("q", "v" or "u"), name, index
+    /// (into q or v), value, source, field (where it is written).
+    #[getter]
+    fn references<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        let out = PyList::empty(py);
+        for r in &self.scene.references {
+            let d = PyDict::new(py);
+            d.set_item("t", r.t)?;
+            d.set_item("quantity", r.quantity)?;
+            d.set_item("name", &r.name)?;
+            d.set_item("index", r.index)?;
+            d.set_item("value", r.value)?;
+            d.set_item("source", &r.source)?;
+            d.set_item("field", &r.field)?;
+            out.append(d)?;
+        }
+        Ok(out)
+    }
+
     /// The scene's expression forces at (t, q, v) as a simulator applies them: a dict with
     /// "generalized" (nv, the coordinate forces) and "points": one (body, world point (3),
     /// world force (3)) per point force, in the order of the export report's `point_force` entries.
