@@ -29,10 +29,10 @@ import time
 from pathlib import Path
 
 from . import baselines as bl
-from . import cliutil, data
+from . import cliutil, data, executors
 from . import history as hist
 from . import report as rp
-from .parallel import Task, default_jobs, error_result, last_line, run_all
+from .parallel import Task, default_jobs, error_result, last_line
 from .results import CheckResult, save
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
@@ -51,6 +51,17 @@ def repo_root() -> Path:
     """The folder paths in the report are shown relative to: the checkout this package runs from,
     else the working directory."""
     return data.checkout() or Path.cwd()
+
+
+def executor_options(p: argparse.ArgumentParser) -> None:
+    """--executor and --address (check and sweep)."""
+    from .executors import EXECUTORS
+
+    p.add_argument("--executor", choices=EXECUTORS, default="local", metavar="NAME",
+                   help="where checks run: local (this machine's cores, --jobs) or ray (a Ray cluster: "
+                   "--address, else $RAY_ADDRESS, else a Ray instance started for the run)")
+    p.add_argument("--address", metavar="HOST:PORT", default=None,
+                   help="the Ray cluster of --executor ray (default: $RAY_ADDRESS)")
 
 
 def parser() -> argparse.ArgumentParser:
@@ -78,6 +89,7 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument("-j", "--jobs", type=int, default=None, metavar="N",
                    help="checks run at once, one process each (default: number of CPUs; 1 runs in this process)")
     c.add_argument("-o", "--out", default="out/check", metavar="DIR", help="output folder (default: out/check)")
+    executor_options(c)
     c.add_argument("--accept", action="store_true",
                    help="write the metrics of every passing check as its new baseline (prints what changed)")
     c.add_argument("--baselines", metavar="DIR", default=None,
@@ -219,7 +231,7 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
 
     options = CheckOptions(step=ns.step, horizon=ns.horizon, samples=ns.samples)
     prov = rp.provenance(root, rerun_command(argv, Path.cwd(), root))
-    prov["jobs"] = jobs
+    prov["jobs"] = jobs if ns.executor == "local" else f"ray ({ns.address or os.environ.get('RAY_ADDRESS') or 'local instance'})"
     prov["baselines"] = _rel(base_dir, root)
     run = rp.Run(results=results, simulators=columns, provenance=prov, scenes=scenes, notes=notes,
                  plots=not ns.no_plots, planned=planned)
@@ -234,7 +246,7 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
     done = 0
     other_versions: dict[str, list[str]] = {}
     try:
-        for task, r in run_all(tasks, options, jobs):
+        for task, r in executors.run(tasks, options, executor=ns.executor, jobs=jobs, address=ns.address):
             done += 1
             if (r.scene, r.simulator) != (task.scene, task.simulator):
                 r.notes.append(f"run_check named this result {r.scene} / {r.simulator}")
@@ -250,6 +262,10 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
                 usage_problem = True
             _save_atomic(results, out / "results.json")
             _say(_progress(done, n_total, r, run))
+    except executors.ExecutorError as e:
+        usage_problem = True
+        notes.insert(0, f"executor {ns.executor}: {e}; {n_total - done} check(s) did not run")
+        _say(f"progmo check: error: {e}")
     except KeyboardInterrupt:
         interrupted = True
         notes.insert(0, f"INTERRUPTED after {done} of {n_total} checks; the others did not run")

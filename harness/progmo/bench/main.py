@@ -1,4 +1,4 @@
-"""`progmo bench [--quick] [--out DIR] [--only workprecision,scipy,conditioning,scaling,anchor,testset,drift]`
+"""`progmo bench [--quick] [--out DIR] [--only workprecision,scipy,conditioning,scaling,anchor,testset,drift,executors]`
 
 Speed against error: writes CSV, PNG and index.html to DIR (default out/bench) and prints the key
 numbers. The `progmo` binary forwards `progmo bench ...` to `python -m progmo.bench.main ...`.
@@ -30,7 +30,7 @@ import numpy as np
 
 from .. import cliutil
 
-PARTS = ("workprecision", "scipy", "conditioning", "scaling", "anchor", "testset", "drift")
+PARTS = ("workprecision", "scipy", "conditioning", "scaling", "anchor", "testset", "drift", "executors")
 
 # sweep sizes; --quick is the default a test or a shared 2-core machine can afford
 QUICK: dict[str, Any] = dict(scenes=("double_pendulum", "chain_8"), tols=[1e-4, 1e-6, 1e-8, 1e-10], repeats=3,
@@ -45,7 +45,7 @@ FULL: dict[str, Any] = dict(scenes=("double_pendulum", "chain_8", "example_2_1",
 # --smoke: the smallest end-to-end run (tests): one scene, two tolerances, two chain lengths
 SMOKE: dict[str, Any] = dict(scenes=("double_pendulum",), tols=[1e-5, 1e-8], repeats=1, scipy_tols=[1e-5, 1e-8],
              radau_min_tol=1e-8, states=2, scaling_ns=[2, 7], conditioning="smoke", testset_tols=[1e-6], drift_rounds=1,
-             anchor_ns=[2, 7], anchor_rounds=1, anchor_budget=0.002)
+             anchor_ns=[2, 7], anchor_rounds=1, anchor_budget=0.002, sweep_samples=2)
 
 
 def parser() -> argparse.ArgumentParser:
@@ -338,6 +338,18 @@ def main(argv: list[str] | None = None) -> int:
                          "(progmo::problems::hard::ten_thousand_periods), DOP853 rtol 1e-8: projection (tol 1e-12) "
                          "on and off alternate; the minimum wall time of each is compared.</p><p>"
                          + line + "</p><p>Data: <a href='drift.csv'>drift.csv</a>.</p>"))
+
+    if "executors" in only:
+        from . import executors as ex
+
+        try:
+            exr = ex.run(out, samples=cfg.get("sweep_samples", 8))
+            text, lines = ex.html(exr)
+            summary += lines
+            sections.append(("7. Sweep executors: local pool and Ray", page.doc(ex.__doc__) + text))
+        except Exception as e:  # noqa: BLE001 - a part that fails is reported, the rest stands
+            failed.append(f"executors: {e}")
+            sections.append(("7. Sweep executors: local pool and Ray", f"<p>FAILED: {e}</p>"))
 
     if ns.accept and anchor_rows is None:
         summary.append(f"--accept: nothing accepted ({anchor_why})")
