@@ -96,3 +96,15 @@ def test_a_killed_ray_worker_loses_and_duplicates_nothing(tmp_path, cluster):
     assert a["metrics"] == b["metrics"] and a["counts"] == b["counts"]
     assert a["meta"]["executor"] == "ray" and b["meta"]["executor"] == "local"
     assert re.search(r"PASS: 8 of 8", stdout)
+    # `progmo check` on the same cluster: the same verdicts as the local executor
+    env = {k: v for k, v in env.items() if k != "PROGMO_CHECK_RUNNER"}
+    outs = {}
+    for ex in ("ray", "local"):
+        c = subprocess.run([sys.executable, "-m", "progmo.cli", "check", "double_pendulum", "heavy_top",
+                            "--horizon", "0.2", "--no-plots", "--json", "-o", str(tmp_path / f"check-{ex}"),
+                            "--executor", ex, "--address", address], cwd=ROOT, env=env, capture_output=True,
+                           text=True, timeout=600)
+        assert c.returncode == 0, c.stderr[-3000:]
+        outs[ex] = sorted((r["scene"], r["simulator"], r["status"], r["metrics"]["replay_residual"])
+                          for r in json.loads(c.stdout)["results"])
+    assert outs["ray"] == outs["local"] and len(outs["ray"]) == 4
