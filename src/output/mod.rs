@@ -154,7 +154,10 @@ pub use error::OutputError;
 pub use mcap_sink::recording_schemas;
 pub use mcap_sink::{McapChannel, McapSink, FRAME_TRANSFORM_SCHEMA, FRAME_TRANSFORM_TOPIC};
 pub use progress::Progress;
-pub use scene3d::{scene_update_schema, Bodies, BodyPose};
+pub use scene3d::{
+    scene_update_schema, Bodies, BodyPose, Geometry, Shape, Target, TracedSite, View, ViewTarget,
+    SHAPE_COLOR, TARGET_COLOR,
+};
 pub use sinks::{Every, StopOn, Tee};
 pub use staged::{remove_previous_run, with_suffix, RunFiles, Staged, PARTIAL_SUFFIX, RUN_FILES};
 pub use summary::{summary_json, write_summary, write_summary_to_path, SummaryInput};
