@@ -8,7 +8,8 @@ recording and write what a person needs to see where a replay leaves the program
   replay on ``/<sim>/state``, ``/<sim>/residual`` (same schemas), ``/<sim>/deviation``,
   ``/<sim>/tf`` (world -> ``<sim>/<body>`` from the simulator's own kinematics: MuJoCo
   ``xpos``/``xquat``, Pinocchio ``oMf``), ``/<sim>/scene`` (the mechanism on those frames) and the
-  breaches on ``/<sim>/breach``;
+  breaches on ``/<sim>/breach``; the scene's view targets once on ``/progmo/scene`` and, at the end,
+  the traces of the programme's sites (``<prefix>/trace/<site>``) for the solver and each replay;
 * ``DIR/<scene>_<sim>.csv``: solver columns named as in ``progmo solve``'s CSV (``t``, ``q:<q>``,
   ``v:<v>``, ``u:<v>``), the replay's (``<sim>.q:<q>``, ``<sim>.v:<v>``, ``<sim>.residual:<row>``)
   and ``deviation``, per replay sample (up to the last finite state when the simulator blows up);

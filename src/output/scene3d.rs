@@ -507,6 +507,106 @@ mod tests {
         assert!(inertia_box(1.0, &Matrix3::zeros()).is_none());
     }
 
+    fn points(v: &Value) -> Vec<Vector3<f64>> {
+        v["points"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| {
+                Vector3::new(
+                    p["x"].as_f64().unwrap(),
+                    p["y"].as_f64().unwrap(),
+                    p["z"].as_f64().unwrap(),
+                )
+            })
+            .collect()
+    }
+
+    /// A one-body tree welded to the world (a point mass at the origin) with the given view.
+    fn bodies(view: View) -> Bodies {
+        let spec = tree::BodySpec::new("b", tree::WORLD, 1.0, [0.0; 3], [[0.0; 3]; 3]);
+        let model = tree::Model::new(&[spec], tree::Fields::default()).unwrap();
+        Bodies::new(Arc::new(model), Arc::new(view))
+    }
+
+    #[test]
+    fn targets_are_drawn_where_declared() {
+        let (c, n, r) = ([1.0, 2.0, 3.0], [0.0, 0.6, 0.8], 0.5);
+        let view = View {
+            targets: vec![
+                ViewTarget {
+                    name: "circle".into(),
+                    target: Target::Circle(c, n, r),
+                    color: TARGET_COLOR,
+                },
+                ViewTarget {
+                    name: "plane".into(),
+                    target: Target::Plane(c, n, Some(2.0)),
+                    color: TARGET_COLOR,
+                },
+                ViewTarget {
+                    name: "line".into(),
+                    target: Target::Line(c, [0.0, 0.0, 2.0], Some(4.0)),
+                    color: TARGET_COLOR,
+                },
+            ],
+            ..View::default()
+        };
+        let mut b = bodies(view);
+        let u = b.scene_update(&[], "p", 1.0, true);
+        let ents = u["entities"].as_array().unwrap();
+        let find = |id: &str| ents.iter().find(|e| e["id"] == id).unwrap().clone();
+        // circle: every point at distance r from the centre, in the plane normal to n
+        let circle = points(&find("p/target/circle")["lines"][0]);
+        assert_eq!(circle.len(), 64);
+        for p in &circle {
+            let d = p - Vector3::from(c);
+            assert!((d.norm() - r).abs() < 1e-12 && d.dot(&Vector3::from(n)).abs() < 1e-12);
+        }
+        // plane: the thin side of the cube along the normal
+        let cube = &find("p/target/plane")["cubes"][0];
+        let o = &cube["pose"]["orientation"];
+        let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+            o["w"].as_f64().unwrap(),
+            o["x"].as_f64().unwrap(),
+            o["y"].as_f64().unwrap(),
+            o["z"].as_f64().unwrap(),
+        ));
+        assert!((q * Vector3::z() - Vector3::from(n)).norm() < 1e-12);
+        assert_eq!(cube["size"]["x"], 2.0);
+        // line: centred on the point, `size` long, along the (normalised) direction
+        let line = points(&find("p/target/line")["lines"][0]);
+        assert!((line[0] - Vector3::new(1.0, 2.0, 1.0)).norm() < 1e-12);
+        assert!((line[1] - Vector3::new(1.0, 2.0, 5.0)).norm() < 1e-12);
+        // without targets (a simulator's scene in `progmo debug`) none is drawn
+        let u = b.scene_update(&[], "p", 1.0, false);
+        assert!(u["entities"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|e| e["frame_id"] == "p/b"));
+    }
+
+    #[test]
+    fn traces_follow_the_sites_and_are_absent_without_samples() {
+        let view = View {
+            traced: vec![TracedSite {
+                name: "s".into(),
+                body: 0,
+                pos: [0.0, 0.0, 1.0],
+            }],
+            ..View::default()
+        };
+        let mut b = bodies(view);
+        assert!(b.trace_update("p").is_none());
+        b.record(&[]);
+        let u = b.trace_update("p").unwrap();
+        let e = &u["entities"][0];
+        assert_eq!(e["id"], "p/trace/s");
+        assert_eq!(e["frame_id"], "world");
+        assert_eq!(points(&e["lines"][0]), vec![Vector3::new(0.0, 0.0, 1.0)]);
+    }
+
     #[test]
     fn arrows_point_along_their_axis() {
         for u in [

@@ -8,10 +8,11 @@ import csv
 import json
 import pathlib
 import re
-import shutil
 import subprocess
 
 import pytest
+
+from browser import find_browser
 
 from progmo.bench import page, targets as tg
 from progmo.bench.main import main
@@ -39,15 +40,7 @@ window.addEventListener('load', () => {
 RAW_OBJECT = re.compile(r"\{'|\[\{|\{\"|\[\[|\bdict\(|np\.float64\(")
 
 
-def _browser():
-    for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable"):
-        if shutil.which(name):
-            return shutil.which(name)
-    subprocess.run(["bash", str(ROOT / "harness" / "install_chromium.sh")], capture_output=True, timeout=600)
-    for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable"):
-        if shutil.which(name):
-            return shutil.which(name)
-    return None
+_browser = find_browser
 
 
 def _render(browser, html_path: pathlib.Path, tmp: pathlib.Path, shot: pathlib.Path | None = None):
