@@ -129,3 +129,24 @@ def test_debug_recording_has_the_same_targets_and_traces(tmp_path, capsys):
     named = set(re.findall(r'"(/[a-z]+/[a-z]+)', json.dumps(layout["configById"])))
     have = set(topics) | {t.replace("/mujoco/", "/pinocchio/") for t in topics} | {"/progmo/warning"}
     assert named <= have, named - have
+
+
+def test_knife_edge_path_target_is_the_solved_contact_path(tmp_path):
+    """knife_edge declares the closed-form path of its blade's contact point as a path target: the
+    drawn samples (200 over [0, 10] s) must lie on the solved (x, y) at the same times (the solver
+    is the independent side here; tests/catalog.rs checks it against the same closed form)."""
+    scene = progmo.load("knife_edge")
+    sol = scene.solve(output_dt=0.05)  # samples at k * 0.05: every drawn time is one (10 / 199 is not)
+    sol.write_mcap(tmp_path / "k.mcap")
+    _, msgs = read(tmp_path / "k.mcap")
+    _, path = entities(msgs, "/progmo/scene")["progmo/target/closed_form_path"]
+    pts = np.array([[p["x"], p["y"], p["z"]] for p in path["lines"][0]["points"]])
+    assert len(pts) == 200 and np.all(pts[:, 2] == 0)
+    ts = np.linspace(0.0, 10.0, 200)
+    x = np.interp(ts, sol.t, sol.q[:, 0])
+    y = np.interp(ts, sol.t, sol.q[:, 1])
+    # linear interpolation between 0.05 s samples of a path with speed <= 1.8 m/s and curvature
+    # radius >= 1.25 m: chord error <= (1.8 * 0.05)^2 / (8 * 1.25) = 8.1e-4 m
+    assert np.abs(pts[:, 0] - x).max() < 1e-3 and np.abs(pts[:, 1] - y).max() < 1e-3
+    # negative control: the path drawn with the wrong turning sign does not match
+    assert np.abs(pts[:, 1] + y).max() > 0.5
