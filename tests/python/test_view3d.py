@@ -119,7 +119,9 @@ def test_debug_recording_has_the_same_targets_and_traces(tmp_path, capsys):
         assert len(tp) == len(states)
         # every point is the closed-form tip of the recorded configuration, on the line
         assert np.abs(tp - np.array([tip(s["q"]) for s in states])).max() < 1e-12
-        assert np.abs(tp[:, 2] - Z0).max() < 1e-7
+        # on the line within the scene's replay_residual budget 5e-10 (measured: 1.3e-13 solver,
+        # 1.0e-14 mujoco replay over 0.1 s)
+        assert np.abs(tp[:, 2] - Z0).max() < 5e-10
     # the layout's 3D panel shows the scene topics these recordings carry
     layout = json.loads((pathlib.Path(progmo.__file__).parent / "foxglove" / "progmo.json").read_text())
     shown = set(layout["configById"]["3D!progmo"]["topics"])
