@@ -214,8 +214,12 @@ class Scene:
     def export(self, format: Literal["mjcf", "urdf"], *, timestep: float = 1e-3) -> tuple[str, dict[str, Any]]: ...
     def body_poses(self, q: F64) -> list[tuple[str, list[float], list[float]]]:
         """World pose of every body at q: (name, position, quaternion w x y z); [] for a lagrangian scene."""
-    def scene_update(self, q: F64, prefix: str, alpha: float = 1.0) -> dict[str, Any] | None:
-        """The foxglove.SceneUpdate drawing the mechanism on frames <prefix>/<body>; None for a lagrangian scene."""
+    def scene_update(self, q: F64, prefix: str, alpha: float = 1.0, targets: bool = True) -> dict[str, Any] | None:
+        """The foxglove.SceneUpdate drawing the mechanism on frames <prefix>/<body> (and the declared view
+        targets in the world frame); None for a lagrangian scene."""
+    def scene_trace(self, q: F64, prefix: str) -> dict[str, Any] | None:
+        """The foxglove.SceneUpdate of the programme's sites' traces through the rows of q (entities
+        <prefix>/trace/<site>); None for a lagrangian scene or no traced site."""
     def recording_schemas(self) -> dict[str, dict[str, Any]]:
         """JSON schemas of recordings by schema name (progmo.State, ..., foxglove.SceneUpdate)."""
 

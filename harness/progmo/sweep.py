@@ -422,7 +422,9 @@ def _plot(row: dict[str, Any], agg: dict[str, Any]) -> str | None:
 
 
 def render_html(agg: dict[str, Any], meta: dict[str, Any]) -> str:
-    from .report import CSS, _e, fmt
+    from .htmlstyle import CSS
+    from .htmlstyle import esc as _e
+    from .report import fmt
 
     good = ok(agg)
     h: list[str] = []

@@ -20,6 +20,7 @@ pub mod rows;
 pub mod schema;
 pub mod signals;
 pub mod tree_model;
+mod view;
 
 pub use error::{SceneError, Source};
 pub use reference::ReferenceValue;
@@ -85,6 +86,8 @@ pub struct Scene {
     pub source: Source,
     /// Byte span of each row's expression in the file (row order of the constraints).
     pub row_spans: Vec<std::ops::Range<usize>>,
+    /// What 3D views draw besides the mechanism: body shapes, targets, traced sites.
+    pub view: std::sync::Arc<crate::output::View>,
 }
 
 impl Scene {
@@ -112,9 +115,10 @@ impl Scene {
     /// a lagrangian scene, which has no bodies).
     pub fn bodies(&self) -> Option<crate::output::Bodies> {
         match &self.system {
-            SceneSystem::Tree(p) => Some(crate::output::Bodies::new(std::sync::Arc::clone(
-                p.model.tree(),
-            ))),
+            SceneSystem::Tree(p) => Some(crate::output::Bodies::new(
+                std::sync::Arc::clone(p.model.tree()),
+                std::sync::Arc::clone(&self.view),
+            )),
             SceneSystem::Lagrangian(_) => None,
         }
     }

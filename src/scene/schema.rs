@@ -3,7 +3,8 @@
 //! it with `PROGMO_BLESS=1 cargo test --test schema` (the test fails while the copy differs).
 
 use super::file::{
-    SceneFile, JOINTS_WITH_AXIS, JOINT_TYPES, LAGRANGIAN_ONLY, MODEL_KINDS, SIMULATORS, TREE_ONLY,
+    SceneFile, JOINTS_WITH_AXIS, JOINT_TYPES, LAGRANGIAN_ONLY, MODEL_KINDS, SIMULATORS,
+    TARGET_KINDS, TREE_ONLY,
 };
 use crate::solve::{DRIFT_NAMES, FORMULATION_NAMES, INTEGRATOR_NAMES};
 use schemars::transform::{RecursiveTransform, RestrictFormats};
@@ -80,6 +81,11 @@ pub(super) fn model_kind(_: &mut SchemaGenerator) -> Schema {
 /// `type` of a joint.
 pub(super) fn joint_type(_: &mut SchemaGenerator) -> Schema {
     string_enum(&JOINT_TYPES)
+}
+
+/// `kind` of a view target.
+pub(super) fn target_kind(_: &mut SchemaGenerator) -> Schema {
+    string_enum(&TARGET_KINDS)
 }
 
 /// `[solver] formulation`: the names of the one method vocabulary (`solve::overrides`).
