@@ -41,9 +41,9 @@ fn a_small_robot_loads_with_notes_and_link_signals() {
     );
     // a link name that is not a signal source is refused in a row (located in the scene)
     let bad = "[[programme]]\nname = \"h\"\nexpr = \"nolink.z\"\n";
-    let e = load(&scene_text(&robots().join("two_link.urdf"), "", bad))
-        .err()
-        .expect("unknown frame");
+    let Err(e) = load(&scene_text(&robots().join("two_link.urdf"), "", bad)) else {
+        panic!("unknown frame")
+    };
     assert_eq!(e.file, robots().join("scene.toml"));
     assert_eq!(e.line, 9, "{e}");
 }
@@ -61,13 +61,13 @@ fn locked_joints_are_welded_and_unknown_ones_refused() {
     };
     use progmo::model::Model;
     assert_eq!(p.model.q_names(), ["shoulder", "elbow"]);
-    let e = load(&scene_text(
+    let Err(e) = load(&scene_text(
         &robots().join("two_link.urdf"),
         "locked_joints = [\"nope\"]",
         "",
-    ))
-    .err()
-    .expect("unknown joint");
+    )) else {
+        panic!("unknown joint")
+    };
     assert_eq!(
         (e.line, e.field.as_str()),
         (6, "model.locked_joints"),
@@ -78,13 +78,15 @@ fn locked_joints_are_welded_and_unknown_ones_refused() {
 
 #[test]
 fn a_missing_robot_file_is_located_in_the_scene() {
-    let e = load(&scene_text(&robots().join("no_such.urdf"), "", ""))
-        .err()
-        .expect("missing");
+    let Err(e) = load(&scene_text(&robots().join("no_such.urdf"), "", "")) else {
+        panic!("missing")
+    };
     assert_eq!((e.line, e.field.as_str()), (4, "model.file"), "{e}");
     assert!(e.message.contains("not found"), "{e}");
     let text = "name = \"t\"\n[model]\nkind = \"urdf\"\nfile = \"package://nopkg/x.urdf\"\n[initial]\n[time]\nt1 = 1.0\n";
-    let e = load(text).err().expect("missing package");
+    let Err(e) = load(text) else {
+        panic!("missing package")
+    };
     assert!(e.message.contains("PROGMO_ROBOT_PATH"), "{e}");
 }
 

@@ -760,7 +760,7 @@ fn urdf_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Import
             ));
         }
         let n = ff.quat.iter().map(|x| x * x).sum::<f64>().sqrt();
-        if !(n >= 1e-9 && n.is_finite()) || !ff.pos.iter().all(|x| x.is_finite()) {
+        if !(n >= 1e-9 && n.is_finite() && ff.pos.iter().all(|x| x.is_finite())) {
             return Err(src.error(
                 f.span(),
                 &field,
