@@ -82,7 +82,7 @@ pub struct Scene {
     /// Byte span of each row's expression in the file (row order of the constraints).
     pub row_spans: Vec<std::ops::Range<usize>>,
     /// What an imported robot file had that the model does not use (joint limits, mimic,
-    /// dynamics), one line each; shown by `progmo solve`/`validate` and in the summary.
+    /// dynamics), one line each; shown by `progmo solve` (stderr) and `progmo validate`.
     pub import_notes: Vec<String>,
 }
 
