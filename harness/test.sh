@@ -14,6 +14,10 @@ cargo clippy --release --workspace --all-targets -q -- -D warnings
 .venv/bin/python -m mypy
 .venv/bin/python -m mypy.stubtest progmo._core --allowlist harness/stubtest-allowlist.txt
 echo "== cargo test (Rust core, pure Rust) ==" >&2
+# The robot scenes read example-robot-data's URDFs (installed by setup.sh): the same search path
+# the Python package uses (progmo.data.robot_path).
+PROGMO_ROBOT_PATH="$(.venv/bin/python -c 'import os; from progmo import data; print(os.pathsep.join(map(str, data.robot_path())))')"
+export PROGMO_ROBOT_PATH
 cargo test --release
 echo "== headless Chromium for the report test ==" >&2
 bash harness/install_chromium.sh || echo "warning: no headless Chromium: the report browser test will be skipped (and say so)" >&2

@@ -457,6 +457,9 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
         errln!("progmo solve: error: {}", flagged(&a, &e));
         return ExitCode::from(2);
     }
+    for n in &scene.import_notes {
+        errln!("progmo solve: note: {n}");
+    }
     let out = a
         .out
         .clone()
@@ -647,6 +650,9 @@ fn validate(scenes: &[PathBuf], json: bool) -> ExitCode {
                         c.position,
                         c.velocity
                     );
+                }
+                for n in &scene.import_notes {
+                    say!("  note: {n}");
                 }
             }
             Err(e) => {

@@ -31,6 +31,7 @@ pub mod expr;
 pub mod formulation;
 #[doc(hidden)]
 pub mod fuzzing;
+pub mod import;
 pub mod integrate;
 pub mod interrupt;
 pub mod linalg;

@@ -1,5 +1,7 @@
 //! The `progmo` command line as a user runs it: outputs, messages and exit codes.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -221,6 +223,7 @@ fn export_writes_mjcf_urdf_and_report() {
 /// Done criterion of the scenes issue: every bundled scene solves from the command line.
 #[test]
 fn every_bundled_scene_solves_from_the_command_line() {
+    common::robot_path();
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("references/scenes");
     let out = tmp("catalog");
     let mut n = 0;

@@ -14,6 +14,8 @@
 //! States: the initial state and random states around it (quaternions renormalized). Tolerance:
 //! round-off class, 1e3 eps relative to the largest entry of the compared quantity.
 
+mod common;
+
 use progmo::model::Model;
 use progmo::problems::chain::ChainSpec;
 use progmo::programme::jet::Jet;
@@ -37,6 +39,7 @@ impl Rng {
 }
 
 fn scenes() -> Vec<Scene> {
+    common::robot_path();
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let mut out: Vec<Scene> = std::fs::read_dir(root.join("references/scenes"))
         .unwrap()

@@ -211,6 +211,7 @@ fn the_maximal_examples_load_match_the_schema_and_use_every_key() {
         MAXIMAL_TREE,
         MAXIMAL_LAGRANGIAN,
         MAXIMAL_LAGRANGIAN_DIAGONAL,
+        MAXIMAL_URDF,
     ];
     for text in examples {
         Scene::from_text(Path::new("maximal"), text).unwrap_or_else(|e| panic!("{e}"));
@@ -515,6 +516,30 @@ expr = "x - 0.1*sin(t)"
 
 [initial]
 q = { x = 0.0, y = 0.0 }
+
+[time]
+t1 = 1.0
+"#;
+
+/// Every key of a urdf scene (the robot of tests/urdf_import.rs; paths relative to the crate).
+const MAXIMAL_URDF: &str = r#"
+name = "maximal_urdf"
+description = "Every key of a urdf model."
+
+[model]
+kind = "urdf"
+file = "tests/robots/two_link.urdf"
+root_joint = "free"
+locked_joints = ["slide"]
+gravity = [0.0, 0.0, -9.81]
+
+[[model.frames]]
+name = "tip"
+parent = "tool"
+pos = [0.0, 0.0, 0.1]
+quat = [1.0, 0.0, 0.0, 0.0]
+
+[initial]
 
 [time]
 t1 = 1.0

@@ -33,6 +33,8 @@ from ._core import (
 from ._core import Scene as Scene
 from .results import Budget, CheckResult
 
+data.export_robot_path()  # package:// robot files (example-robot-data) for the Rust core
+
 __version__ = version()
 
 __all__ = [

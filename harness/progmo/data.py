@@ -76,3 +76,28 @@ def git_revision() -> str:
         return r.stdout.strip() + ("+dirty" if dirty else "") if r.returncode == 0 else ""
     except (OSError, subprocess.SubprocessError):
         return ""
+
+
+ROBOT_PATH_VAR = "PROGMO_ROBOT_PATH"
+
+
+def robot_path() -> list[Path]:
+    """Directories where ``package://PKG/...`` robot files are found: those of
+    ``$PROGMO_ROBOT_PATH``, then the ``share`` folder of an installed ``example-robot-data``
+    (a cmeel package: ``<site-packages>/cmeel.prefix/share/example-robot-data``)."""
+    import sys
+
+    dirs = [Path(p) for p in os.environ.get(ROBOT_PATH_VAR, "").split(os.pathsep) if p]
+    for entry in sys.path:
+        share = Path(entry or ".") / "cmeel.prefix" / "share"
+        if (share / "example-robot-data").is_dir() and share not in dirs:
+            dirs.append(share)
+    return dirs
+
+
+def export_robot_path() -> None:
+    """Set ``$PROGMO_ROBOT_PATH`` for the Rust core (same process) to :func:`robot_path`; the
+    one rule by which every door (``progmo.load``, the ``progmo`` command) finds robot files."""
+    dirs = robot_path()
+    if dirs:
+        os.environ[ROBOT_PATH_VAR] = os.pathsep.join(str(d) for d in dirs)

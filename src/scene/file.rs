@@ -12,7 +12,11 @@ use std::fmt;
 use toml::Spanned;
 
 /// Model kinds (`model.kind`).
-pub const MODEL_KINDS: [&str; 2] = ["lagrangian", "tree"];
+pub const MODEL_KINDS: [&str; 3] = ["lagrangian", "tree", "urdf"];
+/// Keys of `[model]` only a urdf model has.
+pub const URDF_ONLY: [&str; 4] = ["file", "root_joint", "frames", "locked_joints"];
+/// Root joints of a urdf model (`model.root_joint`).
+pub const ROOT_JOINTS: [&str; 2] = ["fixed", "free"];
 /// Keys of `[model]` only a lagrangian model has.
 pub const LAGRANGIAN_ONLY: [&str; 4] = ["coordinates", "mass_matrix", "mass_diagonal", "potential"];
 /// Keys of `[model]` only a tree model has.
@@ -322,6 +326,48 @@ pub struct ModelFile {
     #[serde(default)]
     #[schemars(with = "Vec<PointForceFile>")]
     pub point_forces: Vec<Spanned<PointForceFile>>,
+    // urdf
+    /// urdf: the robot description file, relative to the scene file or `package://PKG/path`
+    /// (found through $PROGMO_ROBOT_PATH; the Python package adds example-robot-data's).
+    #[serde(default)]
+    #[schemars(with = "Option<String>")]
+    pub file: Option<Spanned<String>>,
+    /// urdf: how the root link is attached to the world: fixed (default) or free (a 6-dof joint
+    /// named root).
+    #[serde(default)]
+    #[schemars(schema_with = "schema::root_joint")]
+    pub root_joint: Option<Spanned<String>>,
+    /// urdf: joints welded at q = 0 (e.g. a gripper's fingers), by name.
+    #[serde(default)]
+    #[schemars(with = "Vec<String>")]
+    pub locked_joints: Vec<Spanned<String>>,
+    /// urdf: extra frames fixed in links; like every link, each is a signal source (name.x,
+    /// name.qw, ...).
+    #[serde(default)]
+    #[schemars(with = "Vec<FrameFile>")]
+    pub frames: Vec<Spanned<FrameFile>>,
+}
+
+/// A frame fixed in a link of an imported robot.
+#[derive(Clone, Debug, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+#[schemars(rename = "frame")]
+pub struct FrameFile {
+    /// Frame name (an identifier, not a link or joint name): prefix of its signals.
+    #[schemars(with = "Identifier")]
+    pub name: String,
+    /// The link it is fixed in.
+    pub parent: String,
+    /// Origin in the link frame (m).
+    #[serde(default)]
+    pub pos: [f64; 3],
+    /// Orientation in the link frame (w, x, y, z), normalised implicitly.
+    #[serde(default = "unit_quat")]
+    pub quat: [f64; 4],
+}
+
+fn unit_quat() -> [f64; 4] {
+    [1.0, 0.0, 0.0, 0.0]
 }
 
 /// A rigid body of a tree model.

@@ -82,6 +82,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
     let params = parameters(&src, &file.parameters)?;
     let model = file.model.get_ref();
     let kind = model.kind.get_ref().as_str();
+    let mut import_notes = vec![];
     let (system, spans) = match kind {
         "lagrangian" => {
             let (m, mut sym) = lagrangian(&src, model, &params)?;
@@ -100,8 +101,9 @@ pub(super) fn load(src: Source) -> R<Scene> {
             check_finite_at_start(&src, &file, &p)?;
             (SceneSystem::Lagrangian(p), spans)
         }
-        "tree" => {
-            let (m, mut sym) = tree_scene(&src, model, &params)?;
+        "tree" | "urdf" => {
+            let (m, mut sym, notes) = tree_scene(&src, model, &params)?;
+            import_notes = notes;
             let (c, spans) = rows(&src, &file, &mut sym)?;
             let neutral = tree::neutral(m.tree());
             let (q0, v0) = initial(
@@ -129,7 +131,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
             return Err(src.error(
                 model.kind.span(),
                 "model.kind",
-                format!("unknown model kind `{other}`: expected `lagrangian` or `tree`"),
+                format!("unknown model kind `{other}`: expected `lagrangian`, `tree` or `urdf`"),
             ))
         }
     };
@@ -158,6 +160,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
         source: src,
         row_spans: spans,
         view: Arc::new(view),
+        import_notes,
     })
 }
 
@@ -494,7 +497,324 @@ fn tree_scene(
     src: &Source,
     m: &ModelFile,
     params: &[(String, f64)],
-) -> R<(TreeSceneModel, Symbols)> {
+) -> R<(TreeSceneModel, Symbols, Vec<String>)> {
+    let urdf = m.kind.get_ref() == "urdf";
+    let (specs, joint_names, link_sites, notes) = if urdf {
+        urdf_specs(src, m, params)?
+    } else {
+        let (specs, joint_names) = tree_specs(src, m, params)?;
+        (specs, joint_names, vec![], vec![])
+    };
+    let joint_names: Vec<&str> = joint_names.iter().map(|s| s.as_str()).collect();
+    let fields = Fields {
+        gravity: m.gravity.unwrap_or([0.0; 3]),
+        attractors: m
+            .attractors
+            .iter()
+            .map(|a| tree::Attractor {
+                point: a.get_ref().point,
+                mu: a.get_ref().mu,
+            })
+            .collect(),
+    };
+    let specs = parents_first(specs);
+    let tree = tree::Model::new(&specs, fields).map_err(|e| {
+        let (body, msg) = match &e {
+            ModelError::Body { body, .. } | ModelError::Joint { body, .. } => {
+                (Some(body.clone()), e.to_string())
+            }
+            _ => (None, e.to_string()),
+        };
+        let idx = body.and_then(|b| m.bodies.iter().position(|x| x.get_ref().name == b));
+        // Bodies are sorted parents first here, so an unplaced parent is missing or in a cycle.
+        let msg = match idx.map(|i| &m.bodies[i].get_ref().parent) {
+            Some(parent) if msg.contains("unknown parent") => {
+                if m.bodies.iter().any(|b| &b.get_ref().name == parent) {
+                    format!(
+                        "the parents of body '{}' form a cycle through '{parent}'",
+                        m.bodies[idx.unwrap_or(0)].get_ref().name
+                    )
+                } else {
+                    format!(
+                        "body '{}': unknown parent '{parent}'",
+                        m.bodies[idx.unwrap_or(0)].get_ref().name
+                    )
+                }
+            }
+            _ => msg,
+        };
+        match idx {
+            // Inertia problems point at the inertia itself.
+            Some(i) if msg.contains("inertia") && m.bodies[i].get_ref().inertia.is_some() => {
+                let span = m.bodies[i].get_ref().inertia.as_ref().unwrap().span();
+                src.error(span, &format!("model.bodies[{i}].inertia"), msg)
+            }
+            Some(i) => src.error(m.bodies[i].span(), &format!("model.bodies[{i}]"), msg),
+            None => src.error(m.kind.span(), "model", msg),
+        }
+    })?;
+    let tree = Arc::new(tree);
+    // Imported robots: every link and frame is a site at its origin (its orientation signals are
+    // the body's own).
+    let mut sites: Vec<Site> = link_sites
+        .iter()
+        .filter(|n| !joint_names.contains(&n.as_str()))
+        .map(|n| Site {
+            name: n.clone(),
+            body: tree.body_id(n).expect("imported body"),
+            pos: [0.0; 3],
+        })
+        .collect();
+    for (si, s) in m.sites.iter().enumerate() {
+        let sf = s.get_ref();
+        let body = tree.body_id(&sf.body).ok_or_else(|| {
+            src.error(
+                s.span(),
+                &format!("model.sites[{si}].body"),
+                format!("unknown body `{}`", sf.body),
+            )
+        })?;
+        if !is_identifier(&sf.name) {
+            return Err(src.error(
+                s.span(),
+                &format!("model.sites[{si}].name"),
+                "a site name must be an identifier",
+            ));
+        }
+        if sites.iter().any(|x: &Site| x.name == sf.name) {
+            return Err(src.error(
+                s.span(),
+                &format!("model.sites[{si}].name"),
+                format!("site name `{}` is used twice", sf.name),
+            ));
+        }
+        // `j.qw` would name both the site's orientation and ball joint j's coordinate.
+        if joint_names.contains(&sf.name.as_str()) {
+            return Err(src.error(
+                s.span(),
+                &format!("model.sites[{si}].name"),
+                format!("site name `{}` is also a joint name: its signals would collide with the joint's coordinates", sf.name),
+            ));
+        }
+        sites.push(Site {
+            name: sf.name.clone(),
+            body,
+            pos: sf.pos,
+        });
+    }
+    let q_names = tree.q_names().to_vec();
+    let v_names = tree.v_names().to_vec();
+    let mut sym = symbols(
+        &q_names,
+        &v_names,
+        params,
+        Signals::new(tree.clone(), sites),
+    );
+    #[allow(clippy::single_range_in_vec_init)] // a list of allowed slot ranges, here one
+    let state = [sym.layout.t..sym.layout.a];
+    let mut point_forces = vec![];
+    for (fi, f) in m.point_forces.iter().enumerate() {
+        let pf = f.get_ref();
+        let field = format!("model.point_forces[{fi}]");
+        let body = tree.body_id(&pf.body).ok_or_else(|| {
+            src.error(
+                f.span(),
+                &format!("{field}.body"),
+                format!("unknown body `{}`", pf.body),
+            )
+        })?;
+        let mut exprs = vec![];
+        for (k, s) in pf.force.iter().enumerate() {
+            let e = sym.compile(src, s, &format!("{field}.force[{k}]"))?;
+            if let Some(bad) = sym.outside(&e, &state) {
+                return Err(src.error(
+                    s.span(),
+                    &format!("{field}.force[{k}]"),
+                    format!("a force may depend on t, q and v only, not on `{bad}`"),
+                ));
+            }
+            exprs.push(e);
+        }
+        let [a, b, c]: [Expr; 3] = exprs.try_into().expect("three components");
+        point_forces.push(PointForce {
+            body,
+            point: pf.point,
+            force: [a, b, c],
+        });
+    }
+    let mut coordinate_forces = vec![];
+    for (name, s) in &m.forces {
+        let field = format!("model.forces.{name}");
+        let i = v_names.iter().position(|x| x == name).ok_or_else(|| {
+            src.error(
+                s.span(),
+                &field,
+                format!(
+                    "`{name}` is not a velocity coordinate (have: {})",
+                    v_names.join(", ")
+                ),
+            )
+        })?;
+        let e = sym.compile(src, s, &field)?;
+        if let Some(bad) = sym.outside(&e, &state) {
+            return Err(src.error(
+                s.span(),
+                &field,
+                format!("a force may depend on t, q and v only, not on `{bad}`"),
+            ));
+        }
+        coordinate_forces.push((i, e));
+    }
+    let model = TreeSceneModel::new(tree, sym.layout.clone(), point_forces, coordinate_forces);
+    Ok((model, sym, notes))
+}
+
+/// Bodies, joint names, link and frame names (sites) and notes of a `urdf` model.
+type Imported = (Vec<BodySpec>, Vec<String>, Vec<String>, Vec<String>);
+
+/// The bodies of a `urdf` model: the file's links ([`crate::import::urdf`]) plus `frames` as
+/// massless welded bodies.
+fn urdf_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Imported> {
+    use crate::import::{self, urdf};
+    let present: Vec<&str> = [
+        ("coordinates", !m.coordinates.is_empty()),
+        ("mass_matrix", m.mass_matrix.is_some()),
+        ("mass_diagonal", m.mass_diagonal.is_some()),
+        ("potential", m.potential.is_some()),
+        ("bodies", !m.bodies.is_empty()),
+    ]
+    .iter()
+    .filter(|x| x.1)
+    .map(|x| x.0)
+    .collect();
+    if !present.is_empty() {
+        return Err(src.error(
+            m.kind.span(),
+            "model",
+            format!(
+                "a `urdf` model takes its bodies from the file: remove {}",
+                and_list(&present)
+            ),
+        ));
+    }
+    let Some(file) = &m.file else {
+        return Err(src.error(
+            m.kind.span(),
+            "model.file",
+            "a `urdf` model needs `file` (a path relative to the scene, or package://PKG/...)",
+        ));
+    };
+    let dir = src.file.parent().unwrap_or(std::path::Path::new("."));
+    let path = import::resolve(file.get_ref(), dir)
+        .map_err(|e| src.error(file.span(), "model.file", e))?;
+    let text = std::fs::read_to_string(&path).map_err(|e| {
+        src.error(
+            file.span(),
+            "model.file",
+            format!("cannot read `{}`: {e}", path.display()),
+        )
+    })?;
+    let root = match m.root_joint.as_ref().map(|r| r.get_ref().as_str()) {
+        None | Some("fixed") => urdf::RootJoint::Fixed,
+        Some("free") => urdf::RootJoint::Free,
+        Some(other) => {
+            return Err(src.error(
+                m.root_joint.as_ref().expect("given").span(),
+                "model.root_joint",
+                format!("unknown root joint `{other}`: expected `fixed` or `free`"),
+            ))
+        }
+    };
+    let locked: Vec<String> = m
+        .locked_joints
+        .iter()
+        .map(|l| l.get_ref().clone())
+        .collect();
+    let usrc = Source { file: path, text };
+    let robot = urdf::import(&usrc, root, &locked).map_err(|mut e| {
+        // a locked joint the file lacks is the scene's mistake: locate it there
+        if e.field == "locked_joints" {
+            let k = locked
+                .iter()
+                .position(|l| e.message.contains(&format!("`{l}`")));
+            let span = k.map_or(m.kind.span(), |k| m.locked_joints[k].span());
+            e = src.error(span, "model.locked_joints", e.message);
+        }
+        e
+    })?;
+    let mut specs = robot.bodies;
+    let mut sites: Vec<String> = specs
+        .iter()
+        .map(|b| b.name.clone())
+        .filter(|n| is_identifier(n))
+        .collect();
+    for (fi, f) in m.frames.iter().enumerate() {
+        let ff = f.get_ref();
+        let field = format!("model.frames[{fi}]");
+        if !is_identifier(&ff.name) || specs.iter().any(|b| b.name == ff.name) {
+            return Err(src.error(
+                f.span(),
+                &format!("{field}.name"),
+                format!(
+                    "frame name `{}` must be an identifier and not a link's name",
+                    ff.name
+                ),
+            ));
+        }
+        if !specs.iter().any(|b| b.name == ff.parent) && ff.parent != tree::WORLD {
+            return Err(src.error(
+                f.span(),
+                &format!("{field}.parent"),
+                format!("unknown link `{}`", ff.parent),
+            ));
+        }
+        let n = ff.quat.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if !(n >= 1e-9 && n.is_finite() && ff.pos.iter().all(|x| x.is_finite())) {
+            return Err(src.error(
+                f.span(),
+                &field,
+                "pos must be finite and quat a nonzero (w, x, y, z)",
+            ));
+        }
+        specs.push(
+            BodySpec::massless(&ff.name, &ff.parent)
+                .at(ff.pos)
+                .rotated(ff.quat),
+        );
+        sites.push(ff.name.clone());
+    }
+    for j in &robot.joints {
+        if params.iter().any(|p| &p.0 == j) {
+            return Err(src.error(
+                file.span(),
+                "model.file",
+                format!("joint `{j}` of the file has the name of a parameter"),
+            ));
+        }
+    }
+    Ok((specs, robot.joints, sites, robot.notes))
+}
+
+/// The bodies of a `tree` model as written in `[[model.bodies]]`, and its joint names.
+fn tree_specs(
+    src: &Source,
+    m: &ModelFile,
+    params: &[(String, f64)],
+) -> R<(Vec<BodySpec>, Vec<String>)> {
+    if let Some(f) = &m.file {
+        return Err(src.error(
+            f.span(),
+            "model.file",
+            format!("{} belong to `urdf` models", and_list(&URDF_ONLY)),
+        ));
+    }
+    if m.root_joint.is_some() || !m.frames.is_empty() || !m.locked_joints.is_empty() {
+        return Err(src.error(
+            m.kind.span(),
+            "model",
+            format!("{} belong to `urdf` models", and_list(&URDF_ONLY)),
+        ));
+    }
     if !m.coordinates.is_empty()
         || m.mass_matrix.is_some()
         || m.mass_diagonal.is_some()
@@ -517,7 +837,7 @@ fn tree_scene(
         ));
     }
     let mut specs = vec![];
-    let mut joint_names: Vec<&str> = vec![];
+    let mut joint_names: Vec<String> = vec![];
     for (bi, b) in m.bodies.iter().enumerate() {
         let bf = b.get_ref();
         let field = format!("model.bodies[{bi}]");
@@ -539,14 +859,14 @@ fn tree_scene(
                     format!("`{n}` is not a valid joint name (an identifier, not `t`, `pi` or a parameter)"),
                 ));
             }
-            if joint_names.contains(&n) {
+            if joint_names.iter().any(|x| x == n) {
                 return Err(src.error(
                     j.span(),
                     &jfield,
                     format!("joint name `{n}` is used twice"),
                 ));
             }
-            joint_names.push(n);
+            joint_names.push(n.to_string());
         }
         let inertia = match &bf.inertia {
             None => [[0.0; 3]; 3],
@@ -655,157 +975,7 @@ fn tree_scene(
         }
         specs.push(spec);
     }
-    let fields = Fields {
-        gravity: m.gravity.unwrap_or([0.0; 3]),
-        attractors: m
-            .attractors
-            .iter()
-            .map(|a| tree::Attractor {
-                point: a.get_ref().point,
-                mu: a.get_ref().mu,
-            })
-            .collect(),
-    };
-    let specs = parents_first(specs);
-    let tree = tree::Model::new(&specs, fields).map_err(|e| {
-        let (body, msg) = match &e {
-            ModelError::Body { body, .. } | ModelError::Joint { body, .. } => {
-                (Some(body.clone()), e.to_string())
-            }
-            _ => (None, e.to_string()),
-        };
-        let idx = body.and_then(|b| m.bodies.iter().position(|x| x.get_ref().name == b));
-        // Bodies are sorted parents first here, so an unplaced parent is missing or in a cycle.
-        let msg = match idx.map(|i| &m.bodies[i].get_ref().parent) {
-            Some(parent) if msg.contains("unknown parent") => {
-                if m.bodies.iter().any(|b| &b.get_ref().name == parent) {
-                    format!(
-                        "the parents of body '{}' form a cycle through '{parent}'",
-                        m.bodies[idx.unwrap_or(0)].get_ref().name
-                    )
-                } else {
-                    format!(
-                        "body '{}': unknown parent '{parent}'",
-                        m.bodies[idx.unwrap_or(0)].get_ref().name
-                    )
-                }
-            }
-            _ => msg,
-        };
-        match idx {
-            // Inertia problems point at the inertia itself.
-            Some(i) if msg.contains("inertia") && m.bodies[i].get_ref().inertia.is_some() => {
-                let span = m.bodies[i].get_ref().inertia.as_ref().unwrap().span();
-                src.error(span, &format!("model.bodies[{i}].inertia"), msg)
-            }
-            Some(i) => src.error(m.bodies[i].span(), &format!("model.bodies[{i}]"), msg),
-            None => src.error(m.kind.span(), "model", msg),
-        }
-    })?;
-    let tree = Arc::new(tree);
-    let mut sites = vec![];
-    for (si, s) in m.sites.iter().enumerate() {
-        let sf = s.get_ref();
-        let body = tree.body_id(&sf.body).ok_or_else(|| {
-            src.error(
-                s.span(),
-                &format!("model.sites[{si}].body"),
-                format!("unknown body `{}`", sf.body),
-            )
-        })?;
-        if !is_identifier(&sf.name) {
-            return Err(src.error(
-                s.span(),
-                &format!("model.sites[{si}].name"),
-                "a site name must be an identifier",
-            ));
-        }
-        if sites.iter().any(|x: &Site| x.name == sf.name) {
-            return Err(src.error(
-                s.span(),
-                &format!("model.sites[{si}].name"),
-                format!("site name `{}` is used twice", sf.name),
-            ));
-        }
-        // `j.qw` would name both the site's orientation and ball joint j's coordinate.
-        if joint_names.contains(&sf.name.as_str()) {
-            return Err(src.error(
-                s.span(),
-                &format!("model.sites[{si}].name"),
-                format!("site name `{}` is also a joint name: its signals would collide with the joint's coordinates", sf.name),
-            ));
-        }
-        sites.push(Site {
-            name: sf.name.clone(),
-            body,
-            pos: sf.pos,
-        });
-    }
-    let q_names = tree.q_names().to_vec();
-    let v_names = tree.v_names().to_vec();
-    let mut sym = symbols(
-        &q_names,
-        &v_names,
-        params,
-        Signals::new(tree.clone(), sites),
-    );
-    #[allow(clippy::single_range_in_vec_init)] // a list of allowed slot ranges, here one
-    let state = [sym.layout.t..sym.layout.a];
-    let mut point_forces = vec![];
-    for (fi, f) in m.point_forces.iter().enumerate() {
-        let pf = f.get_ref();
-        let field = format!("model.point_forces[{fi}]");
-        let body = tree.body_id(&pf.body).ok_or_else(|| {
-            src.error(
-                f.span(),
-                &format!("{field}.body"),
-                format!("unknown body `{}`", pf.body),
-            )
-        })?;
-        let mut exprs = vec![];
-        for (k, s) in pf.force.iter().enumerate() {
-            let e = sym.compile(src, s, &format!("{field}.force[{k}]"))?;
-            if let Some(bad) = sym.outside(&e, &state) {
-                return Err(src.error(
-                    s.span(),
-                    &format!("{field}.force[{k}]"),
-                    format!("a force may depend on t, q and v only, not on `{bad}`"),
-                ));
-            }
-            exprs.push(e);
-        }
-        let [a, b, c]: [Expr; 3] = exprs.try_into().expect("three components");
-        point_forces.push(PointForce {
-            body,
-            point: pf.point,
-            force: [a, b, c],
-        });
-    }
-    let mut coordinate_forces = vec![];
-    for (name, s) in &m.forces {
-        let field = format!("model.forces.{name}");
-        let i = v_names.iter().position(|x| x == name).ok_or_else(|| {
-            src.error(
-                s.span(),
-                &field,
-                format!(
-                    "`{name}` is not a velocity coordinate (have: {})",
-                    v_names.join(", ")
-                ),
-            )
-        })?;
-        let e = sym.compile(src, s, &field)?;
-        if let Some(bad) = sym.outside(&e, &state) {
-            return Err(src.error(
-                s.span(),
-                &field,
-                format!("a force may depend on t, q and v only, not on `{bad}`"),
-            ));
-        }
-        coordinate_forces.push((i, e));
-    }
-    let model = TreeSceneModel::new(tree, sym.layout.clone(), point_forces, coordinate_forces);
-    Ok((model, sym))
+    Ok((specs, joint_names))
 }
 
 /// Constraint rows: the system's own constraints, then the programme.

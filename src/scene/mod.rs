@@ -88,6 +88,9 @@ pub struct Scene {
     pub row_spans: Vec<std::ops::Range<usize>>,
     /// What 3D views draw besides the mechanism: body shapes, targets, traced sites.
     pub view: std::sync::Arc<crate::output::View>,
+    /// What an imported robot file had that the model does not use (joint limits, mimic,
+    /// dynamics), one line each; shown by `progmo solve` (stderr) and `progmo validate`.
+    pub import_notes: Vec<String>,
 }
 
 impl Scene {

@@ -3,8 +3,8 @@
 //! it with `PROGMO_BLESS=1 cargo test --test schema` (the test fails while the copy differs).
 
 use super::file::{
-    SceneFile, JOINTS_WITH_AXIS, JOINT_TYPES, LAGRANGIAN_ONLY, MODEL_KINDS, SIMULATORS,
-    TARGET_KINDS, TREE_ONLY,
+    SceneFile, JOINTS_WITH_AXIS, JOINT_TYPES, LAGRANGIAN_ONLY, MODEL_KINDS, ROOT_JOINTS,
+    SIMULATORS, TARGET_KINDS, TREE_ONLY, URDF_ONLY,
 };
 use crate::solve::{DRIFT_NAMES, FORMULATION_NAMES, INTEGRATOR_NAMES};
 use schemars::transform::{RecursiveTransform, RestrictFormats};
@@ -79,6 +79,12 @@ pub(super) fn model_kind(_: &mut SchemaGenerator) -> Schema {
 }
 
 /// `type` of a joint.
+/// `root_joint` of a urdf model.
+pub(super) fn root_joint(_: &mut SchemaGenerator) -> Schema {
+    string_enum(&ROOT_JOINTS)
+}
+
+/// `type` of a joint.
 pub(super) fn joint_type(_: &mut SchemaGenerator) -> Schema {
     string_enum(&JOINT_TYPES)
 }
@@ -149,7 +155,8 @@ fn required_any(keys: &[&str]) -> Value {
 pub(super) fn model_kind_rules(s: &mut Schema) {
     assert_properties(s, &LAGRANGIAN_ONLY);
     assert_properties(s, &TREE_ONLY);
-    let [lagrangian, tree] = MODEL_KINDS;
+    assert_properties(s, &URDF_ONLY);
+    let [lagrangian, tree, urdf] = MODEL_KINDS;
     s.insert(
         "allOf".into(),
         json!([
@@ -158,12 +165,22 @@ pub(super) fn model_kind_rules(s: &mut Schema) {
                 "then": {
                     "required": ["coordinates"],
                     "oneOf": [{ "required": ["mass_matrix"] }, { "required": ["mass_diagonal"] }],
-                    "not": required_any(&TREE_ONLY),
+                    "not": required_any(&[&TREE_ONLY[..], &URDF_ONLY[..]].concat()),
                 }
             },
             {
                 "if": { "properties": { "kind": { "const": tree } } },
-                "then": { "required": ["bodies"], "not": required_any(&LAGRANGIAN_ONLY) }
+                "then": {
+                    "required": ["bodies"],
+                    "not": required_any(&[&LAGRANGIAN_ONLY[..], &URDF_ONLY[..]].concat())
+                }
+            },
+            {
+                "if": { "properties": { "kind": { "const": urdf } } },
+                "then": {
+                    "required": ["file"],
+                    "not": required_any(&[&LAGRANGIAN_ONLY[..], &["bodies"][..]].concat())
+                }
             }
         ]),
     );

@@ -1,0 +1,428 @@
+//! URDF -> [`BodySpec`]s. One body per link, named as the link; the joint whose child a link is
+//! becomes that body's placement (`origin` xyz, rpy) and joint (`axis`, in the joint frame):
+//! revolute and continuous -> hinge, prismatic -> slide, fixed -> none (welded: the link keeps
+//! its own frame and its inertia stays with it; the tree adds it to the parent's composite
+//! inertia exactly), floating -> free. The root link is welded to the world or gets a free joint
+//! (`root_joint`). Inertials: mass, the CoM `origin` and the inertia tensor rotated by the
+//! origin's rpy into the link frame. Limits, mimic, dynamics, safety controllers, transmissions,
+//! visuals and collisions are not used: limits, mimic and dynamics are reported in the notes.
+
+use crate::scene::{SceneError, Source};
+use crate::tree::{BodySpec, JointSpec, WORLD};
+use roxmltree::{Document, Node};
+use std::collections::{HashMap, VecDeque};
+
+/// An imported robot.
+#[derive(Clone, Debug)]
+pub struct Robot {
+    /// Bodies, parents first (link names; a root link named `world` is the world itself).
+    pub bodies: Vec<BodySpec>,
+    /// Coordinate (joint) names, in body order.
+    pub joints: Vec<String>,
+    /// What was read but not modelled (limits, mimic, dynamics), one line each.
+    pub notes: Vec<String>,
+}
+
+/// How the root link is attached to the world.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RootJoint {
+    Fixed,
+    /// A free joint named `root` (6 dof).
+    Free,
+}
+
+/// Name of the free joint `RootJoint::Free` adds.
+pub const ROOT_JOINT_NAME: &str = "root";
+
+type R<T> = Result<T, SceneError>;
+
+fn err(src: &Source, n: Node, what: &str, msg: impl Into<String>) -> SceneError {
+    src.error(n.range(), what, msg)
+}
+
+/// `n`'s attribute parsed as k numbers (`default` when absent).
+fn numbers<const K: usize>(
+    src: &Source,
+    n: Node,
+    attr: &str,
+    default: Option<[f64; K]>,
+) -> R<[f64; K]> {
+    let what = format!("<{}>.{attr}", n.tag_name().name());
+    let Some(text) = n.attribute(attr) else {
+        return default.ok_or_else(|| err(src, n, &what, format!("missing attribute `{attr}`")));
+    };
+    let vals: Vec<f64> = text
+        .split_whitespace()
+        .map(|s| s.parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| err(src, n, &what, format!("`{text}` is not a list of numbers")))?;
+    let out: [f64; K] = vals
+        .try_into()
+        .map_err(|_| err(src, n, &what, format!("`{text}`: expected {K} numbers")))?;
+    if out.iter().any(|x| !x.is_finite()) {
+        return Err(err(src, n, &what, format!("`{text}` is not finite")));
+    }
+    Ok(out)
+}
+
+fn child<'a, 'i>(n: Node<'a, 'i>, tag: &str) -> Option<Node<'a, 'i>> {
+    n.children().find(|c| c.is_element() && c.has_tag_name(tag))
+}
+
+/// Quaternion (w, x, y, z) of URDF roll-pitch-yaw: R = Rz(yaw) Ry(pitch) Rx(roll).
+pub fn rpy_quat([r, p, y]: [f64; 3]) -> [f64; 4] {
+    let (sr, cr) = (r / 2.0).sin_cos();
+    let (sp, cp) = (p / 2.0).sin_cos();
+    let (sy, cy) = (y / 2.0).sin_cos();
+    [
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    ]
+}
+
+fn rpy_matrix(rpy: [f64; 3]) -> nalgebra::Matrix3<f64> {
+    let [w, x, y, z] = rpy_quat(rpy);
+    nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z))
+        .to_rotation_matrix()
+        .into_inner()
+}
+
+/// `<origin xyz rpy>` of `n` (identity when absent).
+fn origin(src: &Source, n: Node) -> R<([f64; 3], [f64; 3])> {
+    match child(n, "origin") {
+        None => Ok(([0.0; 3], [0.0; 3])),
+        Some(o) => Ok((
+            numbers(src, o, "xyz", Some([0.0; 3]))?,
+            numbers(src, o, "rpy", Some([0.0; 3]))?,
+        )),
+    }
+}
+
+/// The body of a link: massless without `<inertial>` or with mass 0 and zero inertia.
+fn link_body(src: &Source, link: Node, name: &str, parent: &str) -> R<BodySpec> {
+    let Some(inertial) = child(link, "inertial") else {
+        return Ok(BodySpec::massless(name, parent));
+    };
+    let what = format!("link[{name}].inertial");
+    let mass_node = child(inertial, "mass")
+        .ok_or_else(|| err(src, inertial, &what, "an <inertial> needs a <mass value>"))?;
+    let [mass] = numbers::<1>(src, mass_node, "value", None)?;
+    let inertia_node = child(inertial, "inertia");
+    let i = match inertia_node {
+        None => [0.0; 6],
+        Some(n) => {
+            let mut v = [0.0; 6];
+            for (k, a) in ["ixx", "iyy", "izz", "ixy", "ixz", "iyz"]
+                .iter()
+                .enumerate()
+            {
+                v[k] = numbers::<1>(src, n, a, Some([0.0]))?[0];
+            }
+            v
+        }
+    };
+    if i == [0.0; 6] && mass == 0.0 {
+        return Ok(BodySpec::massless(name, parent));
+    }
+    if mass <= 0.0 {
+        return Err(err(
+            src,
+            mass_node,
+            &format!("{what}.mass"),
+            format!("mass must be positive (or 0 with zero inertia: a massless link), got {mass}"),
+        ));
+    }
+    let at = inertia_node.unwrap_or(inertial);
+    let local = nalgebra::Matrix3::new(i[0], i[3], i[4], i[3], i[1], i[5], i[4], i[5], i[2]);
+    if local.cholesky().is_none() {
+        return Err(err(
+            src,
+            at,
+            &format!("{what}.inertia"),
+            "the inertia tensor of a link with mass must be positive definite",
+        ));
+    }
+    let (com, rpy) = origin(src, inertial)?;
+    // Inertia about the CoM in the link frame: R I R^T with R the inertial origin's rotation.
+    let r = rpy_matrix(rpy);
+    let rot = r * local * r.transpose();
+    let inertia = [0, 1, 2].map(|a| [0, 1, 2].map(|b| rot[(a, b)]));
+    Ok(BodySpec::new(name, parent, mass, com, inertia))
+}
+
+/// Read a URDF document (`src` is the file and its text).
+pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot> {
+    let doc = Document::parse(&src.text).map_err(|e| {
+        let p = e.pos();
+        let offset = src
+            .text
+            .lines()
+            .take(p.row as usize - 1)
+            .map(|l| l.len() + 1)
+            .sum::<usize>()
+            + p.col as usize
+            - 1;
+        src.error(
+            offset..offset + 1,
+            "xml",
+            format!("not well-formed XML: {e}"),
+        )
+    })?;
+    let robot = doc.root_element();
+    if !robot.has_tag_name("robot") {
+        return Err(err(
+            src,
+            robot,
+            "robot",
+            "the root element of a URDF file must be <robot>",
+        ));
+    }
+    let mut links: HashMap<&str, Node> = HashMap::new();
+    let mut link_order = vec![];
+    for l in robot.children().filter(|c| c.has_tag_name("link")) {
+        let name = l
+            .attribute("name")
+            .ok_or_else(|| err(src, l, "link", "a <link> needs a name"))?;
+        if links.insert(name, l).is_some() {
+            return Err(err(
+                src,
+                l,
+                &format!("link[{name}]"),
+                format!("link `{name}` is defined twice"),
+            ));
+        }
+        link_order.push(name);
+    }
+    // joint of each child link
+    let mut parent_joint: HashMap<&str, Node> = HashMap::new();
+    let mut children: HashMap<&str, Vec<Node>> = HashMap::new();
+    let mut joint_names: Vec<&str> = vec![];
+    for j in robot.children().filter(|c| c.has_tag_name("joint")) {
+        let name = j
+            .attribute("name")
+            .ok_or_else(|| err(src, j, "joint", "a <joint> needs a name"))?;
+        let what = format!("joint[{name}]");
+        if joint_names.contains(&name) {
+            return Err(err(
+                src,
+                j,
+                &what,
+                format!("joint `{name}` is defined twice"),
+            ));
+        }
+        joint_names.push(name);
+        let link_of = |tag: &str| -> R<&str> {
+            let n =
+                child(j, tag).ok_or_else(|| err(src, j, &what, format!("missing <{tag} link>")))?;
+            let l = n
+                .attribute("link")
+                .ok_or_else(|| err(src, n, &format!("{what}.{tag}"), "missing attribute `link`"))?;
+            if !links.contains_key(l) {
+                return Err(err(
+                    src,
+                    n,
+                    &format!("{what}.{tag}"),
+                    format!("unknown link `{l}`"),
+                ));
+            }
+            Ok(l)
+        };
+        let (p, c) = (link_of("parent")?, link_of("child")?);
+        if let Some(first) = parent_joint.get(c) {
+            return Err(err(
+                src,
+                j,
+                &what,
+                format!(
+                    "link `{c}` has two parents (joints `{}` and `{name}`): a kinematic loop, which URDF trees cannot express",
+                    first.attribute("name").unwrap_or("")
+                ),
+            ));
+        }
+        parent_joint.insert(c, j);
+        children.entry(p).or_default().push(j);
+    }
+    let roots: Vec<&str> = link_order
+        .iter()
+        .copied()
+        .filter(|l| !parent_joint.contains_key(l))
+        .collect();
+    let root = match roots.as_slice() {
+        [r] => *r,
+        [] => {
+            return Err(err(
+                src,
+                robot,
+                "robot",
+                if links.is_empty() {
+                    "no <link>".to_string()
+                } else {
+                    "every link has a parent: the joints form a kinematic loop".to_string()
+                },
+            ))
+        }
+        many => {
+            return Err(err(
+                src,
+                links[many[1]],
+                &format!("link[{}]", many[1]),
+                format!(
+                    "several root links ({}): a URDF describes one tree",
+                    many.join(", ")
+                ),
+            ))
+        }
+    };
+    let mut notes = vec![];
+    let mut bodies = vec![];
+    let mut joints = vec![];
+    let mut limited = vec![];
+    let mut dynamics = vec![];
+    // The root: a link named `world` without inertia is the world frame itself.
+    let root_is_world = root == WORLD && child(links[root], "inertial").is_none();
+    if !root_is_world {
+        let mut b = link_body(src, links[root], root, WORLD)?;
+        if root_joint == RootJoint::Free {
+            b = b.joint(JointSpec::free(ROOT_JOINT_NAME));
+            joints.push(ROOT_JOINT_NAME.to_string());
+        }
+        bodies.push(b);
+    } else if root_joint == RootJoint::Free {
+        return Err(err(
+            src,
+            links[root],
+            "link[world]",
+            "root_joint = \"free\" needs a root link other than `world`",
+        ));
+    }
+    let mut used_locked = vec![false; locked.len()];
+    let mut queue: VecDeque<&str> = VecDeque::from([root]);
+    let mut seen = 1usize;
+    while let Some(p) = queue.pop_front() {
+        for j in children.get(p).map(|v| v.as_slice()).unwrap_or(&[]) {
+            let name = j.attribute("name").unwrap_or("");
+            let what = format!("joint[{name}]");
+            let c = child(*j, "child")
+                .and_then(|n| n.attribute("link"))
+                .unwrap_or("");
+            let parent = if p == root && root_is_world { WORLD } else { p };
+            let (xyz, rpy) = origin(src, *j)?;
+            let mut b = link_body(src, links[c], c, parent)?
+                .at(xyz)
+                .rotated(rpy_quat(rpy));
+            let kind = j
+                .attribute("type")
+                .ok_or_else(|| err(src, *j, &what, "missing attribute `type`"))?;
+            let is_locked = match locked.iter().position(|l| l == name) {
+                Some(k) => {
+                    used_locked[k] = true;
+                    true
+                }
+                None => false,
+            };
+            let axis = || -> R<[f64; 3]> {
+                let a = match child(*j, "axis") {
+                    None => [1.0, 0.0, 0.0], // the URDF default
+                    Some(n) => numbers(src, n, "xyz", Some([1.0, 0.0, 0.0]))?,
+                };
+                if a.iter().map(|x| x * x).sum::<f64>() < 1e-24 {
+                    return Err(err(src, *j, &format!("{what}.axis"), "the axis is zero"));
+                }
+                Ok(a)
+            };
+            let spec = match kind {
+                "revolute" | "continuous" => Some(JointSpec::hinge(name, axis()?)),
+                "prismatic" => Some(JointSpec::slide(name, axis()?)),
+                "floating" => Some(JointSpec::free(name)),
+                "fixed" => None,
+                "planar" => {
+                    return Err(err(src, *j, &format!("{what}.type"), "planar joints are not supported (no tree joint has their 3 dof in one)"))
+                }
+                other => {
+                    return Err(err(
+                        src,
+                        *j,
+                        &format!("{what}.type"),
+                        format!("unknown joint type `{other}`: expected revolute, continuous, prismatic, fixed or floating"),
+                    ))
+                }
+            };
+            if let Some(s) = spec.filter(|_| !is_locked) {
+                let id_ok = {
+                    let mut ch = name.chars();
+                    matches!(ch.next(), Some(c) if c.is_ascii_alphabetic() || c == '_')
+                        && ch.all(|c| c.is_ascii_alphanumeric() || c == '_')
+                };
+                if !id_ok || name == "t" || name == "pi" {
+                    return Err(err(src, *j, &what, format!("joint name `{name}` is not an identifier (letters, digits, _): it names a coordinate in rows")));
+                }
+                if let Some(m) = child(*j, "mimic") {
+                    notes.push(format!(
+                        "mimic of joint `{name}` (follows `{}`) ignored: `{name}` is an independent coordinate (lock it with model.locked_joints, or write the mimic law as a row)",
+                        m.attribute("joint").unwrap_or("?")
+                    ));
+                }
+                if child(*j, "limit").is_some() && kind != "continuous" {
+                    limited.push(name);
+                }
+                if child(*j, "dynamics").is_some() {
+                    dynamics.push(name);
+                }
+                b = b.joint(s);
+                joints.push(name.to_string());
+            }
+            bodies.push(b);
+            seen += 1;
+            queue.push_back(c);
+        }
+    }
+    debug_assert_eq!(seen, links.len()); // one root, one parent each: a tree reaches every link
+    if let Some(k) = used_locked.iter().position(|u| !u) {
+        return Err(src.error(
+            0..0,
+            "locked_joints",
+            format!("locked joint `{}` is not a joint of this file", locked[k]),
+        ));
+    }
+    if !limited.is_empty() {
+        notes.push(format!(
+            "joint limits not enforced (the programme decides the motion): {}",
+            limited.join(", ")
+        ));
+    }
+    if !dynamics.is_empty() {
+        notes.push(format!(
+            "<dynamics> (damping, friction) ignored: {}",
+            dynamics.join(", ")
+        ));
+    }
+    Ok(Robot {
+        bodies,
+        joints,
+        notes,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// rpy_quat against the product of the three axis rotations (URDF: fixed axes x, y, z).
+    #[test]
+    fn rpy_is_z_y_x() {
+        use nalgebra::{Rotation3, Vector3};
+        let (r, p, y) = (0.3, -1.1, 2.5);
+        let m = Rotation3::from_axis_angle(&Vector3::z_axis(), y)
+            * Rotation3::from_axis_angle(&Vector3::y_axis(), p)
+            * Rotation3::from_axis_angle(&Vector3::x_axis(), r);
+        let d = (rpy_matrix([r, p, y]) - m.into_inner()).abs().max();
+        assert!(d < 4.0 * f64::EPSILON, "{d}");
+        // negative control: the reversed order differs
+        let wrong = Rotation3::from_axis_angle(&Vector3::x_axis(), r)
+            * Rotation3::from_axis_angle(&Vector3::y_axis(), p)
+            * Rotation3::from_axis_angle(&Vector3::z_axis(), y);
+        assert!((rpy_matrix([r, p, y]) - wrong.into_inner()).abs().max() > 0.1);
+    }
+}

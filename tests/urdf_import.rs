@@ -1,0 +1,138 @@
+//! URDF import (`model.kind = "urdf"`, src/import): a small robot with every supported joint type
+//! loads, reports what it ignores, exposes links and frames as signals and agrees with the same
+//! robot written by hand as a tree scene; each bad robot file (`tests/robots/bad_*.urdf`, header
+//! `<!-- expect: LINE:COL FIELD "phrase" -->`) fails with an error located in the URDF file.
+//! Parity with Pinocchio's own URDF reader: tests/python/test_urdf_import.py.
+
+use progmo::scene::{Scene, SceneSystem};
+use std::path::{Path, PathBuf};
+
+fn robots() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/robots")
+}
+
+fn scene_text(urdf: &Path, extra: &str, rows: &str) -> String {
+    format!(
+        "name = \"t\"\n[model]\nkind = \"urdf\"\nfile = \"{}\"\ngravity = [0.0, 0.0, -9.81]\n{extra}\n{rows}\n[initial]\n[time]\nt1 = 1.0\n",
+        urdf.display()
+    )
+}
+
+fn load(text: &str) -> Result<Scene, progmo::scene::SceneError> {
+    Scene::from_text(&robots().join("scene.toml"), text)
+}
+
+#[test]
+fn a_small_robot_loads_with_notes_and_link_signals() {
+    let frames = "[[model.frames]]\nname = \"tip\"\nparent = \"tool\"\npos = [0.0, 0.0, 0.1]\nquat = [0.0, 1.0, 0.0, 0.0]\n";
+    let rows = "[[programme]]\nname = \"h\"\nexpr = \"tip.z + lower.qw - tip.z - lower.qw\"\n";
+    let s = load(&scene_text(&robots().join("two_link.urdf"), frames, rows))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let SceneSystem::Tree(p) = &s.system else {
+        panic!("a tree system")
+    };
+    use progmo::model::Model;
+    assert_eq!(p.model.q_names(), ["shoulder", "elbow", "slide"]);
+    let notes = s.import_notes.join("\n");
+    assert!(notes.contains("mimic of joint `slide`"), "{notes}");
+    assert!(
+        notes.contains("limits not enforced") && notes.contains("shoulder"),
+        "{notes}"
+    );
+    // a link name that is not a signal source is refused in a row (located in the scene)
+    let bad = "[[programme]]\nname = \"h\"\nexpr = \"nolink.z\"\n";
+    let Err(e) = load(&scene_text(&robots().join("two_link.urdf"), "", bad)) else {
+        panic!("unknown frame")
+    };
+    assert_eq!(e.file, robots().join("scene.toml"));
+    assert_eq!(e.line, 9, "{e}");
+}
+
+#[test]
+fn locked_joints_are_welded_and_unknown_ones_refused() {
+    let s = load(&scene_text(
+        &robots().join("two_link.urdf"),
+        "locked_joints = [\"slide\"]",
+        "",
+    ))
+    .unwrap();
+    let SceneSystem::Tree(p) = &s.system else {
+        panic!()
+    };
+    use progmo::model::Model;
+    assert_eq!(p.model.q_names(), ["shoulder", "elbow"]);
+    let Err(e) = load(&scene_text(
+        &robots().join("two_link.urdf"),
+        "locked_joints = [\"nope\"]",
+        "",
+    )) else {
+        panic!("unknown joint")
+    };
+    assert_eq!(
+        (e.line, e.field.as_str()),
+        (6, "model.locked_joints"),
+        "{e}"
+    );
+    assert!(e.message.contains("`nope`"), "{e}");
+}
+
+#[test]
+fn a_missing_robot_file_is_located_in_the_scene() {
+    let Err(e) = load(&scene_text(&robots().join("no_such.urdf"), "", "")) else {
+        panic!("missing")
+    };
+    assert_eq!((e.line, e.field.as_str()), (4, "model.file"), "{e}");
+    assert!(e.message.contains("not found"), "{e}");
+    let text = "name = \"t\"\n[model]\nkind = \"urdf\"\nfile = \"package://nopkg/x.urdf\"\n[initial]\n[time]\nt1 = 1.0\n";
+    let Err(e) = load(text) else {
+        panic!("missing package")
+    };
+    assert!(e.message.contains("PROGMO_ROBOT_PATH"), "{e}");
+}
+
+#[test]
+fn every_bad_robot_fails_where_its_header_says() {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(robots())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.file_name().unwrap().to_string_lossy().starts_with("bad_"))
+        .collect();
+    files.sort();
+    assert!(files.len() >= 7);
+    let mut failures = vec![];
+    for f in &files {
+        let text = std::fs::read_to_string(f).unwrap();
+        let head = text.lines().next().unwrap();
+        let spec = head
+            .trim_start_matches("<!-- expect: ")
+            .trim_end_matches(" -->");
+        let (pos, rest) = spec.split_once(' ').unwrap();
+        let (field, phrase) = rest.split_once(' ').unwrap();
+        let phrase = phrase.trim_matches('"');
+        let (l, c) = pos.split_once(':').unwrap();
+        let (l, c): (usize, usize) = (l.parse().unwrap(), c.parse().unwrap());
+        match std::panic::catch_unwind(|| load(&scene_text(f, "", ""))) {
+            Err(_) => failures.push(format!("{}: panicked", f.display())),
+            Ok(Ok(_)) => failures.push(format!("{}: loaded", f.display())),
+            Ok(Err(e)) => {
+                println!("{e}\n");
+                if e.file != *f
+                    || e.line != l
+                    || e.column != c
+                    || e.field != field
+                    || !e.message.contains(phrase)
+                {
+                    failures.push(format!(
+                        "{}: got {}:{} `{}` {}",
+                        f.display(),
+                        e.line,
+                        e.column,
+                        e.field,
+                        e.message
+                    ));
+                }
+            }
+        }
+    }
+    assert!(failures.is_empty(), "\n{}", failures.join("\n"));
+}
