@@ -1,5 +1,6 @@
 //! From the TOML file to a validated [`Scene`].
 
+use super::closures::{Closure, ClosureRows, SetAside};
 use super::error::{SceneError, Source};
 use super::file::*;
 use super::lagrangian::LagrangianModel;
@@ -82,10 +83,11 @@ pub(super) fn load(src: Source) -> R<Scene> {
     let params = parameters(&src, &file.parameters)?;
     let model = file.model.get_ref();
     let kind = model.kind.get_ref().as_str();
+    let mut extra: (Vec<Closure>, SetAsideRows) = (vec![], None);
     let (system, spans) = match kind {
         "lagrangian" => {
             let (m, mut sym) = lagrangian(&src, model, &params)?;
-            let (c, spans) = rows(&src, &file, &mut sym)?;
+            let (c, spans) = rows(&src, &file, &mut sym, &[])?;
             let (q0, v0) = initial(&src, &file, &params, &m.q_names(), &m.v_names(), None)?;
             let (t0, t1) = span(&file);
             let p = Problem {
@@ -101,8 +103,8 @@ pub(super) fn load(src: Source) -> R<Scene> {
             (SceneSystem::Lagrangian(p), spans)
         }
         "tree" => {
-            let (m, mut sym) = tree_scene(&src, model, &params)?;
-            let (c, spans) = rows(&src, &file, &mut sym)?;
+            let (m, mut sym, (closures, closure_rows)) = tree_scene(&src, model, &params)?;
+            let (c, mut spans) = rows(&src, &file, &mut sym, &closure_rows)?;
             let neutral = tree::neutral(m.tree());
             let (q0, v0) = initial(
                 &src,
@@ -113,7 +115,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
                 Some((m.tree(), neutral.as_slice())),
             )?;
             let (t0, t1) = span(&file);
-            let p = Problem {
+            let mut p = Problem {
                 model: m,
                 constraints: c,
                 t0,
@@ -123,6 +125,15 @@ pub(super) fn load(src: Source) -> R<Scene> {
             };
             check_mass(&src, &file, &p)?;
             check_finite_at_start(&src, &file, &p)?;
+            let set_aside = closure_rows_kept(
+                &src,
+                &file,
+                &mut p,
+                &mut spans,
+                closure_rows.len(),
+                &settings,
+            )?;
+            extra = (closures, set_aside);
             (SceneSystem::Tree(p), spans)
         }
         other => {
@@ -149,7 +160,73 @@ pub(super) fn load(src: Source) -> R<Scene> {
         expected_not_checked,
         source: src,
         row_spans: spans,
+        closures: extra.0,
+        set_aside: extra.1,
     })
+}
+
+type SetAsideRows = Option<(Vec<SetAside>, ExprConstraints)>;
+
+/// Set aside the closure rows dependent at t0 ([`super::closures::set_aside_dependent`]), then
+/// check the number of rows left. The set-aside rows must hold at t0 too; they stay available
+/// (as constraints of their own) for monitoring.
+fn closure_rows_kept<M: Model>(
+    src: &Source,
+    file: &SceneFile,
+    p: &mut Problem<M, ExprConstraints>,
+    spans: &mut Vec<Range<usize>>,
+    n_closure: usize,
+    settings: &Settings,
+) -> R<SetAsideRows> {
+    if n_closure == 0 {
+        return Ok(None);
+    }
+    let nc = file.constraints.len();
+    let aside = super::closures::set_aside_dependent(p, nc..nc + n_closure, &settings.rank());
+    let s = p.constraints.rows().len();
+    let drop: Vec<usize> = aside.iter().map(|(i, _)| *i).collect();
+    let keep: Vec<usize> = (0..s).filter(|i| !drop.contains(i)).collect();
+    let (kept, removed) = p.constraints.split(&keep, &drop);
+    // The set-aside rows must hold at the initial state like every other row.
+    let mut ws = removed.workspace::<f64>();
+    let mut g = vec![0.0; drop.len()];
+    let zero = vec![0.0; p.v0.len()];
+    removed.eval(&mut ws, p.t0, &p.q0, &p.v0, &zero, &mut g);
+    for (k, &i) in drop.iter().enumerate() {
+        if !(g[k].abs() <= settings.consistency_tol) {
+            return Err(src.error(
+                spans[i].clone(),
+                &format!("row {}", removed.rows()[k].name),
+                format!(
+                    "closure row `{}` is set aside as dependent at t0 but the initial state                      violates it by {:.3e}: the loop is not assembled",
+                    removed.rows()[k].name,
+                    g[k]
+                ),
+            ));
+        }
+    }
+    let nv = p.model.nv();
+    if keep.len() > nv {
+        let first = keep[nv];
+        return Err(src.error(
+            spans[first].clone(),
+            &format!("row {}", p.constraints.rows()[first].name),
+            format!(
+                "too many independent rows: {} (constraints, closures and programme) for {nv}                  degrees of freedom",
+                keep.len()
+            ),
+        ));
+    }
+    let report = aside
+        .into_iter()
+        .map(|(i, reason)| SetAside {
+            row: p.constraints.rows()[i].name.clone(),
+            reason,
+        })
+        .collect();
+    *spans = keep.iter().map(|&i| spans[i].clone()).collect();
+    p.constraints = kept;
+    Ok(Some((report, removed)))
 }
 
 /// Evaluate parameters (numbers or expressions of other parameters) in dependency order.
@@ -286,7 +363,7 @@ fn and_list(names: &[&str]) -> String {
     }
 }
 
-fn is_identifier(s: &str) -> bool {
+pub(super) fn is_identifier(s: &str) -> bool {
     let mut c = s.chars();
     matches!(c.next(), Some(ch) if ch.is_ascii_alphabetic() || ch == '_')
         && c.all(|ch| ch.is_ascii_alphanumeric() || ch == '_')
@@ -316,6 +393,7 @@ fn lagrangian(
         || m.gravity.is_some()
         || !m.point_forces.is_empty()
         || !m.attractors.is_empty()
+        || !m.closures.is_empty()
     {
         return Err(src.error(
             m.kind.span(),
@@ -485,7 +563,7 @@ fn tree_scene(
     src: &Source,
     m: &ModelFile,
     params: &[(String, f64)],
-) -> R<(TreeSceneModel, Symbols)> {
+) -> R<(TreeSceneModel, Symbols, ClosureRows)> {
     if !m.coordinates.is_empty()
         || m.mass_matrix.is_some()
         || m.mass_diagonal.is_some()
@@ -732,6 +810,7 @@ fn tree_scene(
             pos: sf.pos,
         });
     }
+    let closures = super::closures::load(src, m, &tree, &joint_names, &mut sites)?;
     let q_names = tree.q_names().to_vec();
     let v_names = tree.v_names().to_vec();
     let mut sym = symbols(
@@ -796,7 +875,7 @@ fn tree_scene(
         coordinate_forces.push((i, e));
     }
     let model = TreeSceneModel::new(tree, sym.layout.clone(), point_forces, coordinate_forces);
-    Ok((model, sym))
+    Ok((model, sym, closures))
 }
 
 /// Constraint rows: the system's own constraints, then the programme.
@@ -804,6 +883,7 @@ fn rows(
     src: &Source,
     file: &SceneFile,
     sym: &mut Symbols,
+    closure_rows: &[(RowFile, String)],
 ) -> R<(ExprConstraints, Vec<Range<usize>>)> {
     let mut specs = vec![];
     let mut exprs = vec![];
@@ -813,6 +893,11 @@ fn rows(
         .iter()
         .enumerate()
         .map(|(i, r)| (r, Role::System, format!("constraints[{i}]")))
+        .chain(
+            closure_rows
+                .iter()
+                .map(|(r, field)| (r, Role::System, field.clone())),
+        )
         .chain(
             file.programme
                 .iter()
@@ -859,9 +944,11 @@ fn rows(
         spans.push(r.expr.span());
     }
     let nv = sym.layout.nv;
-    if specs.len() > nv {
+    // Closure rows are counted after the dependent ones are set aside (`closure_rows_kept`).
+    if specs.len() - closure_rows.len() > nv {
         // Point at the first row beyond the number of degrees of freedom.
         let nc = file.constraints.len();
+        let n_user = specs.len() - closure_rows.len();
         let (row, field) = if nv < nc {
             (&file.constraints[nv], format!("constraints[{nv}]"))
         } else {
@@ -871,8 +958,7 @@ fn rows(
             row.name.span(),
             &field,
             format!(
-                "too many rows: {} (constraints + programme) for {nv} degrees of freedom, at most {nv}",
-                specs.len()
+                "too many rows: {n_user} (constraints + programme) for {nv} degrees of freedom, at most {nv}"
             ),
         ));
     }
