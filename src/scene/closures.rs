@@ -65,7 +65,7 @@ pub struct SetAside {
     pub reason: String,
 }
 
-fn site_name(closure: &str, side: char) -> String {
+pub(super) fn site_name(closure: &str, side: char) -> String {
     format!("{closure}__{side}")
 }
 
