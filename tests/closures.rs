@@ -248,3 +248,36 @@ fn distance_and_weld_closures_hold() {
         .collect();
     assert_eq!(aside, ["w_x", "w_z", "w_rx", "w_ry"]);
 }
+
+/// A weld between two bodies: the relative quaternion conj(F_b) (x) F_a is the identity when the
+/// frames coincide, also for frames rotated in their bodies (regression: the conjugate negated only
+/// the first term of F_b's product expansion, so the rz row read 2.9 at an assembled state). Link 2
+/// welded to a body `l3` hinged on the world at (1, 0): at q = 0 the frames are the same world
+/// frame, rotated by 0.3 rad about z and 0.5 rad about x.
+#[test]
+fn weld_between_bodies_holds_at_the_assembled_state() {
+    let (c3, s3) = ((0.15f64).cos(), (0.15f64).sin());
+    let (c5, s5) = ((0.25f64).cos(), (0.25f64).sin());
+    // quat = Rz(0.3) (x) Rx(0.5)
+    let q = [c3 * c5, c3 * s5, s3 * s5, s3 * c5];
+    let weld = format!(
+        "{BASE}[[model.bodies]]\nname = \"l3\"\npos = [1.0, 0.0, 0.0]\nmass = 1.0\n\
+         com = [0.5, 0.0, 0.0]\ninertia = [0.01, 0.1, 0.1]\n\
+         joints = [{{ name = \"q3\", type = \"hinge\", axis = [0.0, 0.0, 1.0] }}]\n\
+         [[model.closures]]\nname = \"w\"\nkind = \"weld\"\nbody_a = \"l2\"\nbody_b = \"l3\"\n\
+         point_a = [0.2, 0.1, 0.0]\npoint_b = [0.2, 0.1, 0.0]\nquat_a = {q:?}\nquat_b = {q:?}\n"
+    );
+    let s = Scene::from_text(Path::new("weld2.toml"), &weld).unwrap_or_else(|e| panic!("{e}"));
+    let rows: Vec<String> = s.rows().into_iter().map(|r| r.name).collect();
+    assert!(!rows.is_empty());
+    let sol = s.solve(&s.settings);
+    assert!(sol.code.is_success(), "{:?}", sol.code);
+    let tr = &sol.trajectory;
+    let mut worst = 0f64;
+    for k in 0..tr.len() {
+        let q = tr.q_at(k);
+        // welded: l2 and l3 move as one body, so q1 + q2 = q3 and l2's origin stays at (1, 0)
+        worst = worst.max((q[0] + q[1] - q[2]).abs()).max(q[0].abs());
+    }
+    assert!(worst < 1e-9, "weld broken by {worst:e}");
+}

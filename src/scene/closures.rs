@@ -267,9 +267,9 @@ impl Closure {
                     };
                     let conj_b = [
                         fb[0].clone(),
-                        format!("(-{})", fb[1]),
-                        format!("(-{})", fb[2]),
-                        format!("(-{})", fb[3]),
+                        format!("(-({}))", fb[1]),
+                        format!("(-({}))", fb[2]),
+                        format!("(-({}))", fb[3]),
                     ];
                     let rel = qmul(&conj_b, &fa);
                     for (k, c) in ["rx", "ry", "rz"].iter().enumerate() {
