@@ -48,7 +48,7 @@ SIMULATORS = ("mujoco", "pinocchio")
 BUDGETED = ("solver_residual", "parity_mass", "parity_bias", "instant_u", "replay_residual",
             "replay_deviation")
 #: metrics of scenes with loop closures (``[[model.closures]]``), budgeted in addition
-CLOSURE_BUDGETED = ("parity_closure",)
+CLOSURE_BUDGETED = ("parity_closure", "reaction_closure")
 #: the scene-table name of a metric's budget where it differs
 TABLE_NAME = {"solver_residual": "programme_residual"}
 
@@ -90,6 +90,10 @@ def default_budgets(settings: dict[str, Any]) -> dict[str, tuple[float, str]]:
         "parity_closure": (1e-11, "default (algebraic identity): the simulator's closure Jacobian "
                                   "rows vs ours, both ways, as relative distances to the other's row "
                                   "space (frame and sign free; catalog <= 1e-15)"),
+        "reaction_closure": (1e-9, "default (algebraic, through a constraint solve): the closures' "
+                                   "generalized reaction J^T f from the simulator's own multipliers under "
+                                   "the solver's u vs ours B_c^T lambda_c, relative to its max (Pinocchio "
+                                   "catalog <= 1e-13; MuJoCo's soft equalities need a scene budget)"),
     }
 
 
@@ -359,7 +363,8 @@ def _parity(c: _Check) -> None:
     idx = np.unique(np.linspace(0, 2 * ref.steps, max(1, c.options.samples)).round().astype(int))
     times = ref.t[idx]
     sM = sR = 0.0
-    dmt, drt, dU, dJ = [], [], [], []
+    dmt, drt, dU, dJ, dR = [], [], [], [], []
+    sRc = 0.0
     names = [r["name"] for r in scene.rows]
     programme = [i for i, r in enumerate(scene.rows) if r["role"] == "programme"]
     closures = be.report.get("closures", [])
@@ -377,7 +382,13 @@ def _parity(c: _Check) -> None:
         us = be.instant_u(tk, qk, vk, ak, B, np.asarray(dyn["gamma"]), programme)
         dU.append(float(np.abs(us - ref.u[k]).max()))
         if closures:
-            dJ.append(row_space_distance(B[closure_idx], be.closure_jacobian(tk, qk, vk)))
+            Jsim = be.closure_jacobian(tk, qk, vk)
+            dJ.append(row_space_distance(B[closure_idx], Jsim))
+            # closure reactions: ours B_c^T lambda_c; the simulator's J^T f under the same u
+            ours_r = B[closure_idx].T @ np.asarray(ref.lam[k])[closure_idx]
+            sim_r = Jsim.T @ be.closure_forces(tk, qk, vk, ref.u[k])
+            dR.append(float(np.abs(sim_r - ours_r).max()))
+            sRc = max(sRc, float(np.abs(ours_r).max()))
     sR = sR if sR > 0 else 1.0
     # u relative to its own scale; without a programme (u = 0) relative to the forces.
     uabs = float(np.abs(ref.u).max()) if ref.u.size else 0.0
@@ -391,6 +402,10 @@ def _parity(c: _Check) -> None:
     if closures:
         c.res.metrics["parity_closure"] = float(max(dJ))
         c.first["parity_closure"] = (times, np.array(dJ))
+        rc = np.array(dR) / max(sRc, 1e-300)
+        c.res.metrics["reaction_closure"] = float(rc.max())
+        c.first["reaction_closure"] = (times, rc)
+        c.res.notes.append(f"closure reaction scale: max|B_c^T lambda_c| {sRc:.3g}")
         gate.append("parity_closure")
     bval = {b.metric: b.value for b in c.res.budgets}
     bad = [m for m in gate if not (c.res.metrics[m] <= bval[m])]

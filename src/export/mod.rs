@@ -152,8 +152,8 @@ pub const MUJOCO_SOLIMP: [f64; 3] = [0.9999, 0.9999, 0.001];
 
 /// A loop closure (`[[model.closures]]`) as the exported document carries it, and the report's
 /// entry. MJCF: sites `site_a`/`site_b` (body frames as ours) joined by `<equality>` `connect`
-/// (point), `weld` (weld) or a two-site spatial tendon of fixed length (`<equality><tendon>`,
-/// distance), softness [`MUJOCO_SOLREF_STEPS`], [`MUJOCO_SOLIMP`]. URDF has no closures: each
+/// (point) or `weld` (weld), softness [`MUJOCO_SOLREF_STEPS`], [`MUJOCO_SOLIMP`]; a distance is
+/// refused (MuJoCo's fixed-length tendon equality is not exact: `MUJOCO_CLOSURES.md`). URDF has no closures: each
 /// body-side site is a massless link on a fixed joint (a Pinocchio frame), and the harness builds
 /// `pin.RigidConstraintModel`s (CONTACT_3D / CONTACT_6D) between the frames; a world side
 /// (`body_b = None`) is the world point `point_b` / orientation `quat_b`.

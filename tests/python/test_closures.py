@@ -55,6 +55,8 @@ def test_closed_loop_scenes_pass(name, sim):
     r = run_check(str(scene_file(name)), sim)
     assert r.status == "pass", (r.reason, r.metrics)
     assert r.metrics["parity_closure"] < 1e-14 and r.metrics["instant_u"] < 1e-12, r.metrics
+    # closure reactions: Pinocchio's multipliers are exact, MuJoCo's soft forces ~(1 - solimp) off
+    assert r.metrics["reaction_closure"] < (1e-13 if sim == "pinocchio" else 3e-4), r.metrics
     # the closure rows alone, as the simulator holds them (info; judged through replay_residual)
     assert r.info["replay_closure_residual"] <= r.metrics["replay_residual"]
 
@@ -81,6 +83,15 @@ def test_moved_closure_point_fails_parity(name, site, sim):
     assert "parity_closure" in {b.metric for b in r.breaches}, r.reason
     assert r.metrics["parity_closure"] > 1e-4, r.metrics  # measured 1e-3 .. 1e-2
     assert "replay_residual" not in r.metrics
+
+
+@pytest.mark.parametrize("sim", BOTH)
+def test_wrong_control_fails_the_closure_reactions(sim):
+    """Negative control of reaction_closure: u 1 % too large changes the simulator's closure
+    multipliers under it, while ours stay those of the right u."""
+    r, _ = _run(str(scene_file("four_bar")), sim, corrupt_u=lambda t, u: 1.01 * u)
+    assert r.status == "fail"
+    assert "reaction_closure" in {b.metric for b in r.breaches}, (r.reason, r.metrics)
 
 
 DISTANCE = """name = "distance_pendulum"
@@ -110,29 +121,22 @@ t1 = 1.0
 output_dt = 0.01
 [tolerances]
 replay_step = { value = 1e-3, reason = "test" }
-replay_residual_mujoco = { value = 1e-4, reason = "test: soft tendon equality" }
-replay_deviation_mujoco = { value = 1e-2, reason = "test: soft tendon equality" }
 """
 
 
-def test_distance_closure_is_a_tendon_equality_in_mujoco(tmp_path):
-    """MuJoCo holds a distance closure as a fixed-length two-site tendon (L - L0 = d - L0 at
-    qpos0); Pinocchio has no distance constraint model: not_checked, naming the closure."""
+def test_distance_closure_is_solver_only(tmp_path):
+    """No exact distance constraint in either simulator: MuJoCo's export refuses it (naming the
+    scene and the closure: its tendon equality leaves out dJ/dt v) and Pinocchio has no constraint
+    model for it; both checks are not_checked, naming the closure."""
     p = tmp_path / "distance_pendulum.toml"
     p.write_text(DISTANCE)
     scene = progmo.load(str(p))
-    doc, report = scene.export("mjcf")
-    assert "<tendon" in doc and 'tendon1="rod"' in doc
-    be = MujocoBackend(doc, report, scene)
-    import mujoco
-    be._set(0.0, np.asarray(scene.q0), np.asarray(scene.v0))
-    mujoco.mj_forward(be.m, be.d)
-    assert abs(be.d.ten_length[0] - 1.0) < 1e-15
-    assert abs(be.d.efc_pos[be._equality_rows()][0]) < 1e-15  # the constraint holds at q0
+    with pytest.raises(progmo.ExportUnsupported, match="distance closure 'rod' of scene 'distance_pendulum'"):
+        scene.export("mjcf")
     r = run_check(str(p), "mujoco")
-    assert r.status == "pass", (r.reason, r.metrics)
+    assert r.status == "not_checked" and not r.expected and "distance closure 'rod'" in r.reason, r.reason
     r = run_check(str(p), "pinocchio")
-    assert r.status == "not_checked" and "distance closure 'rod'" in r.reason, r.reason
+    assert r.status == "not_checked" and not r.expected and "distance closure 'rod'" in r.reason, r.reason
 
 
 WELD = """name = "welded_pair"
@@ -177,6 +181,7 @@ output_dt = 0.01
 replay_step = { value = 1e-3, reason = "test" }
 replay_residual_mujoco = { value = 1e-5, reason = "test: soft weld" }
 replay_deviation_mujoco = { value = 1e-3, reason = "test: soft weld" }
+reaction_closure_mujoco = { value = 1e-3, reason = "test: soft weld" }
 """
 
 
