@@ -281,3 +281,76 @@ fn weld_between_bodies_holds_at_the_assembled_state() {
     }
     assert!(worst < 1e-9, "weld broken by {worst:e}");
 }
+
+/// Freudenstein's output angle of a four-bar with input link a at the origin, coupler b, output
+/// link c at (d, 0): K1 cos th4 - K2 cos th2 + K3 = cos(th2 - th4), tan(th4/2) the roots of
+/// A x^2 + B x + C = 0 (`sign` picks the branch).
+fn freudenstein(a: f64, b: f64, c: f64, d: f64, th2: f64, sign: f64) -> f64 {
+    let (k1, k2, k3) = (
+        d / a,
+        d / c,
+        (a * a - b * b + c * c + d * d) / (2.0 * a * c),
+    );
+    let aa = th2.cos() - k1 - k2 * th2.cos() + k3;
+    let bb = -2.0 * th2.sin();
+    let cc = k1 - (k2 + 1.0) * th2.cos() + k3;
+    2.0 * ((-bb + sign * (bb * bb - 4.0 * aa * cc).sqrt()) / (2.0 * aa)).atan()
+}
+
+fn wrap(x: f64) -> f64 {
+    use std::f64::consts::PI;
+    (x + PI).rem_euclid(2.0 * PI) - PI
+}
+
+/// Watt II six-bar: both rockers over the run against Freudenstein twice (loop 1: crank -> th4;
+/// loop 2, ground O4 -> O6 rotated onto the x axis: th4 + beta -> th6), branches chosen at t0;
+/// the crossed branch of loop 2 is the negative control. Two planar loops: both z rows set aside.
+#[test]
+fn watt_six_bar_follows_freudenstein_twice() {
+    let s = load("watt_six_bar");
+    let aside: Vec<&str> = s
+        .set_aside
+        .as_ref()
+        .unwrap()
+        .0
+        .iter()
+        .map(|a| a.row.as_str())
+        .collect();
+    assert_eq!(aside, ["joint_b_z", "joint_d_z"]);
+    let sol = s.solve(&s.settings);
+    assert!(sol.code.is_success(), "{:?}", sol.code);
+    let p = |n: &str| param(&s, n);
+    let (gx, gy) = (p("gx"), p("gy"));
+    let (gamma, d2) = (gy.atan2(gx), gx.hypot(gy));
+    let th4 = |th2: f64, sg: f64| freudenstein(p("a"), p("b"), p("c"), p("d"), th2, sg);
+    let th6 = |th4: f64, sg: f64| {
+        gamma + freudenstein(p("a2"), p("b2"), p("c2"), d2, th4 + p("beta") - gamma, sg)
+    };
+    let tr = &sol.trajectory;
+    let q0 = tr.q_at(0);
+    let pick = |f: &dyn Fn(f64) -> f64, x: f64| {
+        if wrap(f(1.0) - x).abs() < wrap(f(-1.0) - x).abs() {
+            1.0
+        } else {
+            -1.0
+        }
+    };
+    let s1 = pick(&|sg| th4(q0[0], sg), q0[2]);
+    let s2 = pick(&|sg| th6(q0[2], sg), q0[4]);
+    let (mut e4, mut e6, mut other) = (0f64, 0f64, f64::INFINITY);
+    for k in 0..tr.len() {
+        let q = tr.q_at(k);
+        let t4 = th4(q[0], s1);
+        e4 = e4.max(wrap(q[2] - t4).abs());
+        e6 = e6.max(wrap(q[4] - th6(t4, s2)).abs());
+        other = other.min(wrap(q[4] - th6(t4, -s2)).abs());
+    }
+    assert!(
+        e4 < 1e-10 && e6 < 1e-10,
+        "rockers off Freudenstein by {e4:e}, {e6:e}"
+    );
+    assert!(
+        other > 1e-2,
+        "control: the crossed branch is only {other:e} away"
+    );
+}

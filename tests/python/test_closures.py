@@ -16,7 +16,7 @@ from progmo.simulators.mujoco_sim import MujocoBackend
 from progmo.simulators.pinocchio_sim import PinocchioBackend
 
 BOTH = ["mujoco", "pinocchio"]
-LOOPS = ["slider_crank_tree", "four_bar"]
+LOOPS = ["slider_crank_tree", "four_bar", "watt_six_bar"]
 
 
 def backend(scene, sim):
