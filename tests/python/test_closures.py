@@ -16,7 +16,7 @@ from progmo.simulators.mujoco_sim import MujocoBackend
 from progmo.simulators.pinocchio_sim import PinocchioBackend
 
 BOTH = ["mujoco", "pinocchio"]
-LOOPS = ["slider_crank_tree", "four_bar", "watt_six_bar"]
+LOOPS = ["slider_crank_tree", "four_bar", "watt_six_bar", "rssr"]
 
 
 def backend(scene, sim):
@@ -73,7 +73,8 @@ def moved_site(doc: str, site: str, dx: float = 1e-3) -> str:
     return out
 
 
-@pytest.mark.parametrize("name,site", [("four_bar", "joint_b__a"), ("slider_crank_tree", "pin__a")])
+@pytest.mark.parametrize("name,site", [("four_bar", "joint_b__a"), ("slider_crank_tree", "pin__a"),
+                                       ("watt_six_bar", "joint_d__a"), ("rssr", "joint_b__a")])
 @pytest.mark.parametrize("sim", BOTH)
 def test_moved_closure_point_fails_parity(name, site, sim):
     """Negative control: the simulator's loop closed 1 mm off ours must fail model parity (and the
