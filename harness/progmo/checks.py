@@ -89,7 +89,7 @@ def default_budgets(settings: dict[str, Any]) -> dict[str, tuple[float, str]]:
                                    "replay_horizon and its own budget"),
         "parity_closure": (1e-11, "default (algebraic identity): the simulator's closure Jacobian "
                                   "rows vs ours, both ways, as relative distances to the other's row "
-                                  "space (frame and sign free; catalog <= 1e-15)"),
+                                  "space (frame and sign free; catalog <= 2e-15)"),
         "reaction_closure": (1e-9, "default (algebraic, through a constraint solve): the closures' "
                                    "generalized reaction J^T f from the simulator's own multipliers under "
                                    "the solver's u vs ours B_c^T lambda_c, relative to its max (Pinocchio "
