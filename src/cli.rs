@@ -120,6 +120,15 @@ enum Command {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
         args: Vec<String>,
     },
+    /// Tolerance report over distributions of runs (Python harness): parameters, initial states
+    /// and solver settings drawn from a sweep file, each sample checked in the simulators, on this
+    /// machine or a Ray cluster. `progmo sweep --help`.
+    #[command(disable_help_flag = true)]
+    Sweep {
+        /// Arguments for the harness.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<String>,
+    },
     /// Re-render the report of a saved check run from its results.json (Python harness).
     /// `progmo report --help`.
     #[command(disable_help_flag = true)]
@@ -241,6 +250,7 @@ where
         Command::Debug { args } => harness("debug", &["-m", "progmo.cli", "debug"], &args),
         Command::Bench { args } => harness("bench", &["-m", "progmo.bench.main"], &args),
         Command::Report { args } => harness("report", &["-m", "progmo.cli", "report"], &args),
+        Command::Sweep { args } => harness("sweep", &["-m", "progmo.sweep"], &args),
     }
 }
 

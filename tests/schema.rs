@@ -175,21 +175,32 @@ fn tables(schema: &Json) -> BTreeMap<String, BTreeSet<String>> {
     out
 }
 
-/// The sub-table of `v` at a table path (first element of arrays, first map entry).
-fn table_at<'a>(v: &'a toml::Value, path: &str) -> Option<&'a toml::Table> {
-    let mut cur = v;
+/// The sub-tables of `v` at a table path (every element of arrays: a shape or a view target
+/// takes one of several key sets; the first map entry of `*`).
+fn tables_at<'a>(v: &'a toml::Value, path: &str) -> Vec<&'a toml::Table> {
+    let mut cur = vec![v];
     for seg in path.split('.').filter(|&s| s != TOP) {
         let (key, arrays) = (seg.trim_end_matches("[]"), seg.matches("[]").count());
-        cur = if key == "*" {
-            cur.as_table()?.values().next()?
-        } else {
-            cur.as_table()?.get(key)?
-        };
+        cur = cur
+            .into_iter()
+            .filter_map(|c| {
+                let t = c.as_table()?;
+                if key == "*" {
+                    t.values().next()
+                } else {
+                    t.get(key)
+                }
+            })
+            .collect();
         for _ in 0..arrays {
-            cur = cur.as_array()?.first()?;
+            cur = cur
+                .into_iter()
+                .filter_map(|c| c.as_array())
+                .flatten()
+                .collect();
         }
     }
-    cur.as_table()
+    cur.into_iter().filter_map(|c| c.as_table()).collect()
 }
 
 /// A two-link planar chain with one closure (closures of different kinds use different keys).
@@ -264,7 +275,7 @@ fn the_maximal_examples_load_match_the_schema_and_use_every_key() {
         for k in keys {
             if !parsed
                 .iter()
-                .any(|v| table_at(v, &path).is_some_and(|t| t.contains_key(&k)))
+                .any(|v| tables_at(v, &path).iter().any(|t| t.contains_key(&k)))
             {
                 unused.push(format!("{path}.{k}"));
             }
@@ -400,6 +411,7 @@ mass = 1.0
 com = [0.0, 0.0, -0.5]
 inertia = [0.01, 0.01, 0.01, 0.0, 0.0, 0.0]
 joints = [{ name = "q1", type = "hinge", axis = [0.0, 1.0, 0.0], anchor = [0.0, 0.0, 0.0], stiffness = 1.0, spring_ref = 0.1, damping = 0.05 }]
+shape = { capsule = [0.05, 1.0], pos = [0.0, 0.0, -0.5], quat = [1.0, 0.0, 0.0, 0.0], color = [0.2, 0.2, 0.8, 1.0] }
 
 [[model.bodies]]
 name = "lower"
@@ -409,6 +421,22 @@ mass = 1.0
 com = [0.0, 0.0, -0.5]
 inertia = [0.01, 0.01, 0.01]
 joints = [{ name = "j", type = "ball" }]
+shape = { cylinder = [0.05, 1.0] }
+
+[[model.bodies]]
+name = "bob"
+parent = "lower"
+pos = [0.0, 0.0, -1.0]
+mass = 0.1
+shape = { sphere = 0.05 }
+
+[[model.bodies]]
+name = "plate"
+parent = "lower"
+pos = [0.0, 0.0, -1.0]
+mass = 0.1
+inertia = [0.001, 0.001, 0.001]
+shape = { box = [0.1, 0.1, 0.01] }
 
 [[model.sites]]
 name = "tip"
@@ -453,6 +481,34 @@ programme_residual = { value = 1e-6, reason = "Baumgarte keeps the drift small, 
 
 [checks]
 not_checked = { pinocchio = "an example of a declared not_checked" }
+
+[[view.targets]]
+name = "reach"
+kind = "path"
+path = ["a*sin(t)", "0", "-2"]
+samples = 50
+color = [1.0, 0.0, 1.0, 0.8]
+
+[[view.targets]]
+kind = "line"
+point = [0.0, 0.0, "-b"]
+direction = [1.0, 0.0, 0.0]
+size = 2.0
+
+[[view.targets]]
+kind = "plane"
+point = [0.0, 0.0, -2.5]
+normal = [0.0, 0.0, 1.0]
+
+[[view.targets]]
+kind = "circle"
+point = [0.0, 0.0, -2.0]
+normal = [0.0, 0.0, 1.0]
+radius = "a"
+
+[[view.targets]]
+kind = "point"
+point = [0.5, 0.0, -2.0]
 "#;
 
 /// Every field of a lagrangian scene with a full mass matrix.
@@ -485,6 +541,13 @@ v = { x = 0.1, y = 0.1 }
 
 [time]
 t1 = 1.0
+
+[[reference]]
+t = "0.5*m"
+source = "the programme and the constraint solved by hand"
+q = { x = "0.1*sin(t)", y = 0.05 }
+v = { y = 0.1 }
+u = { y = 0.0 }
 "#;
 
 /// A lagrangian scene with a diagonal mass matrix.

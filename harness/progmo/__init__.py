@@ -52,19 +52,21 @@ def _scene(scene: Scene | str | os.PathLike[str]) -> Scene:
     return scene if isinstance(scene, Scene) else load(scene)
 
 
-def check(scene: Scene | str | os.PathLike[str], simulator: Literal["mujoco", "pinocchio"] = "mujoco",
+def check(scene: Scene | str | os.PathLike[str],
+          simulator: Literal["mujoco", "pinocchio", "solver_only"] = "mujoco",
           *, step: float | None = None, horizon: float | None = None, samples: int = 8,
           baselines: str | os.PathLike[str] | None = None) -> CheckResult:
     """Replay the scene's control forces open-loop in ``simulator`` and judge every metric against
-    its budget (the nightly check of one pair). ``step``/``horizon``/``samples`` as in ``progmo
+    its budget (the nightly check of one pair); ``"solver_only"`` compares two formulations and the
+    scene's ``[[reference]]`` values instead (how a lagrangian scene is checked). ``step``/``horizon``/``samples`` as in ``progmo
     check``. With ``baselines`` (a folder of accepted baselines, e.g. ``progmo.data.baselines_dir()``;
     None: no comparison), a pass worse than its baseline becomes a ``fail`` whose ``reason`` names
     the regressed metrics. Never raises for a failing scene: ``status`` says what happened."""
     from . import baselines as bl
-    from .checks import SIMULATORS, CheckOptions, run_check
+    from .checks import CHECKERS, CheckOptions, run_check
 
-    if simulator not in SIMULATORS:
-        raise ValueError(f"unknown simulator {simulator!r} (one of {', '.join(SIMULATORS)})")
+    if simulator not in CHECKERS:
+        raise ValueError(f"unknown simulator {simulator!r} (one of {', '.join(CHECKERS)})")
     sc = _scene(scene)
     r = run_check(sc.path, simulator, CheckOptions(step=step, horizon=horizon, samples=samples))
     if baselines is not None and r.status == "pass":

@@ -191,6 +191,10 @@ class Scene:
     @property
     def expected_not_checked(self) -> list[tuple[str, str]]:
         """[checks] not_checked of the scene: (simulator, reason)."""
+    @property
+    def references(self) -> list[dict[str, Any]]:
+        """[[reference]] of the scene: one dict per value (t, quantity "q"/"v"/"u", name, index,
+        value, source, field)."""
     def expression_forces(self, t: float, q: F64, v: F64) -> ExpressionForces: ...
     def residuals(self, t: F64, q: F64, v: F64, a: F64 | None = None) -> F64: ...
     def dynamics(self, t: float, q: F64, v: F64) -> Dynamics: ...
@@ -210,8 +214,12 @@ class Scene:
     def export(self, format: Literal["mjcf", "urdf"], *, timestep: float = 1e-3) -> tuple[str, dict[str, Any]]: ...
     def body_poses(self, q: F64) -> list[tuple[str, list[float], list[float]]]:
         """World pose of every body at q: (name, position, quaternion w x y z); [] for a lagrangian scene."""
-    def scene_update(self, q: F64, prefix: str, alpha: float = 1.0) -> dict[str, Any] | None:
-        """The foxglove.SceneUpdate drawing the mechanism on frames <prefix>/<body>; None for a lagrangian scene."""
+    def scene_update(self, q: F64, prefix: str, alpha: float = 1.0, targets: bool = True) -> dict[str, Any] | None:
+        """The foxglove.SceneUpdate drawing the mechanism on frames <prefix>/<body> (and the declared view
+        targets in the world frame); None for a lagrangian scene."""
+    def scene_trace(self, q: F64, prefix: str) -> dict[str, Any] | None:
+        """The foxglove.SceneUpdate of the programme's sites' traces through the rows of q (entities
+        <prefix>/trace/<site>); None for a lagrangian scene or no traced site."""
     def recording_schemas(self) -> dict[str, dict[str, Any]]:
         """JSON schemas of recordings by schema name (progmo.State, ..., foxglove.SceneUpdate)."""
 

@@ -28,6 +28,14 @@ A check is a sequence of small steps over a typed back-end (``simulators.Backend
 6. **Open-loop replay** of the solver's u(t): ``replay_residual`` (max |row| of the core's own
    evaluator on the replayed states) and ``replay_deviation`` (max |dq|, |dv| against the solver,
    quaternions up to sign); the growth rate of the deviation is ``info``, not judged.
+
+A scene no simulator document describes (a lagrangian model) is checked ``solver_only``
+(``run_check(path, "solver_only")``): the scene (step 1), then :func:`_solver_only`: the solve with
+the scene's formulation against a **second formulation** (``kkt``, or ``null_space`` when the scene
+uses ``kkt``) at the reference tolerance (``formulation_deviation``: max |dq|, |dv|;
+``formulation_force_deviation``: u and the system reactions relative to their scale) and, where the
+scene gives ``[[reference]]`` values of independent origin, ``reference_error`` (max |x - x_ref| /
+max(1, |x_ref|)). It is a verdict of its own, shown as such in the report, never a skip.
 """
 
 from __future__ import annotations
@@ -40,15 +48,20 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .results import Breach, Budget, CheckResult, Series, judge
+from .results import SOLVER_ONLY, Breach, Budget, CheckResult, Series, judge
 
 SIMULATORS = ("mujoco", "pinocchio")
+#: everything ``run_check`` can check in: the simulators and the solver-only check
+CHECKERS = (*SIMULATORS, SOLVER_ONLY)
 
 #: metrics with budgets (``programme_residual`` in a scene's table judges ``solver_residual``)
 BUDGETED = ("solver_residual", "parity_mass", "parity_bias", "instant_u", "replay_residual",
             "replay_deviation")
 #: metrics of scenes with loop closures (``[[model.closures]]``), budgeted in addition
 CLOSURE_BUDGETED = ("parity_closure", "reaction_closure")
+#: metrics of the solver_only check (``reference_error`` only where the scene gives references)
+SOLVER_ONLY_BUDGETED = ("solver_residual", "formulation_deviation", "formulation_force_deviation",
+                        "reference_error")
 #: the scene-table name of a metric's budget where it differs
 TABLE_NAME = {"solver_residual": "programme_residual"}
 
@@ -94,16 +107,26 @@ def default_budgets(settings: dict[str, Any]) -> dict[str, tuple[float, str]]:
                                    "generalized reaction J^T f from the simulator's own multipliers under "
                                    "the solver's u vs ours B_c^T lambda_c, relative to its max (Pinocchio "
                                    "catalog <= 1e-13; MuJoCo's soft equalities need a scene budget)"),
+        "formulation_deviation": (1e-8, f"default (integrated): max |dq|, |dv| between two formulations "
+                                        f"solved at rtol {REF_RTOL:g}: both carry the integration error "
+                                        "(about 1e4 x rtol for non-stiff scenes) and the conditioning of B"),
+        "formulation_force_deviation": (1e-8, "default (integrated): u and reactions of two formulations, "
+                                              "relative to their largest value: the state difference "
+                                              "propagated through A, G and the multipliers"),
+        "reference_error": (1e-8, f"default (integrated): the reference solve (rtol {REF_RTOL:g}) against "
+                                  "values of independent origin, max |x - x_ref| / max(1, |x_ref|): the "
+                                  "global error of a tight solve; published values need the scene's own "
+                                  "budget (their digits)"),
     }
 
 
 def budgets_for(tolerances: dict[str, tuple[float, str]], settings: dict[str, Any],
-                simulator: str, closures: bool = False) -> list[Budget]:
-    """One budget per metric of ``BUDGETED`` (and ``CLOSURE_BUDGETED`` for a scene with loop
-    closures): ``<name>_<simulator>``, else ``<name>`` from the scene's table, else the default."""
+                simulator: str, metrics: tuple[str, ...] = BUDGETED) -> list[Budget]:
+    """One budget per metric of ``metrics``: ``<name>_<simulator>``, else ``<name>`` from the
+    scene's table, else the default."""
     defaults = default_budgets(settings)
     out = []
-    for m in BUDGETED + (CLOSURE_BUDGETED if closures else ()):
+    for m in metrics:
         name = TABLE_NAME.get(m, m)
         key = next((k for k in (f"{name}_{simulator}", name) if k in tolerances), None)
         if key is not None:
@@ -191,8 +214,10 @@ def _run(scene_path: str, simulator: str, options: CheckOptions | None = None, *
     c = _Check(str(scene_path), simulator, options or CheckOptions(),
                CheckResult(scene=str(scene_path), simulator=simulator, status="error"),
                corrupt_u, corrupt_export, tuple(withhold), frame_every, record)
+    steps = (_scene, _solver_only) if simulator == SOLVER_ONLY else (
+        _scene, _export, _budgets, _reference, _parity, _replay)
     try:
-        for step in (_scene, _export, _budgets, _reference, _parity, _replay):
+        for step in steps:
             step(c)
     except _Stop as e:
         c.res.status, c.res.reason, c.res.expected = e.status, e.reason, e.expected
@@ -208,8 +233,8 @@ def _scene(c: _Check) -> None:
     """Load the scene; the solver's verdict on its initial state; a declared not_checked."""
     from . import Scene, SceneError  # the Rust core
 
-    if c.simulator not in SIMULATORS:
-        raise _Stop("error", f"unknown simulator {c.simulator!r} (one of {', '.join(SIMULATORS)})")
+    if c.simulator not in CHECKERS:
+        raise _Stop("error", f"unknown simulator {c.simulator!r} (one of {', '.join(CHECKERS)})")
     try:
         c.scene = Scene(c.path)
     except Exception as e:
@@ -259,8 +284,9 @@ def _export(c: _Check) -> None:
 def _budgets(c: _Check) -> None:
     """Every metric's budget and the replayed span."""
     c.tol = {k: (float(v[0]), str(v[1])) for k, v in dict(c.scene.tolerances).items()}
+    closures = bool(c.backend.report.get("closures"))
     c.res.budgets = budgets_for(c.tol, dict(c.scene.settings), c.simulator,
-                                bool(c.backend.report.get("closures")))
+                                BUDGETED + CLOSURE_BUDGETED if closures else BUDGETED)
     full = c.scene.t1 - c.scene.t0
     horizon = c.options.horizon or (c.tol["replay_horizon"][0] if "replay_horizon" in c.tol else full)
     c.horizon = min(horizon, full)
@@ -535,3 +561,84 @@ def _first_times(first: dict, bval: dict) -> dict:
             if ft is not None:
                 out[m] = ft
     return out
+
+
+# --- solver_only ---------------------------------------------------------------------------------
+def second_formulation(formulation: str) -> str:
+    """The formulation a solver_only check compares with: the KKT system (multipliers, the other
+    side of the paper's contrast), or the paper's null-space method when the scene uses KKT."""
+    return "null_space" if formulation == "kkt" else "kkt"
+
+
+def _solver_only(c: _Check) -> None:
+    """A scene no simulator document describes: two formulations and the scene's references."""
+    from .simulators.replay import downsample
+
+    scene, res = c.scene, c.res
+    c.tol = {k: (float(v[0]), str(v[1])) for k, v in dict(scene.tolerances).items()}
+    refs = list(scene.references)
+    metrics = SOLVER_ONLY_BUDGETED if refs else SOLVER_ONLY_BUDGETED[:-1]
+    st = dict(scene.settings)
+    res.budgets = budgets_for(c.tol, st, SOLVER_ONLY, metrics)
+    full = scene.t1 - scene.t0
+    res.span = [full, full]
+    tight = dict(rtol=min(st["rtol"], REF_RTOL), atol=min(st["atol"], REF_ATOL))
+    first, second = st["formulation"], second_formulation(st["formulation"])
+    t0s = _time.perf_counter()
+    a = scene.solve(**tight)
+    res.warnings = [w["message"] for w in a.warnings]
+    if not a.success:
+        raise _Stop("error", f"the reference solve stopped ({a.code}): {a.message}")
+    b = scene.solve(formulation=second, **tight)
+    if not b.success:
+        raise _Stop("fail", f"the second formulation ({second}) stopped ({b.code}): {b.message}")
+    ta, tb = np.asarray(a.t), np.asarray(b.t)
+    if ta.shape != tb.shape or np.abs(ta - tb).max() > 1e-12 * max(1.0, abs(scene.t1)):
+        raise _Stop("error", "the two formulations sampled different times")
+    res.notes.append(
+        f"solver-only check: no MJCF/URDF element describes a {scene.kind} model, so no simulator "
+        f"replays it; formulation {first} against {second}, both at rtol {tight['rtol']:g}, "
+        f"atol {tight['atol']:g} ({len(ta)} samples, {_time.perf_counter() - t0s:.2f} s)")
+    for w in res.warnings:
+        res.notes.append(f"solver warning: {w}")
+    dev = np.maximum(np.abs(np.asarray(a.q) - np.asarray(b.q)).max(axis=1),
+                     np.abs(np.asarray(a.v) - np.asarray(b.v)).max(axis=1))
+    fa = np.hstack([np.asarray(a.u), np.asarray(a.reactions)])
+    fb = np.hstack([np.asarray(b.u), np.asarray(b.reactions)])
+    scale = float(np.abs(fa).max()) if fa.size else 0.0
+    fdev = (np.abs(fa - fb).max(axis=1) / (scale if scale > 0 else 1.0)) if fa.size else np.zeros(len(ta))
+    resid = np.abs(np.asarray(a.residuals)).max(axis=1) if np.asarray(a.residuals).size else np.zeros(len(ta))
+    res.metrics.update(solver_residual=float(resid.max()), formulation_deviation=float(dev.max()),
+                       formulation_force_deviation=float(fdev.max()))
+    first_series = {"formulation_deviation": (ta, dev), "formulation_force_deviation": (ta, fdev)}
+    sel = downsample(len(ta))
+    res.series.append(Series("formulation_deviation", ta[sel].tolist(), dev[sel].tolist(), "m, rad (q); m/s, rad/s (v)"))
+    res.series.append(Series("formulation_force_deviation", ta[sel].tolist(), fdev[sel].tolist(), "relative"))
+    for j, name in enumerate(scene.v_names):
+        res.series.append(Series(f"u.{name}", ta[sel].tolist(), np.asarray(a.u)[sel, j].tolist(), "N or N m"))
+    if refs:
+        errs = []
+        sources = list(dict.fromkeys(r["source"] for r in refs))
+        for r in refs:
+            k = int(np.argmin(np.abs(ta - r["t"])))
+            sol = a
+            if abs(ta[k] - r["t"]) > 1e-12 * max(1.0, abs(r["t"])):
+                # not on the output grid: a solve that ends there
+                sol = scene.solve(t1=r["t"], **tight)
+                if not sol.success:
+                    raise _Stop("error", f"the solve to the reference time {r['t']:g} stopped: {sol.message}")
+                k = len(np.asarray(sol.t)) - 1
+            x = float(np.asarray(getattr(sol, r["quantity"]))[k, r["index"]])
+            errs.append((abs(x - r["value"]) / max(1.0, abs(r["value"])), r, x))
+        worst = max(errs, key=lambda e: e[0])
+        res.metrics["reference_error"] = worst[0]
+        res.info["reference_values"] = float(len(refs))
+        res.notes.append(f"{len(refs)} reference value(s) of independent origin ({'; '.join(sources)}); "
+                         f"worst {worst[1]['field']} at t = {worst[1]['t']:g}: {worst[2]:.15g} against "
+                         f"{worst[1]['value']:.15g}")
+        res.series.append(Series("reference_error", [e[1]["t"] for e in errs], [e[0] for e in errs], "relative"))
+    res.status = "pass"
+    bval = {bd.metric: bd.value for bd in res.budgets}
+    judge(res, _first_times(first_series, bval))
+    if res.status == "fail":
+        res.reason = "; ".join(f"{br.metric} {br.value:.3g} > {br.budget:.3g}" for br in res.breaches)

@@ -29,10 +29,10 @@ import time
 from pathlib import Path
 
 from . import baselines as bl
-from . import cliutil, data
+from . import cliutil, data, executors
 from . import history as hist
 from . import report as rp
-from .parallel import Task, default_jobs, error_result, last_line, run_all
+from .parallel import Task, default_jobs, error_result, last_line
 from .results import CheckResult, save
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
@@ -53,8 +53,19 @@ def repo_root() -> Path:
     return data.checkout() or Path.cwd()
 
 
+def executor_options(p: argparse.ArgumentParser) -> None:
+    """--executor and --address (check and sweep)."""
+    from .executors import EXECUTORS
+
+    p.add_argument("--executor", choices=EXECUTORS, default="local", metavar="NAME",
+                   help="where checks run: local (this machine's cores, --jobs) or ray (a Ray cluster: "
+                   "--address, else $RAY_ADDRESS, else a Ray instance started for the run)")
+    p.add_argument("--address", metavar="HOST:PORT", default=None,
+                   help="the Ray cluster of --executor ray (default: $RAY_ADDRESS)")
+
+
 def parser() -> argparse.ArgumentParser:
-    from .checks import SIMULATORS
+    from .checks import CHECKERS, SIMULATORS
 
     p = cliutil.parser("progmo", "Cross-simulator checks of progmo (also: python -m progmo.cli).")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
@@ -71,11 +82,14 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument("scenes", nargs="*", metavar="SCENE",
                    help="scene files (TOML), folders of them, or names of bundled scenes "
                    "(default: every bundled scene)")
-    c.add_argument("-s", "--simulator", action="append", choices=SIMULATORS, metavar="NAME",
-                   help=f"simulator to check in, repeatable: {', '.join(SIMULATORS)} (default: all)")
+    c.add_argument("-s", "--simulator", action="append", choices=CHECKERS, metavar="NAME",
+                   help=f"simulator to check in, repeatable: {', '.join(SIMULATORS)} (default: both), or "
+                   "solver_only (a second formulation and the scene's [[reference]] values; every "
+                   "lagrangian scene is checked this way, whatever the simulators)")
     c.add_argument("-j", "--jobs", type=int, default=None, metavar="N",
                    help="checks run at once, one process each (default: number of CPUs; 1 runs in this process)")
     c.add_argument("-o", "--out", default="out/check", metavar="DIR", help="output folder (default: out/check)")
+    executor_options(c)
     c.add_argument("--accept", action="store_true",
                    help="write the metrics of every passing check as its new baseline (prints what changed)")
     c.add_argument("--baselines", metavar="DIR", default=None,
@@ -152,6 +166,7 @@ def _say(msg: str) -> None:
 def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
     from . import Scene, SceneError
     from .checks import SIMULATORS, CheckOptions
+    from .results import SOLVER_ONLY
 
     t_start = time.perf_counter()
     root = repo_root()
@@ -177,6 +192,7 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
         notes.append(pr)
         usage_problem = True
     tasks: list[Task] = []
+    planned: list[tuple[str, str]] = []
     scenes: dict[str, dict[str, str]] = {}
     for f in files:
         try:
@@ -185,6 +201,12 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
             if name in scenes:
                 raise ValueError(f"scene name {name!r} already used by {scenes[name]['path']}")
             scenes[name] = {"path": _rel(f, root), "description": sc.description, "purpose": sc.purpose}
+            # A model no simulator document describes is checked solver-only, never skipped.
+            targets = sims
+            if sc.kind == "lagrangian":
+                targets = [SOLVER_ONLY]
+                scenes[name]["solver_only"] = "a lagrangian model: no MJCF/URDF element describes it"
+            planned += [(name, m) for m in targets]
             try:
                 sc.check_initial()
             except SceneError as e:
@@ -193,9 +215,9 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
                 notes.append(f"{_rel(f, root)}: the solver refuses the scene: {last_line(e)}")
                 usage_problem = True
                 results += [error_result(Task(str(f), name, m), f"the solver refuses the scene: {e}")
-                            for m in sims]
+                            for m in targets]
                 continue
-            tasks += [Task(str(f), name, m) for m in sims]
+            tasks += [Task(str(f), name, m) for m in targets]
         except Exception as e:  # noqa: BLE001 - SceneError or worse: report it, run the rest
             msg = f"scene does not load: {last_line(e)}"
             _say(f"progmo check: error: {f}: {msg}")
@@ -204,13 +226,15 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
             name = f.stem if f.stem not in scenes else f"{f.stem} ({f})"
             scenes[name] = {"path": _rel(f, root)}
             results += [error_result(Task(str(f), name, m), msg) for m in sims]
+            planned += [(name, m) for m in sims]
+    columns = sims + [SOLVER_ONLY] if SOLVER_ONLY not in sims and any(m == SOLVER_ONLY for _, m in planned) else sims
 
     options = CheckOptions(step=ns.step, horizon=ns.horizon, samples=ns.samples)
     prov = rp.provenance(root, rerun_command(argv, Path.cwd(), root))
-    prov["jobs"] = jobs
+    prov["jobs"] = jobs if ns.executor == "local" else f"ray ({ns.address or os.environ.get('RAY_ADDRESS') or 'local instance'})"
     prov["baselines"] = _rel(base_dir, root)
-    run = rp.Run(results=results, simulators=sims, provenance=prov, scenes=scenes, notes=notes,
-                 plots=not ns.no_plots)
+    run = rp.Run(results=results, simulators=columns, provenance=prov, scenes=scenes, notes=notes,
+                 plots=not ns.no_plots, planned=planned)
 
     order = {(t.scene, t.simulator): i for i, t in enumerate(tasks)}
     interrupted = False
@@ -218,11 +242,11 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
     old_term = signal.getsignal(signal.SIGTERM)
     if _main_thread():
         signal.signal(signal.SIGTERM, _raise_interrupt)
-    _say(f"progmo check: {len(scenes)} scene(s) x {len(sims)} simulator(s) = {n_total} check(s), {jobs} job(s)")
+    _say(f"progmo check: {len(scenes)} scene(s), {n_total} check(s) ({', '.join(columns)}), {jobs} job(s)")
     done = 0
     other_versions: dict[str, list[str]] = {}
     try:
-        for task, r in run_all(tasks, options, jobs):
+        for task, r in executors.run(tasks, options, executor=ns.executor, jobs=jobs, address=ns.address):
             done += 1
             if (r.scene, r.simulator) != (task.scene, task.simulator):
                 r.notes.append(f"run_check named this result {r.scene} / {r.simulator}")
@@ -238,6 +262,10 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
                 usage_problem = True
             _save_atomic(results, out / "results.json")
             _say(_progress(done, n_total, r, run))
+    except executors.ExecutorError as e:
+        usage_problem = True
+        notes.insert(0, f"executor {ns.executor}: {e}; {n_total - done} check(s) did not run")
+        _say(f"progmo check: error: {e}")
     except KeyboardInterrupt:
         interrupted = True
         notes.insert(0, f"INTERRUPTED after {done} of {n_total} checks; the others did not run")

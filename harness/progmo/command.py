@@ -2,8 +2,8 @@
 
 ``solve``, ``validate``, ``export`` and ``--help`` run the Rust command line in this process
 (``progmo::cli::run`` through the binding; the bundled scenes are found by name); ``check``,
-``debug`` and ``report`` run the harness (``progmo.cli``), ``bench`` the benchmarks
-(``progmo.bench.main``). Exit codes are those of the subcommand (``progmo --help``).
+``debug`` and ``report`` run the harness (``progmo.cli``), ``sweep`` the tolerance sweeps
+(``progmo.sweep``), ``bench`` the benchmarks (``progmo.bench.main``). Exit codes are those of the subcommand (``progmo --help``).
 """
 
 from __future__ import annotations
@@ -22,6 +22,10 @@ def main(argv: list[str] | None = None) -> int:
         from .cli import main as harness_main
 
         return run(lambda: harness_main(args), f"progmo {args[0]}")
+    if args and args[0] == "sweep":
+        from .sweep import main as sweep_main
+
+        return run(lambda: sweep_main(args[1:]), "progmo sweep")
     if args and args[0] == "bench":
         from .bench.main import main as bench_main
 

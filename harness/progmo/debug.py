@@ -8,7 +8,8 @@ recording and write what a person needs to see where a replay leaves the program
   replay on ``/<sim>/state``, ``/<sim>/residual`` (same schemas), ``/<sim>/deviation``,
   ``/<sim>/tf`` (world -> ``<sim>/<body>`` from the simulator's own kinematics: MuJoCo
   ``xpos``/``xquat``, Pinocchio ``oMf``), ``/<sim>/scene`` (the mechanism on those frames) and the
-  breaches on ``/<sim>/breach``;
+  breaches on ``/<sim>/breach``; the scene's view targets once on ``/progmo/scene`` and, at the end,
+  the traces of the programme's sites (``<prefix>/trace/<site>``) for the solver and each replay;
 * ``DIR/<scene>_<sim>.csv``: solver columns named as in ``progmo solve``'s CSV (``t``, ``q:<q>``,
   ``v:<v>``, ``u:<v>``), the replay's (``<sim>.q:<q>``, ``<sim>.v:<v>``, ``<sim>.residual:<row>``)
   and ``deviation``, per replay sample (up to the last finite state when the simulator blows up);
@@ -99,7 +100,17 @@ def _frames(mc: _Mcap, topic: str, prefix: str, t: float, bodies, schemas: dict)
 
 
 def _geometry(mc: _Mcap, prefix: str, t: float, rec: Recording, schemas: dict, alpha: float) -> None:
-    update = rec.scene.scene_update(np.asarray(rec.ref.q[0]), prefix, alpha)
+    """The mechanism on /<prefix>/scene; the solver's (prefix progmo) also carries the declared
+    view targets, drawn once in the world frame."""
+    update = rec.scene.scene_update(np.asarray(rec.ref.q[0]), prefix, alpha, targets=prefix == "progmo")
+    if update is not None:
+        mc.write(mc.channel(f"/{prefix}/scene", "foxglove.SceneUpdate", schemas["foxglove.SceneUpdate"]), t, update)
+
+
+def _trace(mc: _Mcap, prefix: str, t: float, rec: Recording, q, schemas: dict) -> None:
+    """The realized traces of the programme's sites through the configurations q (rows), on
+    /<prefix>/scene at time t (the end of the motion), as `progmo solve` writes them."""
+    update = rec.scene.scene_trace(np.asarray(q, dtype=float), prefix)
     if update is not None:
         mc.write(mc.channel(f"/{prefix}/scene", "foxglove.SceneUpdate", schemas["foxglove.SceneUpdate"]), t, update)
 
@@ -126,6 +137,8 @@ def _write_solver(mc: _Mcap, rec: Recording) -> None:
             _geometry(mc, "progmo", t, rec, schemas, 0.35)
         if i % every == 0:
             _frames(mc, "/progmo/tf", "progmo", t, rec.scene.body_poses(np.asarray(ref.q[k])), schemas)
+    if len(ref.t):
+        _trace(mc, "progmo", float(ref.t[-1]), rec, np.asarray(ref.q)[::2], schemas)
 
 
 def _write_sim(mc: _Mcap, sim: str, rec: Recording, result) -> None:
@@ -147,6 +160,8 @@ def _write_sim(mc: _Mcap, sim: str, rec: Recording, result) -> None:
         _geometry(mc, sim, float(rp.t[0]), rec, schemas, 1.0)
     for t, bodies in rp.frames:
         _frames(mc, f"/{sim}/tf", sim, t, bodies, schemas)
+    if len(rp.t):
+        _trace(mc, sim, float(rp.t[-1]), rec, rp.q, schemas)
     cb = mc.channel(f"/{sim}/breach", "progmo.Breach", BREACH_SCHEMA)
     for b in result.breaches:
         t = b.first_time if b.first_time is not None else float(rp.t[-1])

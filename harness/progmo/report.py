@@ -15,7 +15,6 @@ from __future__ import annotations
 import base64
 import csv
 import datetime as _dt
-import html
 import io
 import json
 import math
@@ -31,7 +30,8 @@ from typing import Any
 
 from . import baselines as bl
 from . import history
-from .results import CheckResult
+from .htmlstyle import CSS, esc
+from .results import SOLVER_ONLY, CheckResult
 
 #: Verdicts in order of attention, the first problems first. ``not_checked`` is a simulator that
 #: could not reproduce the scene (fails the run); ``declared`` a not_checked the scene declares.
@@ -65,6 +65,9 @@ class Run:
     plots: bool = True
     #: Records of earlier runs and this one (``history.load``, oldest first) when --history is given.
     history: list[dict[str, Any]] = field(default_factory=list)
+    #: The (scene, checker) cells this run scheduled; empty: every scene x simulator. A lagrangian
+    #: scene is scheduled as one ``solver_only`` cell, and its simulator cells do not apply.
+    planned: list[tuple[str, str]] = field(default_factory=list)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -78,6 +81,7 @@ class Run:
             "accepted": [list(p) for p in self.accepted],
             "plots": self.plots,
             "history": self.history,
+            "planned": [list(p) for p in self.planned],
         }
 
     @staticmethod
@@ -92,6 +96,7 @@ class Run:
             accepted=[tuple(p) for p in d.get("accepted", [])],
             plots=d.get("plots", True),
             history=d.get("history", []),
+            planned=[tuple(p) for p in d.get("planned", [])],
         )
 
     # --- derived views -------------------------------------------------------------------------
@@ -115,14 +120,26 @@ class Run:
             return "declared"
         return r.status
 
+    def cells(self, scene: str) -> list[str]:
+        """The checkers (simulators, ``solver_only``) whose cell applies to ``scene``: planned by the
+        run or holding a result."""
+        planned = set(self.planned)
+        return [m for m in self.simulators
+                if not planned or (scene, m) in planned or self.result(scene, m) is not None]
+
+    def worst(self, scene: str) -> str:
+        """The scene's verdict that needs the most attention."""
+        return min((self.verdict(self.result(scene, m)) for m in self.cells(scene)),
+                   key=lambda v: RANK[v], default="not run")
+
     def scene_names(self) -> list[str]:
         names = list(dict.fromkeys([*self.scenes, *(r.scene for r in self.results)]))
-        return sorted(names, key=lambda s: (min(RANK[self.verdict(self.result(s, m))] for m in self.simulators), s))
+        return sorted(names, key=lambda s: (RANK[self.worst(s)], s))
 
     def totals(self) -> dict[str, int]:
         t = {k: 0 for k in RANK}
         for s in self.scene_names():
-            for m in self.simulators:
+            for m in self.cells(s):
                 t[self.verdict(self.result(s, m))] += 1
         return t
 
@@ -138,6 +155,10 @@ class Run:
         cells = sum(t.values())
         head = ("PASS" if self.ok() else "FAIL") + f": {t['pass']} of {cells} (scene x simulator) passed"
         rest = [f"{n} {label(k)}" for k, n in t.items() if n and k not in ("pass", "declared")]
+        solver_only = [s for s in self.scene_names() if SOLVER_ONLY in self.cells(s)]
+        if solver_only:
+            rest.append(f"{len(solver_only)} checked solver-only, no simulator model "
+                        f"({', '.join(solver_only)})")
         declared = [f"{r.scene}/{r.simulator}" for r in self.results if self.verdict(r) == "declared"]
         if declared:
             rest.append(f"{len(declared)} not checked as declared ({', '.join(declared)})")
@@ -205,8 +226,7 @@ def fmt(v: Any) -> str:
     return str(v)
 
 
-def _e(s: Any) -> str:
-    return html.escape(str(s), quote=True)
+_e = esc
 
 
 def _anchor(scene: str) -> str:
@@ -358,43 +378,6 @@ def plot(r: CheckResult) -> str | None:
 
 
 # --- HTML ----------------------------------------------------------------------------------------
-CSS = """
-:root{--pass:#1e8449;--fail:#c0392b;--error:#8e1b5c;--skip:#7f8c8d;--reg:#d35400;--bg:#fafafa}
-*{box-sizing:border-box}
-body{font:14px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,Helvetica,Arial,sans-serif;margin:0;background:var(--bg);color:#222}
-main{max-width:1180px;margin:0 auto;padding:20px 28px 40px}
-h1{font-size:22px;margin:0 0 4px} h2{font-size:18px;margin:28px 0 10px;border-bottom:1px solid #ddd;padding-bottom:4px}
-h3{font-size:15px;margin:16px 0 6px}
-.banner{padding:12px 16px;border-radius:6px;color:#fff;font-weight:600;margin:12px 0;font-size:16px}
-.banner.b-ok{background:var(--pass)} .banner.b-bad{background:var(--fail)}
-.sub{color:#555;margin:0}
-table{border-collapse:collapse;background:#fff;margin:6px 0 12px;font-size:13px}
-th,td{border:1px solid #ddd;padding:4px 8px;text-align:left;vertical-align:top}
-th{background:#f0f0f0;font-weight:600}
-td.num{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}
-.v{display:inline-block;min-width:64px;text-align:center;border-radius:4px;padding:1px 8px;color:#fff;font-weight:600;font-size:12px}
-.v-pass{background:var(--pass)} .v-fail{background:var(--fail)} .v-error{background:var(--error)}
-.v-declared{background:var(--skip)} .v-regression{background:var(--reg)} .v-not-run{background:#bbb}
-.v-not_checked{background:var(--error)}
-td.c-pass{background:#eaf6ee} td.c-warn{background:#fff4d6}
-td.c-fail,td.c-error,td.c-not_checked{background:#fdecea} td.c-regression{background:#fdf0e6} td.c-declared{background:#f4f4f4}
-.reason.warnbox{background:#fff8e6;border-color:#e6a100}
-.small{font-size:12px;color:#555}
-.reason{font-family:ui-monospace,SFMono-Regular,Menlo,Consolas,monospace;font-size:12px;background:#fff6f5;border-left:3px solid var(--fail);padding:4px 8px;white-space:pre-wrap;word-break:break-word}
-.reason.skip{background:#f5f5f5;border-color:var(--skip)}
-.bad{color:var(--fail);font-weight:600} .warn{color:var(--reg);font-weight:600} .good{color:var(--pass)}
-.bar{display:inline-block;height:8px;background:#e5e5e5;width:60px;border-radius:4px;vertical-align:middle;margin-right:6px;overflow:hidden}
-.bar>i{display:block;height:100%;background:var(--pass)} .bar>i.warm{background:#e6a100} .bar>i.hot{background:var(--fail)}
-details.scene{background:#fff;border:1px solid #e2e2e2;border-radius:6px;padding:6px 16px 12px;margin:14px 0}
-details.scene.attn{border-left:5px solid var(--fail)}
-details.scene>summary{cursor:pointer} details.scene>summary>h3{display:inline}
-.sim{border-top:1px dashed #e2e2e2;padding-top:6px;margin-top:8px}
-img.plot{max-width:100%;display:block;margin:4px 0}
-ul.notes{margin:4px 0 8px 18px;padding:0;font-size:12px;color:#444}
-pre{background:#272822;color:#f8f8f2;padding:10px 12px;border-radius:5px;overflow-x:auto;font-size:12.5px}
-footer{margin-top:30px;border-top:2px solid #ccc;padding-top:8px}
-a{color:#1a5fa8;text-decoration:none} a:hover{text-decoration:underline}
-"""
 
 
 #: A pass using more than this fraction of a budget is shown amber in the grid ("warn").
@@ -421,11 +404,18 @@ def _use_text(use: float | None) -> str:
     return f"{use:.3g}&times;" if use >= 10 else f"{100 * use:.3g}%"
 
 
+def _na_reason(run: Run, s: str, m: str) -> str:
+    why = run.scenes.get(s, {}).get("solver_only")
+    if why and m != SOLVER_ONLY:
+        return f"not applicable: checked solver-only ({why})"
+    return "not applicable: not scheduled for this scene"
+
+
 def _attention(run: Run) -> list[tuple[str, str, str, str]]:
     """(scene, simulator, verdict, one-line reason) of every cell that fails the job."""
     out = []
     for s in run.scene_names():
-        for m in run.simulators:
+        for m in run.cells(s):
             r = run.result(s, m)
             v = run.verdict(r)
             if v in OK_VERDICTS:
@@ -477,6 +467,9 @@ def render_html(run: Run) -> str:
         spans: list[str] = []
         warns: set[str] = set()
         for m in run.simulators:
+            if m not in run.cells(s):
+                a(f"<td class='c-na' title='{_e(_na_reason(run, s, m))}'>&mdash;</td>")
+                continue
             r = run.result(s, m)
             v = run.verdict(r)
             bu_cell = budget_use(r) if r is not None else None
@@ -501,15 +494,18 @@ def render_html(run: Run) -> str:
     for m in run.simulators:
         c: dict[str, int] = {}
         for s in run.scene_names():
-            v = run.verdict(run.result(s, m))
-            c[v] = c.get(v, 0) + 1
+            if m in run.cells(s):
+                v = run.verdict(run.result(s, m))
+                c[v] = c.get(v, 0) + 1
         a("<td class='small'>" + _e(", ".join(f"{n} {label(k)}" for k, n in sorted(c.items(), key=lambda kv: RANK[kv[0]]))) + "</td>")
     a("<td></td><td></td><td></td><td></td></tr></tfoot></table>")
     a("<p class='small'>Statuses: <b>pass</b> every metric within its budget (the cell is amber when a "
       f"metric uses more than {WARN_USE:.0%} of its budget); <b>fail</b> a metric beyond "
       "it; <b>regression</b> a pass worse than its accepted baseline; <b>error</b> the check could not "
       "run; <b>not checked</b> the simulator cannot reproduce an element of the scene (fails the run); "
-      "<b>not checked (declared)</b> the scene declares it with a reason (does not fail the run). "
+      "<b>not checked (declared)</b> the scene declares it with a reason (does not fail the run); "
+      "<b>solver_only</b>: a scene no simulator document describes (a lagrangian model) is checked "
+      "against a second formulation and its reference values, and its simulator cells show &mdash;. "
       "Budgets marked <i>default</i> are the documented defaults for a scene that gives none "
       "(src/scene/FORMAT.md).</p>")
 
@@ -528,17 +524,17 @@ def render_html(run: Run) -> str:
     # Per scene.
     a("<h2>Scenes</h2>")
     for s in run.scene_names():
-        worst = min(RANK[run.verdict(run.result(s, m))] for m in run.simulators)
+        worst = RANK[run.worst(s)]
         info = run.scenes.get(s, {})
         attn = worst <= RANK["not run"]
         a(f"<details class='scene{' attn' if attn else ''}' id='{_anchor(s)}'{' open' if attn else ''}>")
-        a(f"<summary><h3>{_e(s)} " + " ".join(_badge(run.verdict(run.result(s, m))) for m in run.simulators)
+        a(f"<summary><h3>{_e(s)} " + " ".join(_badge(run.verdict(run.result(s, m))) for m in run.cells(s))
           + "</h3></summary>")
         if info.get("description"):
             a(f"<p class='small'>{_e(info['description'])}</p>")
         if info.get("path"):
             a(f"<p class='small'>scene file: <code>{_e(info['path'])}</code></p>")
-        for m in run.simulators:
+        for m in run.cells(s):
             a(_sim_block(run, s, m))
         if run.history and run.plots:
             budgets = {m: {b.metric: b.value for b in r.budgets}
@@ -646,6 +642,9 @@ def render_markdown(run: Run) -> str:
         spans: list[str] = []
         warns: set[str] = set()
         for m in run.simulators:
+            if m not in run.cells(s):
+                cells.append("—")
+                continue
             r = run.result(s, m)
             v = run.verdict(r)
             cells.append(f"{icons[v]} {label(v)}")
@@ -692,7 +691,7 @@ def write_csv(run: Run, path: Path) -> None:
         w = csv.writer(f)
         w.writerow(CSV_FIELDS)
         for s in run.scene_names():
-            for m in run.simulators:
+            for m in run.cells(s):
                 r = run.result(s, m)
                 v = run.verdict(r)
                 if r is None:

@@ -29,6 +29,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 STATUSES = ("pass", "fail", "not_checked", "error")
+#: The checker of a scene no simulator document describes (a lagrangian model): a second
+#: formulation and the scene's reference values instead of a replay (``checks._solver_only``).
+SOLVER_ONLY = "solver_only"
 
 
 @dataclass
@@ -67,7 +70,7 @@ class CheckResult:
     """Outcome of checking one scene in one simulator."""
 
     scene: str
-    simulator: str  # "mujoco" or "pinocchio"
+    simulator: str  # "mujoco", "pinocchio" or "solver_only"
     status: str  # one of STATUSES
     reason: str = ""
     #: Scalar metrics, e.g. parity_mass, parity_bias, replay_residual, replay_deviation,

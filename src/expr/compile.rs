@@ -4,6 +4,7 @@ use super::error::{ExprError, ExprErrorKind as K};
 use super::parser::{parse, BinOp, Func, Kind, Node};
 use super::{time_order, SymbolTable};
 use crate::scalar::Scalar;
+use std::collections::HashMap;
 use std::fmt;
 
 /// One instruction of the stack machine. `C` suffix: constant right operand, `L`: slot right
@@ -48,6 +49,10 @@ pub(crate) enum Op {
     Sinh,
     Cosh,
     Tanh,
+    /// Store the top in temporary k (a repeated subexpression, `cse.rs`); the top stays.
+    Tee(u32),
+    /// Push temporary k.
+    Get(u32),
 }
 
 /// A compiled expression: immutable, `Send + Sync`, cheap to evaluate over any [`Scalar`].
@@ -55,6 +60,8 @@ pub(crate) enum Op {
 pub struct Expr {
     code: Vec<Op>,
     max_stack: usize,
+    /// Temporaries of repeated subexpressions, kept at the bottom of the stack.
+    temps: usize,
     /// Sorted, distinct slots read.
     slots: Vec<usize>,
     time_order: u8,
@@ -257,9 +264,31 @@ struct Gen {
     code: Vec<Op>,
     depth: usize,
     max: usize,
+    /// Repeated subtrees (cse.rs) and the temporary each class got when first computed.
+    repeated: super::cse::Repeated,
+    temps: HashMap<usize, u32>,
 }
 
 impl Gen {
+    /// The temporary holding `n`'s value, if an equal subtree was computed before.
+    fn stored(&self, n: &Node) -> Option<u32> {
+        self.repeated
+            .get(&(n as *const Node))
+            .and_then(|c| self.temps.get(c))
+            .copied()
+    }
+
+    /// After `n` was computed: keep its value if it is needed again.
+    fn remember(&mut self, n: &Node) {
+        if let Some(&c) = self.repeated.get(&(n as *const Node)) {
+            if !self.temps.contains_key(&c) {
+                let k = self.temps.len() as u32;
+                self.temps.insert(c, k);
+                self.code.push(Op::Tee(k));
+            }
+        }
+    }
+
     fn push(&mut self, op: Op) {
         self.code.push(op);
         self.depth += 1;
@@ -273,19 +302,24 @@ impl Gen {
     }
 
     fn emit(&mut self, n: &Node) {
+        if let Some(k) = self.stored(n) {
+            return self.push(Op::Get(k));
+        }
         // A binary node whose left operand is not a leaf emits that operand first: walk the left
         // spine iteratively (a long chain would recurse once per term), then finish each level.
+        // The walk stops at a stored operand (read back, not recomputed).
         let mut spine = vec![];
         let mut cur = n;
         while let Kind::Bin(_, a, _) = &cur.kind {
-            if leaf(a).is_some() {
+            if leaf(a).is_some() || self.stored(a).is_some() {
                 break;
             }
             spine.push(cur);
             cur = a;
         }
         if spine.is_empty() {
-            return self.emit_one(n);
+            self.emit_one(n);
+            return self.remember(n);
         }
         self.emit(cur);
         for node in spine.into_iter().rev() {
@@ -304,6 +338,7 @@ impl Gen {
                     self.reduce(binary(*op), 2);
                 }
             }
+            self.remember(node);
         }
     }
 
@@ -477,6 +512,15 @@ fn abs<S: Scalar>(x: S) -> S {
 impl Expr {
     /// Parse `source`, resolve names against `symbols`, fold constants and compile to bytecode.
     pub fn compile(source: &str, symbols: &SymbolTable) -> Result<Expr, ExprError> {
+        Self::compile_with(source, symbols, true)
+    }
+
+    /// `compile`, with or without storing repeated subexpressions (`cse.rs`; the tests compare).
+    pub(crate) fn compile_with(
+        source: &str,
+        symbols: &SymbolTable,
+        cse: bool,
+    ) -> Result<Expr, ExprError> {
         let (tree, _) = parse(source, Some(symbols))?;
         let text = tree.to_string();
         let mut slots = Vec::new();
@@ -489,12 +533,20 @@ impl Expr {
             code: Vec::new(),
             depth: 0,
             max: 0,
+            repeated: if cse {
+                super::cse::repeated(&folded)
+            } else {
+                Default::default()
+            },
+            temps: HashMap::new(),
         };
         g.emit(&folded);
         debug_assert_eq!(g.depth, 1);
+        let temps = g.temps.len();
         Ok(Expr {
             code: g.code,
-            max_stack: g.max,
+            max_stack: g.max + temps,
+            temps,
             slots,
             time_order: order,
             source: source.to_string(),
@@ -562,6 +614,8 @@ impl Expr {
     /// Panics if `slots.len() < self.min_slots()`.
     pub fn eval<S: Scalar>(&self, slots: &[S], stack: &mut Vec<S>) -> S {
         stack.clear();
+        // Temporaries first: stack[k] is temporary k; the machine's values go above them.
+        stack.resize(self.temps, S::from(0.0));
         // Top of stack lives in `acc`; `stack` holds the values below it (plus one dummy).
         let mut acc = S::from(0.0);
         macro_rules! pop {
@@ -617,6 +671,12 @@ impl Expr {
                 Op::Sinh => acc = acc.sinh(),
                 Op::Cosh => acc = acc.cosh(),
                 Op::Tanh => acc = acc.tanh(),
+                Op::Tee(k) => stack[k as usize] = acc,
+                Op::Get(k) => {
+                    let x = stack[k as usize];
+                    stack.push(acc);
+                    acc = x;
+                }
             }
         }
         acc

@@ -82,6 +82,7 @@
 //! scene file (see [`ExprError::render`]).
 
 mod compile;
+mod cse;
 mod error;
 mod lexer;
 mod parser;

@@ -11,7 +11,7 @@ pub(crate) const MAX_DEPTH: usize = 200;
 pub(crate) const MAX_HEIGHT: usize = 10_000;
 
 /// Built-in functions.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Func {
     Sin,
     Cos,
@@ -92,7 +92,7 @@ fn alias(name: &str) -> Option<&'static str> {
     })
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub(crate) enum BinOp {
     Add,
     Sub,

@@ -40,6 +40,8 @@ pub struct McapSink<W: Write + Seek> {
     /// Tree scenes: body frames per sample on /progmo/tf and the geometry on /progmo/scene.
     /// (bodies, the scene channel once written, the child frame id of each body)
     bodies: Option<(super::Bodies, Option<McapChannel>, Vec<String>)>,
+    /// Time of the last sample (the traces are written there at `finish`).
+    last_t: f64,
     sequence: BTreeMap<u16, u32>,
     q_keys: Vec<String>,
     v_keys: Vec<String>,
@@ -229,6 +231,7 @@ impl<W: Write + Seek> McapSink<W> {
             tf: None,
             warning_channel: None,
             bodies: None,
+            last_t: 0.0,
             sequence: BTreeMap::new(),
             q_keys: keys(&layout.q_names),
             v_keys: keys(&layout.v_names),
@@ -304,7 +307,8 @@ impl<W: Write + Seek> McapSink<W> {
 
     /// Record the mechanism of a tree scene: at every sample the world pose of each body on
     /// [`FRAME_TRANSFORM_TOPIC`] (child frame `progmo/<body>`), and at the first sample its
-    /// geometry on [`SCENE_TOPIC`] (see [`super::Bodies::scene_update`]).
+    /// geometry on [`SCENE_TOPIC`] (see [`super::Bodies::scene_update`]); at `finish`, the traces
+    /// of the programme's sites on [`SCENE_TOPIC`] at the last sample's time.
     pub fn with_bodies(mut self, bodies: super::Bodies) -> Self {
         let frames = bodies.names().map(|n| format!("progmo/{n}")).collect();
         self.bodies = Some((bodies, None, frames));
@@ -318,7 +322,7 @@ impl<W: Write + Seek> McapSink<W> {
         let scene = match scene {
             Some(ch) => Some(ch),
             None => {
-                let update = bodies.scene_update(q, "progmo", 1.0);
+                let update = bodies.scene_update(q, "progmo", 1.0, true);
                 match self.add_json_channel(
                     SCENE_TOPIC,
                     "foxglove.SceneUpdate",
@@ -335,7 +339,7 @@ impl<W: Write + Seek> McapSink<W> {
                 }
             }
         };
-        for (p, frame) in bodies.poses(q).iter().zip(&frames) {
+        for (p, frame) in bodies.record(q).iter().zip(&frames) {
             self.frame_transform(t, "world", frame, p.position, p.quaternion);
         }
         self.bodies = Some((bodies, scene, frames));
@@ -500,6 +504,7 @@ impl<W: Write + Seek> SampleSink for McapSink<W> {
             return;
         }
         self.write_sample(s);
+        self.last_t = s.t;
         if self.bodies.is_some() {
             self.write_bodies(s.t, s.q);
         }
@@ -546,6 +551,12 @@ impl<W: Write + Seek> SampleSink for McapSink<W> {
 impl<W: Write + Seek> OutputSink for McapSink<W> {
     /// Writes the summary section and footer, and flushes. Returns the first error met.
     fn finish(&mut self) -> Result<(), OutputError> {
+        if let Some((bodies, Some(ch), _)) = &self.bodies {
+            if let Some(update) = bodies.trace_update("progmo") {
+                let ch = *ch;
+                self.write_json(ch, self.last_t, &update);
+            }
+        }
         if let Some(mut w) = self.writer.take() {
             let r = w.finish();
             let mut inner = w.into_inner();

@@ -82,7 +82,7 @@
 //! | `/progmo/residual`  | `progmo.Residual`   | `{"t", "residual": {row name: ..}, "residual_rate": {row name: ..}}` |
 //! | `/progmo/reaction`  | `progmo.Reaction`   | `{"t", "reaction": {v name: ..}}`; only if `SampleLayout::reactions` |
 //! | `/progmo/tf` (tree scenes) | `foxglove.FrameTransform` | world -> `progmo/<body>` per body per sample ([`McapSink::with_bodies`], [`McapSink::frame_transform`]) |
-//! | `/progmo/scene` (tree scenes) | `foxglove.SceneUpdate` | once, at the first sample: the mechanism's geometry on the body frames ([`Bodies::scene_update`]) |
+//! | `/progmo/scene` (tree scenes) | `foxglove.SceneUpdate` | at the first sample: the mechanism's geometry on the body frames (bodies' `shape` or inertia boxes, joint axes, links) and the scene's `[[view.targets]]` in the world frame ([`Bodies::scene_update`]); at the last sample: the realized trace of each site the programme rows read, entity `progmo/trace/<site>` ([`Bodies::trace_update`]) |
 //! | `/progmo/warning`   | `progmo.Warning`    | `{"t", "kind", "rows": [row names], "value", "threshold", "message"}`: one per conditioning warning, at its first crossing; only when there is one |
 //!
 //! One message per sample on each of the first three (four) channels. In Foxglove, plot e.g.
@@ -154,7 +154,10 @@ pub use error::OutputError;
 pub use mcap_sink::recording_schemas;
 pub use mcap_sink::{McapChannel, McapSink, FRAME_TRANSFORM_SCHEMA, FRAME_TRANSFORM_TOPIC};
 pub use progress::Progress;
-pub use scene3d::{scene_update_schema, Bodies, BodyPose};
+pub use scene3d::{
+    scene_update_schema, Bodies, BodyPose, Geometry, Shape, Target, TracedSite, View, ViewTarget,
+    SHAPE_COLOR, TARGET_COLOR,
+};
 pub use sinks::{Every, StopOn, Tee};
 pub use staged::{remove_previous_run, with_suffix, RunFiles, Staged, PARTIAL_SUFFIX, RUN_FILES};
 pub use summary::{summary_json, write_summary, write_summary_to_path, SummaryInput};

@@ -157,6 +157,107 @@ pub struct SceneFile {
     pub tolerances: BTreeMap<String, Spanned<ToleranceFile>>,
     #[serde(default)]
     pub checks: ChecksFile,
+    /// Reference values at given times, of an origin independent of the solver (a closed form, a
+    /// published solution), each entry with its source; judged by the solver_only check's
+    /// `reference_error` (FORMAT.md, "Reference values").
+    #[serde(default)]
+    #[schemars(with = "Vec<ReferenceFile>")]
+    pub reference: Vec<Spanned<ReferenceFile>>,
+    #[serde(default)]
+    pub view: ViewFile,
+}
+
+/// Target kinds of `[[view.targets]]`.
+pub const TARGET_KINDS: [&str; 5] = ["point", "line", "plane", "circle", "path"];
+
+/// What the 3D view of recordings draws besides the mechanism (tree scenes).
+#[derive(Clone, Debug, Default, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+#[schemars(rename = "view")]
+pub struct ViewFile {
+    /// The programme's geometric targets, drawn in the world frame (`/progmo/scene`).
+    #[serde(default)]
+    #[schemars(with = "Vec<TargetFile>")]
+    pub targets: Vec<Spanned<TargetFile>>,
+}
+
+/// A geometric target: numbers or expressions of parameters (a path's: of t too), world frame.
+#[derive(Clone, Debug, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+#[schemars(rename = "target")]
+pub struct TargetFile {
+    /// point, line, plane, circle or path.
+    #[schemars(schema_with = "schema::target_kind")]
+    pub kind: Spanned<String>,
+    /// Entity name in the view (default: target<index>).
+    #[serde(default)]
+    pub name: Option<String>,
+    /// point: the point; line, plane: a point on it; circle: its centre (m).
+    #[serde(default)]
+    #[schemars(with = "Option<[Number; 3]>")]
+    pub point: Option<Spanned<[Number; 3]>>,
+    /// line: its direction.
+    #[serde(default)]
+    #[schemars(with = "Option<[Number; 3]>")]
+    pub direction: Option<Spanned<[Number; 3]>>,
+    /// plane, circle: the normal.
+    #[serde(default)]
+    #[schemars(with = "Option<[Number; 3]>")]
+    pub normal: Option<Spanned<[Number; 3]>>,
+    /// circle: the radius (m), > 0.
+    #[serde(default)]
+    #[schemars(with = "Option<Number>")]
+    pub radius: Option<Spanned<Number>>,
+    /// line: drawn length, plane: drawn side (m), > 0; default twice the mechanism's size.
+    #[serde(default)]
+    #[schemars(with = "Option<Number>")]
+    pub size: Option<Spanned<Number>>,
+    /// path: x, y, z as expressions of t and parameters, sampled over the time span.
+    #[serde(default)]
+    #[schemars(with = "Option<[Expression; 3]>")]
+    pub path: Option<[Spanned<String>; 3]>,
+    /// path: number of samples over [t0, t1], >= 2. Default 200.
+    #[serde(default)]
+    #[schemars(with = "Option<i64>", range(min = 2))]
+    pub samples: Option<Spanned<i64>>,
+    /// Colour [r, g, b, a], each in [0, 1]. Default magenta.
+    #[serde(default)]
+    #[schemars(with = "Option<[f64; 4]>")]
+    pub color: Option<Spanned<[f64; 4]>>,
+}
+
+/// A body's drawn shape: exactly one of box, sphere, cylinder, capsule.
+#[derive(Clone, Debug, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+#[schemars(rename = "shape")]
+pub struct ShapeFile {
+    /// A box with these side lengths (m).
+    #[serde(default, rename = "box")]
+    #[schemars(with = "Option<[f64; 3]>")]
+    pub cuboid: Option<Spanned<[f64; 3]>>,
+    /// A sphere of this radius (m).
+    #[serde(default)]
+    #[schemars(with = "Option<f64>")]
+    pub sphere: Option<Spanned<f64>>,
+    /// A cylinder [radius, length] (m) along the shape's z axis.
+    #[serde(default)]
+    #[schemars(with = "Option<[f64; 2]>")]
+    pub cylinder: Option<Spanned<[f64; 2]>>,
+    /// A capsule [radius, length between the centres of its end spheres] (m) along z.
+    #[serde(default)]
+    #[schemars(with = "Option<[f64; 2]>")]
+    pub capsule: Option<Spanned<[f64; 2]>>,
+    /// Centre in the body frame (m). Default: the body's centre of mass.
+    #[serde(default)]
+    pub pos: Option<[f64; 3]>,
+    /// Orientation in the body frame, quaternion (w, x, y, z), normalised implicitly.
+    #[serde(default)]
+    #[schemars(with = "[f64; 4]", extend("default" = [1.0, 0.0, 0.0, 0.0]))]
+    pub quat: Option<Spanned<[f64; 4]>>,
+    /// Colour [r, g, b, a], each in [0, 1]. Default orange.
+    #[serde(default)]
+    #[schemars(with = "Option<[f64; 4]>")]
+    pub color: Option<Spanned<[f64; 4]>>,
 }
 
 /// How the cross-simulator check treats the scene.
@@ -308,6 +409,10 @@ pub struct BodyFile {
     #[serde(default)]
     #[schemars(with = "Vec<JointFile>")]
     pub joints: Vec<Spanned<JointFile>>,
+    /// Shape drawn in 3D views; absent: a box with the body's mass and inertia.
+    #[serde(default)]
+    #[schemars(with = "Option<ShapeFile>")]
+    pub shape: Option<Spanned<ShapeFile>>,
 }
 
 fn world() -> String {
@@ -513,4 +618,29 @@ pub struct ToleranceFile {
     /// One line: why this value.
     #[schemars(length(min = 1), regex(pattern = r"\S"))]
     pub reason: String,
+}
+
+/// Reference values of the motion at one time (`[[reference]]`).
+#[derive(Clone, Debug, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+#[schemars(rename = "reference")]
+pub struct ReferenceFile {
+    /// The time (s): a number or an expression of parameters, inside the scene's span.
+    #[schemars(with = "Number")]
+    pub t: Spanned<Number>,
+    /// Where the values come from (a closed form, a publication): required, one line or more.
+    #[schemars(length(min = 1), regex(pattern = r"\S"))]
+    pub source: String,
+    /// Coordinates: name -> number or expression of parameters and `t`.
+    #[serde(default)]
+    #[schemars(with = "BTreeMap<String, Number>")]
+    pub q: BTreeMap<String, Spanned<Number>>,
+    /// Velocities (by velocity name, e.g. `phi1` for phi1'): numbers or expressions of parameters and `t`.
+    #[serde(default)]
+    #[schemars(with = "BTreeMap<String, Number>")]
+    pub v: BTreeMap<String, Spanned<Number>>,
+    /// Control forces u (by velocity name): numbers or expressions of parameters and `t`.
+    #[serde(default)]
+    #[schemars(with = "BTreeMap<String, Number>")]
+    pub u: BTreeMap<String, Spanned<Number>>,
 }

@@ -146,8 +146,15 @@ pub(super) fn load(src: Source) -> R<Scene> {
     };
     let n_system = file.constraints.len();
     crate::with_problem!(&system, p => check_acceleration_rows(&src, p, &spans, n_system)?);
+    let view = super::view::view(&src, &file, &params, &system)?;
     let tolerances = tolerances(&src, &file)?;
     let expected_not_checked = expected_not_checked(&src, &file)?;
+    let references = {
+        let (q_names, v_names) =
+            crate::with_problem!(&system, p => (p.model.q_names(), p.model.v_names()));
+        let (t0, t1) = span(&file);
+        super::reference::references(&src, &file, &params, &q_names, &v_names, (t0, t1))?
+    };
     Ok(Scene {
         name: file.name.clone(),
         description: file.description.clone(),
@@ -158,10 +165,12 @@ pub(super) fn load(src: Source) -> R<Scene> {
         settings,
         tolerances,
         expected_not_checked,
+        references,
         source: src,
         row_spans: spans,
         closures: extra.0,
         set_aside: extra.1,
+        view: Arc::new(view),
     })
 }
 
@@ -984,14 +993,7 @@ fn initial(
     for (n, x) in params {
         consts.define(n.clone(), *x);
     }
-    let value = |n: &Number, span: Range<usize>, field: &str| -> R<f64> {
-        match n {
-            Number::Value(x) => Ok(*x),
-            Number::Expr(text) => Expr::compile(text, &consts)
-                .map(|e| e.value::<f64>(&[]))
-                .map_err(|e| src.expr_error(span, field, &e)),
-        }
-    };
+    let value = |n: &Number, span: Range<usize>, field: &str| number(src, &consts, n, span, field);
     let fill = |map: &BTreeMap<String, Spanned<Initial>>,
                 names: &[String],
                 out: &mut Vec<Option<f64>>,
@@ -1078,7 +1080,23 @@ fn initial(
 }
 
 /// The time span as written (checked with the settings by [`validate_settings`]).
-fn span(file: &SceneFile) -> (f64, f64) {
+/// A number or an expression of the constants in `consts`, located at `span` on error.
+pub(super) fn number(
+    src: &Source,
+    consts: &SymbolTable,
+    n: &Number,
+    span: Range<usize>,
+    field: &str,
+) -> R<f64> {
+    match n {
+        Number::Value(x) => Ok(*x),
+        Number::Expr(text) => Expr::compile(text, consts)
+            .map(|e| e.value::<f64>(&[]))
+            .map_err(|e| src.expr_error(span, field, &e)),
+    }
+}
+
+pub(super) fn span(file: &SceneFile) -> (f64, f64) {
     let t = file.time.get_ref();
     (t.t0.as_ref().map_or(0.0, |x| *x.get_ref()), *t.t1.get_ref())
 }

@@ -16,12 +16,15 @@ pub mod file;
 pub mod lagrangian;
 pub mod layout;
 mod load;
+mod reference;
 pub mod rows;
 pub mod schema;
 pub mod signals;
 pub mod tree_model;
+mod view;
 
 pub use error::{SceneError, Source};
+pub use reference::ReferenceValue;
 
 use crate::solve::{self, Problem, SampleSink, Settings, Solution};
 use lagrangian::LagrangianModel;
@@ -78,6 +81,8 @@ pub struct Scene {
     pub tolerances: Vec<Tolerance>,
     /// `[checks] not_checked`: (simulator, reason) pairs the check expects not to run.
     pub expected_not_checked: Vec<(String, String)>,
+    /// `[[reference]]`: values of independent origin at given times, one per quantity.
+    pub references: Vec<ReferenceValue>,
     /// The file's text, for locating later errors.
     pub source: Source,
     /// Byte span of each row's expression in the file (row order of the constraints).
@@ -86,6 +91,8 @@ pub struct Scene {
     pub closures: Vec<closures::Closure>,
     /// Closure rows set aside as dependent at t0 (with why), and those rows, for monitoring.
     pub set_aside: Option<(Vec<closures::SetAside>, ExprConstraints)>,
+    /// What 3D views draw besides the mechanism: body shapes, targets, traced sites.
+    pub view: std::sync::Arc<crate::output::View>,
 }
 
 impl Scene {
@@ -113,9 +120,10 @@ impl Scene {
     /// a lagrangian scene, which has no bodies).
     pub fn bodies(&self) -> Option<crate::output::Bodies> {
         match &self.system {
-            SceneSystem::Tree(p) => Some(crate::output::Bodies::new(std::sync::Arc::clone(
-                p.model.tree(),
-            ))),
+            SceneSystem::Tree(p) => Some(crate::output::Bodies::new(
+                std::sync::Arc::clone(p.model.tree()),
+                std::sync::Arc::clone(&self.view),
+            )),
             SceneSystem::Lagrangian(_) => None,
         }
     }

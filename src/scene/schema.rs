@@ -4,7 +4,7 @@
 
 use super::file::{
     SceneFile, CLOSURE_KINDS, JOINTS_WITH_AXIS, JOINT_TYPES, LAGRANGIAN_ONLY, MODEL_KINDS,
-    SIMULATORS, TREE_ONLY,
+    SIMULATORS, TARGET_KINDS, TREE_ONLY,
 };
 use crate::solve::{DRIFT_NAMES, FORMULATION_NAMES, INTEGRATOR_NAMES};
 use schemars::transform::{RecursiveTransform, RestrictFormats};
@@ -86,6 +86,11 @@ pub(super) fn model_kind(_: &mut SchemaGenerator) -> Schema {
 /// `type` of a joint.
 pub(super) fn joint_type(_: &mut SchemaGenerator) -> Schema {
     string_enum(&JOINT_TYPES)
+}
+
+/// `kind` of a view target.
+pub(super) fn target_kind(_: &mut SchemaGenerator) -> Schema {
+    string_enum(&TARGET_KINDS)
 }
 
 /// `[solver] formulation`: the names of the one method vocabulary (`solve::overrides`).

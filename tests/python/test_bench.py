@@ -226,7 +226,10 @@ def test_bench_skips_the_anchor_with_the_reason_when_it_cannot_be_built(tmp_path
     html = (tmp_path / "index.html").read_text()
     for text in (out, html):
         assert "SKIPPED: no C++ compiler (g++ or $CXX) on PATH" in text
-        assert "not measured: C++ anchor skipped: no C++ compiler" in text
+    assert "not measured: C++ anchor skipped: no C++ compiler" in out
+    # the page: a grey "not measured" row saying why
+    assert ("<tr class='t-not-measured'><td><span class='v v-declared'>not measured</span></td>"
+            "<td>C++ anchor skipped: no C++ compiler") in html
     assert "<h3>Targets</h3>" in html
 
 

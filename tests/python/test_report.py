@@ -4,11 +4,11 @@ escaping, self-containment, Markdown and CSV, and a render in a real headless Ch
 import csv
 import pathlib
 import re
-import shutil
 import subprocess
 
 import pytest
 
+from browser import find_browser
 from fake_checks import make_result
 from progmo import baselines as bl
 from progmo import report as rp
@@ -113,15 +113,7 @@ def test_plot_handles_zeros_nans_and_long_series():
     assert rp.plot(r) is None
 
 
-def _browser():
-    for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable"):
-        if shutil.which(name):
-            return shutil.which(name)
-    subprocess.run(["bash", str(ROOT / "harness" / "install_chromium.sh")], capture_output=True, timeout=600)
-    for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable"):
-        if shutil.which(name):
-            return shutil.which(name)
-    return None
+_browser = find_browser
 
 
 def test_report_renders_in_headless_chromium(tmp_path, written):

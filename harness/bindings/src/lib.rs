@@ -453,6 +453,25 @@ impl PyScene {
         self.scene.expected_not_checked.clone()
     }
 
+    /// `[[reference]]` of the scene, one dict per value: t, quantity ("q", "v" or "u"), name, index
+    /// (into q or v), value, source, field (where it is written).
+    #[getter]
+    fn references<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        let out = PyList::empty(py);
+        for r in &self.scene.references {
+            let d = PyDict::new(py);
+            d.set_item("t", r.t)?;
+            d.set_item("quantity", r.quantity)?;
+            d.set_item("name", &r.name)?;
+            d.set_item("index", r.index)?;
+            d.set_item("value", r.value)?;
+            d.set_item("source", &r.source)?;
+            d.set_item("field", &r.field)?;
+            out.append(d)?;
+        }
+        Ok(out)
+    }
+
     /// The scene's expression forces at (t, q, v) as a simulator applies them: a dict with
     /// "generalized" (nv, the coordinate forces) and "points": one (body, world point (3),
     /// world force (3)) per point force, in the order of the export report's `point_force` entries.
@@ -539,24 +558,53 @@ impl PyScene {
     }
 
     /// The `foxglove.SceneUpdate` drawing the mechanism on frames `<prefix>/<body>` (sized at q;
-    /// alpha < 1: a ghost); None for a lagrangian scene.
-    #[pyo3(signature = (q, prefix, alpha=1.0))]
+    /// alpha < 1: a ghost; targets: also the declared view targets); None for a lagrangian scene.
+    #[pyo3(signature = (q, prefix, alpha=1.0, targets=true))]
     fn scene_update<'py>(
         &self,
         py: Python<'py>,
         q: PyReadonlyArray1<'py, f64>,
         prefix: &str,
         alpha: f64,
+        targets: bool,
     ) -> PyResult<Option<Bound<'py, PyAny>>> {
         let q = q.as_slice()?.to_vec();
         finite("q", &q)?;
         match self.scene.bodies() {
-            Some(mut b) if q.len() == self.scene.q_names().len() => {
-                Ok(Some(json_to_py(py, &b.scene_update(&q, prefix, alpha))?))
-            }
+            Some(mut b) if q.len() == self.scene.q_names().len() => Ok(Some(json_to_py(
+                py,
+                &b.scene_update(&q, prefix, alpha, targets),
+            )?)),
             Some(_) => Err(PyValueError::new_err("q has the wrong length")),
             None => Ok(None),
         }
+    }
+
+    /// The `foxglove.SceneUpdate` of the traces of the programme's sites through the
+    /// configurations (rows of `q`, non-finite rows skipped), entities `<prefix>/trace/<site>`;
+    /// None for a lagrangian scene or when no site is traced.
+    fn scene_trace<'py>(
+        &self,
+        py: Python<'py>,
+        q: PyReadonlyArray2<'py, f64>,
+        prefix: &str,
+    ) -> PyResult<Option<Bound<'py, PyAny>>> {
+        let q = q.as_array();
+        if q.ncols() != self.scene.q_names().len() {
+            return Err(PyValueError::new_err("q has the wrong number of columns"));
+        }
+        let Some(mut b) = self.scene.bodies() else {
+            return Ok(None);
+        };
+        for row in q.rows() {
+            let row: Vec<f64> = row.to_vec();
+            if row.iter().all(|x| x.is_finite()) {
+                b.record(&row);
+            }
+        }
+        b.trace_update(prefix)
+            .map(|u| json_to_py(py, &u))
+            .transpose()
     }
 
     /// The JSON schemas of recordings by schema name (the ones `progmo solve` writes), for this

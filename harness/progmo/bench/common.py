@@ -103,6 +103,31 @@ def _fmt(x):
     return x
 
 
+ZERO_LABEL = "exactly 0 (marked on the axis floor)"
+
+
+def log_plot(ax, x, y, *args, logx: bool = True, **kw) -> int:
+    """Plot y > 0 on log axes (loglog, or semilogy with logx=False) without hiding zeros: a value of
+    exactly 0 has no place on a log axis, so it breaks the line and is drawn as a triangle on the
+    axis floor (labelled once per axis, ZERO_LABEL), not clamped to a tiny number. Returns the number
+    of zeros."""
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    zero = y == 0
+    line = ax.loglog if logx else ax.semilogy
+    (h,) = line(x, np.where(zero, np.nan, y), *args, **kw)
+    if zero.any():
+        labelled = any(t.get_label() == ZERO_LABEL for t in ax.get_lines())
+        ax.plot(x[zero], np.zeros(int(zero.sum())), "v", color=h.get_color(), ms=6, clip_on=False,
+                transform=ax.get_xaxis_transform(), label="_" if labelled else ZERO_LABEL)
+    return int(zero.sum())
+
+
+def count_zeros(values) -> int:
+    """How many values are exactly 0 (what log_plot marks on the axis floor)."""
+    return int(np.sum(np.asarray(list(values), dtype=float) == 0))
+
+
 def save_figure(fig, path: Path, prov: Provenance) -> Path:
     from matplotlib.ticker import NullFormatter
 

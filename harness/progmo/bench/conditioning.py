@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import FORMULATIONS, Provenance, SceneDir, chain_toml, log, save_figure, write_csv
+from .common import FORMULATIONS, Provenance, SceneDir, chain_toml, log, log_plot, save_figure, write_csv
 
 DIGITS = 50
 
@@ -138,7 +138,7 @@ def plot(rows, out: Path, prov: Provenance) -> Path:
             for f in FORMULATIONS:
                 pts = sorted((r["cond_A"], r[key]) for r in rows if r["family"] == fam and r["formulation"] == f)
                 x, y = zip(*pts)
-                ax.loglog(x, np.maximum(y, 1e-18), ls=STYLES[f], marker=MARKERS[f], label=f)
+                log_plot(ax, x, y, ls=STYLES[f], marker=MARKERS[f], label=f)
             ax.set_xlabel("cond(A)")
             ax.set_ylabel("relative error of " + ("dv/dt" if key == "rel_err_a" else "u"))
             ax.set_title(fam, fontsize=9)

@@ -215,6 +215,7 @@ def plot(scene_name, progmo_rows, scipy_rows, ratio_rows, ref, out, prov, nodrif
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from .common import log_plot
     from .workprecision import COLORS
 
     fig, axes = plt.subplots(1, 2, figsize=(12, 5.2))
@@ -224,18 +225,18 @@ def plot(scene_name, progmo_rows, scipy_rows, ratio_rows, ref, out, prov, nodrif
                          if r["integrator"] == integ and r["formulation"] == "null_space" and np.isfinite(r["error"]))
             if pts:
                 x, y = zip(*pts)
-                ax.loglog(x, np.maximum(y, 1e-17), "-o", ms=4, color=COLORS[integ], label=f"progmo {integ} null_space")
+                log_plot(ax, x, y, "-o", ms=4, color=COLORS[integ], label=f"progmo {integ} null_space")
         pts = sorted((r[xkey], r["error"]) for r in nodrift_rows if np.isfinite(r["error"]))
         if pts:
             x, y = zip(*pts)
-            ax.loglog(x, np.maximum(y, 1e-17), ":o", ms=4, color=COLORS["dop853"], mfc="none",
-                      label="progmo dop853 null_space, drift control off")
+            log_plot(ax, x, y, ":o", ms=4, color=COLORS["dop853"], mfc="none",
+                     label="progmo dop853 null_space, drift control off")
         for m in SCIPY_METHODS:
             pts = sorted((r[xkey], r["error"]) for r in scipy_rows if r["method"] == f"scipy {m}" and np.isfinite(r["error"]))
             if pts:
                 x, y = zip(*pts)
-                ax.loglog(x, np.maximum(y, 1e-17), "--s", ms=4, color=COLORS[f"scipy {m}"],
-                          label=f"scipy {m} + pin.forwardDynamics")
+                log_plot(ax, x, y, "--s", ms=4, color=COLORS[f"scipy {m}"],
+                         label=f"scipy {m} + pin.forwardDynamics")
         ax.axhline(ref.floor, color="gray", lw=0.8, ls=":")
         ax.set_xlabel("CPU time per solve (s)" if xkey == "cpu_s" else "RHS evaluations")
         ax.set_ylabel("final-state error")

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
@@ -51,6 +52,24 @@ class Target:
     @property
     def met(self) -> bool:
         return self.verdict == "met"
+
+    @property
+    def status(self) -> str:
+        """met, missed or not measured (the page's colour)."""
+        if self.met:
+            return "met"
+        return "not measured" if self.verdict.startswith("not measured") else "missed"
+
+    @property
+    def how_far(self) -> str:
+        """The verdict's detail as the page shows it: "2.86x over target" for "MISSED by 2.86x"."""
+        m = re.match(r"MISSED by ([0-9.]+(?:-[0-9.]+)?)x(.*)$", self.verdict)
+        if m:
+            return f"{m.group(1)}x over target{m.group(2)}"
+        for prefix in ("MISSED by ", "MISSED: ", "MISSED", "not measured: ", "met"):
+            if self.verdict.startswith(prefix):
+                return self.verdict[len(prefix):]
+        return self.verdict
 
     def line(self) -> str:
         return f"target: {self.target}: {self.measured}: {self.verdict}"

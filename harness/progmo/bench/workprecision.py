@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import FORMULATIONS, INTEGRATORS, Provenance, cpu_time, log, save_figure, write_csv
+from .common import FORMULATIONS, INTEGRATORS, Provenance, cpu_time, log, log_plot, save_figure, write_csv
 
 REF_TOL = 1e-14
 
@@ -113,8 +113,8 @@ def plot(scene_name: str, rows: list[dict], ref: Reference, res_run, out: Path, 
                 if not pts:
                     continue
                 x, y = zip(*pts)
-                ax.loglog(x, np.maximum(y, 1e-17), ls=STYLES[form], marker=MARKERS[form],
-                          color=COLORS[integ], ms=4, lw=1, label=f"{integ} {form}")
+                log_plot(ax, x, y, ls=STYLES[form], marker=MARKERS[form],
+                         color=COLORS[integ], ms=4, lw=1, label=f"{integ} {form}")
         ax.axhline(ref.floor, color="gray", lw=0.8, ls=":")
         ax.set_xlabel(label)
         ax.set_ylabel("final-state error max|(q,v) - ref|")
@@ -123,7 +123,9 @@ def plot(scene_name: str, rows: list[dict], ref: Reference, res_run, out: Path, 
     axes[1].set_title("error vs RHS evaluations (gray: reference floor)")
     axes[1].legend(fontsize=6, ncol=2)
     t, res, info = res_run
-    axes[2].semilogy(t, np.maximum(res, 1e-18))
+    log_plot(axes[2], t, res, logx=False)
+    if np.any(np.asarray(res) == 0):
+        axes[2].legend(fontsize=7)
     axes[2].set_title(f"programme residual max|g|: {info['integrator']} {info['formulation']} "
                       f"rtol {info['rtol']:.0e}", fontsize=9)
     axes[2].set_xlabel("t (s)")

@@ -1,0 +1,683 @@
+"""``progmo sweep``: tolerance reports over distributions of runs.
+
+A sweep file (TOML; format below, bundled ones in ``references/sweeps/<scene>.toml``) says which
+parameters, initial coordinates or velocities and solver settings vary, with which distribution,
+and the seed. Each sample is a scene file derived from the scene (written to ``OUT/samples/``, a
+reproducer runnable with ``progmo check``) checked in the chosen simulators on the chosen executor
+(:mod:`progmo.executors`). Results are appended to ``OUT/results.jsonl`` as they arrive, one line
+per (sample, simulator): an interrupted sweep rerun with the same arguments resumes, running only
+what is missing, and never counts a sample twice. The tolerance report (``OUT/sweep.html``,
+``sweep.md``, ``sweep.json``) aggregates in sample order, so it does not depend on the executor,
+the number of workers or the order results arrived in.
+
+Sweep file::
+
+    scene = "double_pendulum"      # optional: the scene it is written for (name or path)
+    samples = 16                   # random draws (per point of the grid variables)
+    seed = 20261123                # sample i draws from numpy's SeedSequence([seed, i])
+    simulators = ["mujoco", "pinocchio"]     # default: both
+    initial_state = "refuse"       # or "assemble": a sample whose initial state leaves the
+                                   # programme is refused and counted, or projected onto it
+    horizon = 1.0                  # optional: replay horizon of each check (s)
+    step = 1e-3                    # optional: replay step
+
+    [vary]                         # "where.name" = { distribution = [arguments] }
+    "parameters.amp" = { uniform = [0.3, 0.7] }
+    "initial.q.q1" = { normal = [0.3, 0.1] }        # mean, standard deviation
+    "solver.rtol" = { grid = [1e-8, 1e-10] }        # every value, crossed with the draws
+    "parameters.k" = { loguniform = [1e2, 1e4] }
+
+``where`` is ``parameters``, ``initial.q``, ``initial.v`` or ``solver``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import dataclasses
+import hashlib
+import io
+import itertools
+import json
+import math
+import os
+import sys
+import time
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import cliutil, data, executors
+from .parallel import Task, default_jobs, last_line
+from .results import CheckResult
+
+DISTRIBUTIONS = {"uniform": 2, "normal": 2, "loguniform": 2, "grid": None}
+WHERE = ("parameters", "initial.q", "initial.v", "solver")
+KEYS = ("scene", "samples", "seed", "simulators", "initial_state", "horizon", "step", "vary")
+EXIT_OK, EXIT_FAIL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+#: suggested budget = SAFETY x the worst sampled value, rounded up to 1, 2 or 5 x 10^k
+SAFETY = 10.0
+
+
+class SweepError(ValueError):
+    """A bad sweep file or an inconsistency with its scene: ``file:line: key: message``."""
+
+
+@dataclass
+class Variable:
+    key: str  # "parameters.amp"
+    where: str  # "parameters"
+    name: str  # "amp"
+    dist: str
+    args: list[float]
+
+
+@dataclass
+class Spec:
+    path: str
+    scene: str | None
+    samples: int
+    seed: int
+    simulators: list[str]
+    initial_state: str
+    horizon: float | None
+    step: float | None
+    variables: list[Variable]
+
+    def grid(self) -> list[dict[str, float]]:
+        gv = [v for v in self.variables if v.dist == "grid"]
+        return [dict(zip([v.key for v in gv], combo)) for combo in itertools.product(*[v.args for v in gv])]
+
+    def total(self) -> int:
+        return len(self.grid()) * self.samples
+
+    def values(self, i: int) -> dict[str, float]:
+        """The values of sample i: a function of (seed, i) only."""
+        grid = self.grid()
+        out = dict(grid[i // self.samples])
+        rng = np.random.default_rng(np.random.SeedSequence([self.seed, i]))
+        for v in self.variables:
+            if v.dist == "uniform":
+                out[v.key] = float(rng.uniform(v.args[0], v.args[1]))
+            elif v.dist == "normal":
+                out[v.key] = float(rng.normal(v.args[0], v.args[1]))
+            elif v.dist == "loguniform":
+                out[v.key] = float(math.exp(rng.uniform(math.log(v.args[0]), math.log(v.args[1]))))
+        return {v.key: out[v.key] for v in self.variables}
+
+
+def _line_of(text: str, needle: str) -> int:
+    for k, line in enumerate(text.splitlines(), 1):
+        if needle in line:
+            return k
+    return 0
+
+
+def load_spec(path: str | os.PathLike[str]) -> Spec:
+    """Read and validate a sweep file; errors name the file, the line and the key."""
+    from .checks import SIMULATORS
+
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except OSError as e:
+        raise SweepError(f"{p}: cannot read the sweep file: {e.strerror or e}") from None
+    try:
+        d = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise SweepError(f"{p}: {e}") from None
+
+    def err(key: str, msg: str, needle: str | None = None) -> SweepError:
+        line = _line_of(text, needle or key.split(".")[-1])
+        return SweepError(f"{p}:{line}: {key}: {msg}" if line else f"{p}: {key}: {msg}")
+
+    for k in d:
+        if k not in KEYS:
+            raise err(k, f"unknown key (expected one of {', '.join(KEYS)})", k)
+    samples, seed = d.get("samples", 10), d.get("seed", 0)
+    if not isinstance(samples, int) or isinstance(samples, bool) or samples < 1:
+        raise err("samples", f"must be an integer >= 1, got {samples!r}")
+    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
+        raise err("seed", f"must be an integer >= 0, got {seed!r}")
+    sims = d.get("simulators", list(SIMULATORS))
+    if not isinstance(sims, list) or not sims or any(s not in (*SIMULATORS, "solver_only") for s in sims):
+        raise err("simulators", f"must be a list of {', '.join(SIMULATORS)} or solver_only, got {sims!r}")
+    init = d.get("initial_state", "refuse")
+    if init not in ("refuse", "assemble"):
+        raise err("initial_state", f"must be \"refuse\" or \"assemble\", got {init!r}")
+    opt: dict[str, float | None] = {}
+    for k in ("horizon", "step"):
+        x = d.get(k)
+        if x is not None and not (isinstance(x, (int, float)) and not isinstance(x, bool) and x > 0):
+            raise err(k, f"must be a number > 0, got {x!r}")
+        opt[k] = None if x is None else float(x)
+    vary = d.get("vary", {})
+    if not isinstance(vary, dict) or not vary:
+        raise err("vary", "a sweep needs a [vary] table with at least one variable", "vary")
+    variables = []
+    for key, dist in vary.items():
+        where, _, name = key.rpartition(".")
+        if where not in WHERE or not name:
+            raise err(f"vary.{key}", f"must be WHERE.NAME with WHERE one of {', '.join(WHERE)}", key)
+        if not (isinstance(dist, dict) and len(dist) == 1):
+            raise err(f"vary.{key}", "must be one distribution: { uniform = [a, b] }, { normal = [mean, sd] }, "
+                      "{ loguniform = [a, b] } or { grid = [x1, x2, ...] }", key)
+        (kind, args), = dist.items()
+        if kind not in DISTRIBUTIONS:
+            raise err(f"vary.{key}", f"unknown distribution {kind!r} (one of {', '.join(DISTRIBUTIONS)})", key)
+        if not isinstance(args, list) or not args or not all(
+                isinstance(a, (int, float)) and not isinstance(a, bool) and math.isfinite(a) for a in args):
+            raise err(f"vary.{key}", f"{kind} needs a list of finite numbers, got {args!r}", key)
+        n = DISTRIBUTIONS[kind]
+        if n is not None and len(args) != n:
+            raise err(f"vary.{key}", f"{kind} takes {n} numbers, got {len(args)}", key)
+        if kind in ("uniform", "loguniform") and not args[0] < args[1]:
+            raise err(f"vary.{key}", f"{kind} needs a < b, got {args}", key)
+        if kind == "loguniform" and args[0] <= 0:
+            raise err(f"vary.{key}", "loguniform needs a > 0", key)
+        if kind == "normal" and not args[1] > 0:
+            raise err(f"vary.{key}", "normal needs a standard deviation > 0", key)
+        variables.append(Variable(key, where, name, kind, [float(a) for a in args]))
+    scene = d.get("scene")
+    if scene is not None and not isinstance(scene, str):
+        raise err("scene", f"must be a scene name or path, got {scene!r}")
+    return Spec(str(p), scene, samples, seed, list(dict.fromkeys(sims)), init, opt["horizon"], opt["step"],
+                variables)
+
+
+def bundled_spec(scene_name: str) -> Path | None:
+    p = data.references() / "sweeps" / f"{scene_name}.toml"
+    return p if p.is_file() else None
+
+
+# --- samples -------------------------------------------------------------------------------------
+def sample_text(scene_text: str, scene_path: str, spec: Spec, i: int, values: dict[str, float]) -> str:
+    """The scene of sample i: the scene file with the varied entries replaced (comments kept)."""
+    import tomlkit
+
+    doc = tomlkit.parse(scene_text)
+    name = str(doc["name"])
+    doc["name"] = f"{name}-{i:05d}"
+    for v in spec.variables:
+        x = values[v.key]
+        if v.where == "parameters":
+            if "parameters" not in doc or v.name not in doc["parameters"]:  # type: ignore[operator]
+                raise SweepError(f"{spec.path}:{_line_of(Path(spec.path).read_text(), v.key)}: vary.{v.key}: "
+                                 f"the scene {scene_path} has no parameter {v.name!r}")
+            doc["parameters"][v.name] = x  # type: ignore[index]
+        elif v.where in ("initial.q", "initial.v"):
+            part = v.where.split(".")[1]
+            init = doc["initial"]
+            if part not in init:  # type: ignore[operator]
+                init[part] = tomlkit.inline_table()  # type: ignore[index]
+            init[part][v.name] = x  # type: ignore[index]
+        else:
+            if "solver" not in doc:
+                doc["solver"] = tomlkit.table()
+            doc["solver"][v.name] = x  # type: ignore[index]
+    if spec.initial_state == "assemble":
+        doc["initial"]["assemble"] = True  # type: ignore[index]
+    # the check's settings travel in the reproducer, so `progmo check FILE` reruns the same check
+    for key, setting in (("replay_step", spec.step), ("replay_horizon", spec.horizon)):
+        if setting is not None:
+            if "tolerances" not in doc:
+                doc["tolerances"] = tomlkit.table()
+            t = tomlkit.inline_table()
+            t.update({"value": setting, "reason": f"set by the sweep {Path(spec.path).name}"})
+            doc["tolerances"][key] = t  # type: ignore[index]
+    head = (f"# Sample {i} of the sweep {spec.path} (seed {spec.seed}) of {scene_path}:\n"
+            + "".join(f"#   {k} = {values[k]!r}\n" for k in values)
+            + "# Rerun: progmo check THIS_FILE\n")
+    return head + tomlkit.dumps(doc)
+
+
+@dataclass
+class Sample:
+    index: int
+    scene: str  # the base scene's name
+    path: str  # the sample's scene file
+    values: dict[str, float]
+    refused: str = ""  # why the solver refused the initial state ("" if accepted)
+
+
+def make_samples(scene_file: Path, spec: Spec, out: Path) -> list[Sample]:
+    from . import Scene, SceneError
+
+    base = Scene(str(scene_file))
+    text = scene_file.read_text()
+    d = out / "samples"
+    d.mkdir(parents=True, exist_ok=True)
+    samples = []
+    for i in range(spec.total()):
+        values = spec.values(i)
+        st = sample_text(text, str(scene_file), spec, i, values)
+        p = d / f"{base.name}-{i:05d}.toml"
+        if not p.is_file() or p.read_text() != st:
+            p.write_text(st)
+        s = Sample(i, base.name, str(p), values)
+        try:
+            sc = Scene(str(p))
+            sc.check_initial()
+        except SceneError as e:
+            s.refused = last_line(e)
+        samples.append(s)
+    return samples
+
+
+# --- results file --------------------------------------------------------------------------------
+def read_results(path: Path) -> dict[tuple[str, int, str], dict[str, Any]]:
+    """(scene, sample, simulator) -> record; the first complete line wins, a torn last line is
+    ignored (an interrupted write)."""
+    out: dict[tuple[str, int, str], dict[str, Any]] = {}
+    if not path.is_file():
+        return out
+    for line in path.read_text().splitlines():
+        try:
+            rec = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        out.setdefault((rec["scene"], rec["sample"], rec["simulator"]), rec)
+    return out
+
+
+def drop_torn_tail(path: Path) -> None:
+    """Cut a last line that an interrupted write left without its newline, so that appending
+    starts on a line of its own (the torn record is rerun)."""
+    if not path.is_file():
+        return
+    data = path.read_bytes()
+    if data and not data.endswith(b"\n"):
+        with open(path, "r+b") as f:
+            f.truncate(data.rfind(b"\n") + 1)
+
+
+def spec_digest(spec: Spec, scene_texts: dict[str, str]) -> str:
+    h = hashlib.sha256()
+    h.update(Path(spec.path).read_bytes())
+    for k in sorted(scene_texts):
+        h.update(k.encode() + scene_texts[k].encode())
+    return h.hexdigest()[:16]
+
+
+# --- aggregation ---------------------------------------------------------------------------------
+def _nice_up(x: float) -> float:
+    """The smallest of 1, 2, 5 x 10^k at or above x."""
+    if not x > 0 or not math.isfinite(x):
+        return x
+    k = math.floor(math.log10(x))
+    for m in (1, 2, 5, 10):
+        if m * 10.0 ** k >= x * (1 - 1e-12):
+            return m * 10.0 ** k
+    return 10.0 ** (k + 1)  # pragma: no cover
+
+
+def aggregate(samples: list[Sample], spec: Spec, records: dict[tuple[str, int, str], dict[str, Any]]) -> dict[str, Any]:
+    """The tolerance report as data, in sample order (independent of how results arrived)."""
+    sims = spec.simulators
+    counts: dict[str, dict[str, int]] = {}
+    metrics: dict[tuple[str, str, str], list[tuple[int, float, float | None, str]]] = {}
+    reasons: dict[str, str] = {}
+    warnings: dict[str, int] = {}
+    for s in samples:
+        for m in sims:
+            c = counts.setdefault(f"{s.scene}/{m}", {})
+            if s.refused:
+                c["refused"] = c.get("refused", 0) + 1
+                continue
+            rec = records.get((s.scene, s.index, m))
+            if rec is None:
+                c["not run"] = c.get("not run", 0) + 1
+                continue
+            r = rec["result"]
+            c[r["status"]] = c.get(r["status"], 0) + 1
+            for w in r.get("warnings") or []:
+                warnings[f"{s.scene}/{m}"] = warnings.get(f"{s.scene}/{m}", 0) + 1
+                break
+            budgets = {b["metric"]: (b["value"], b["reason"]) for b in r.get("budgets", [])}
+            for k, v in (r.get("metrics") or {}).items():
+                if k not in budgets:
+                    continue
+                val = math.nan if v is None else float(v)
+                metrics.setdefault((s.scene, m, k), []).append((s.index, val, budgets[k][0], r["status"]))
+                reasons[k] = budgets[k][1]
+    rows = []
+    for (scene, m, k), pts in sorted(metrics.items()):
+        vals = np.array([p[1] for p in pts])
+        finite = vals[np.isfinite(vals)]
+        budget = pts[0][2]
+        worst_i = int(np.nanargmax(np.where(np.isfinite(vals), vals, np.inf))) if len(vals) else 0
+        worst = pts[worst_i]
+        q = (np.quantile(finite, [0.5, 0.9, 0.99]).tolist() if finite.size else [math.nan] * 3)
+        wv = float(vals[worst_i])
+        suggested = _nice_up(SAFETY * wv) if math.isfinite(wv) and wv > 0 else None
+        rows.append({
+            "scene": scene, "simulator": m, "metric": k, "n": len(pts), "nonfinite": int(len(vals) - finite.size),
+            "min": float(finite.min()) if finite.size else math.nan, "p50": q[0], "p90": q[1], "p99": q[2],
+            "max": wv, "budget": budget, "budget_reason": reasons.get(k, ""),
+            "margin": (budget / wv) if (budget and math.isfinite(wv) and wv > 0) else None,
+            "over_budget": int(np.sum(~(vals <= budget))) if budget is not None else 0,
+            "worst_sample": worst[0], "suggested_budget": suggested,
+            "suggestion_reason": (f"{SAFETY:g} x the worst of {len(pts)} samples ({wv:.3g}), rounded up to 1, 2 or 5 "
+                                  f"x 10^k: with n samples a new run exceeds the sampled maximum with probability "
+                                  f"about 1/(n+1) = {1 / (len(pts) + 1):.2g}; the factor covers the tail beyond it"
+                                  if suggested is not None else "no finite positive value sampled"),
+            "points": [[p[0], p[1]] for p in pts],
+        })
+    failing = [{"scene": s.scene, "sample": s.index, "simulator": m, "path": s.path,
+                "status": records[(s.scene, s.index, m)]["result"]["status"],
+                "reason": records[(s.scene, s.index, m)]["result"].get("reason", "")}
+               for s in samples for m in sims
+               if not s.refused and (s.scene, s.index, m) in records
+               and records[(s.scene, s.index, m)]["result"]["status"] != "pass"]
+    return {
+        "spec": {"path": spec.path, "samples": spec.samples, "seed": spec.seed, "simulators": sims,
+                 "initial_state": spec.initial_state, "horizon": spec.horizon, "step": spec.step,
+                 "variables": [dataclasses.asdict(v) for v in spec.variables]},
+        "samples": [{"scene": s.scene, "index": s.index, "path": s.path, "values": s.values, "refused": s.refused}
+                    for s in samples],
+        "counts": counts, "warnings": warnings, "metrics": rows, "failing": failing,
+    }
+
+
+def ok(agg: dict[str, Any]) -> bool:
+    """Every accepted sample passed in every simulator (refused samples are counted, not failed)."""
+    return all(set(c) <= {"pass", "refused"} for c in agg["counts"].values()) and any(
+        c.get("pass") for c in agg["counts"].values())
+
+
+# --- report --------------------------------------------------------------------------------------
+def _plot(row: dict[str, Any], agg: dict[str, Any]) -> str | None:
+    from matplotlib.figure import Figure
+
+    values = {(s["scene"], s["index"]): s["values"] for s in agg["samples"]}
+    keys = [v["key"] for v in agg["spec"]["variables"]]
+    pts = [(values[(row["scene"], i)], y) for i, y in row["points"]]
+    if not pts or not keys:
+        return None
+    fig = Figure(figsize=(3.3 * len(keys), 2.5), dpi=90)
+    axes = fig.subplots(1, len(keys), squeeze=False)[0]
+    for ax, k in zip(axes, keys):
+        xs = np.array([p[0][k] for p in pts])
+        ys = np.array([p[1] for p in pts], dtype=float)
+        pos = np.isfinite(ys) & (ys > 0)
+        ax.scatter(xs[pos], ys[pos], s=12, color="#1f5fa8", label="samples")
+        zero = np.isfinite(ys) & (ys <= 0)
+        if zero.any():  # exact zeros: marked on the axis floor, not clamped into the data
+            floor = ys[pos].min() / 10 if pos.any() else 1e-300
+            ax.scatter(xs[zero], np.full(zero.sum(), floor), marker="v", color="#888", label="exactly 0")
+        ax.set_yscale("log")
+        if row["budget"]:
+            ax.axhline(row["budget"], color="#b3261e", lw=1, ls="--", label="budget")
+        ax.set_xlabel(k)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel(row["metric"])
+    axes[0].legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def render_html(agg: dict[str, Any], meta: dict[str, Any]) -> str:
+    from .htmlstyle import CSS
+    from .htmlstyle import esc as _e
+    from .report import fmt
+
+    good = ok(agg)
+    h: list[str] = []
+    a = h.append
+    a("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>")
+    a("<meta name='viewport' content='width=device-width,initial-scale=1'>")
+    a(f"<title>progmo sweep: {'pass' if good else 'FAIL'}</title><style>{CSS}</style></head><body><main>")
+    a("<h1>progmo tolerance sweep</h1>")
+    sp = agg["spec"]
+    a(f"<p class='sub'>{len(agg['samples'])} sample(s) of <code>{_e(sp['path'])}</code> (seed {sp['seed']}), "
+      f"checked in {_e(', '.join(sp['simulators']))} on the {_e(meta.get('executor', 'local'))} executor; "
+      f"{_e(meta.get('date', ''))}.</p>")
+    a(f"<div class='banner {'b-ok' if good else 'b-bad'}' id='overall'>{_e(summary_line(agg))}</div>")
+    a("<h2>Outcomes</h2><table id='counts'><tr><th>scene / simulator</th><th>pass</th><th>fail</th><th>error</th>"
+      "<th>not checked</th><th>refused</th><th>not run</th><th>with solver warnings</th></tr>")
+    for k, c in agg["counts"].items():
+        cells = "".join(f"<td class='num{' bad' if n and st in ('fail', 'error', 'not_checked', 'not run') else ''}'>{n}</td>"
+                        for st in ("pass", "fail", "error", "not_checked", "refused", "not run") for n in [c.get(st, 0)])
+        a(f"<tr><td>{_e(k)}</td>{cells}<td class='num'>{agg['warnings'].get(k, 0)}</td></tr>")
+    a("</table>")
+    a("<h2>Metrics</h2><table id='metrics'><tr><th>scene / simulator</th><th>metric</th><th>n</th><th>median</th>"
+      "<th>90%</th><th>99%</th><th>worst</th><th>budget</th><th>margin</th><th>suggested budget</th>"
+      "<th>worst sample (rerun)</th></tr>")
+    for r in agg["metrics"]:
+        cls = "bad" if r["over_budget"] else ""
+        margin = "" if r["margin"] is None else f"{r['margin']:.3g}&times;"
+        a(f"<tr class='metric {'m-over' if r['over_budget'] else 'm-ok'}'><td>{_e(r['scene'])} / {_e(r['simulator'])}</td>"
+          f"<td>{_e(r['metric'])}</td><td class='num'>{r['n']}</td>"
+          + "".join(f"<td class='num'>{fmt(r[k])}</td>" for k in ("p50", "p90", "p99"))
+          + f"<td class='num {cls}'>{fmt(r['max'])}</td><td class='num' title='{_e(r['budget_reason'])}'>{fmt(r['budget'])}</td>"
+          f"<td class='num {cls}'>{margin}</td>"
+          f"<td class='num' title='{_e(r['suggestion_reason'])}'>{fmt(r['suggested_budget'])}</td>"
+          f"<td class='small'><code>progmo check {_e(_sample_path(agg, r['scene'], r['worst_sample']))} -s {_e(r['simulator'])}</code></td></tr>")
+    a("</table>")
+    a(f"<p class='small'>Suggested budget: {SAFETY:g} &times; the worst sampled value, rounded up to 1, 2 or 5 "
+      "&times; 10<sup>k</sup>; with n samples a new run exceeds the sampled maximum with probability about "
+      "1/(n+1), and the factor covers the tail beyond it (hover a value for its reasoning). Margin: budget / worst.</p>")
+    if agg["failing"]:
+        a("<h2 id='failing'>Failing samples (reproducers)</h2><table><tr><th>sample</th><th>simulator</th>"
+          "<th>status</th><th>why</th><th>rerun</th></tr>")
+        for f in agg["failing"]:
+            a(f"<tr><td>{_e(f['scene'])} #{f['sample']}</td><td>{_e(f['simulator'])}</td><td class='bad'>{_e(f['status'])}</td>"
+              f"<td class='small'>{_e(f['reason'])}</td><td class='small'><code>progmo check {_e(f['path'])} -s {_e(f['simulator'])}</code></td></tr>")
+        a("</table>")
+    refused = [s for s in agg["samples"] if s["refused"]]
+    if refused:
+        a(f"<h2 id='refused'>Refused samples ({len(refused)})</h2><p class='small'>initial_state = \"refuse\": "
+          "these initial states leave the programme; set initial_state = \"assemble\" to project them onto it.</p><ul class='small'>")
+        for s in refused[:50]:
+            a(f"<li>{_e(s['scene'])} #{s['index']}: {_e(s['refused'])}</li>")
+        a("</ul>")
+    if meta.get("plots", True):
+        a("<h2>Metrics against the varied quantities</h2>")
+        for r in agg["metrics"]:
+            img = _plot(r, agg)
+            if img:
+                a(f"<h3>{_e(r['scene'])} / {_e(r['simulator'])}: {_e(r['metric'])}</h3>"
+                  f"<img class='plot' alt='{_e(r['metric'])}' src='{img}'>")
+    a("<footer id='provenance'><h2>How to rerun</h2>")
+    a(f"<pre id='rerun'><code>{_e(meta.get('command', ''))}</code></pre>")
+    a("<table>" + "".join(f"<tr><th>{_e(k)}</th><td><code>{_e(v)}</code></td></tr>" for k, v in meta.items()
+                          if k not in ("command", "plots")) + "</table>")
+    a("</footer></main></body></html>")
+    return "\n".join(h)
+
+
+def _sample_path(agg: dict[str, Any], scene: str, index: int) -> str:
+    for s in agg["samples"]:
+        if s["scene"] == scene and s["index"] == index:
+            return str(s["path"])
+    return "?"
+
+
+def summary_line(agg: dict[str, Any]) -> str:
+    tot: dict[str, int] = {}
+    for c in agg["counts"].values():
+        for k, n in c.items():
+            tot[k] = tot.get(k, 0) + n
+    n = sum(tot.values())
+    head = ("PASS" if ok(agg) else "FAIL") + f": {tot.get('pass', 0)} of {n} (sample x simulator) checks passed"
+    rest = [f"{v} {k}" for k, v in sorted(tot.items()) if k != "pass" and v]
+    over = [f"{r['scene']}/{r['simulator']} {r['metric']} ({r['over_budget']} over budget)"
+            for r in agg["metrics"] if r["over_budget"]]
+    if over:
+        rest.append("metrics beyond budget: " + ", ".join(over))
+    return head + ("; " + "; ".join(rest) if rest else "")
+
+
+def render_markdown(agg: dict[str, Any], meta: dict[str, Any]) -> str:
+    from .report import fmt
+
+    lines = [f"# progmo sweep: {'PASS' if ok(agg) else 'FAIL'}", "", summary_line(agg), "",
+             "| scene / simulator | metric | n | median | 90% | 99% | worst | budget | margin | suggested | worst sample |",
+             "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+    for r in agg["metrics"]:
+        lines.append(f"| {r['scene']} / {r['simulator']} | {r['metric']} | {r['n']} | {fmt(r['p50'])} | {fmt(r['p90'])} | "
+                     f"{fmt(r['p99'])} | {fmt(r['max'])} | {fmt(r['budget'])} | "
+                     f"{'' if r['margin'] is None else format(r['margin'], '.3g')} | {fmt(r['suggested_budget'])} | "
+                     f"`{_sample_path(agg, r['scene'], r['worst_sample'])}` |")
+    lines += ["", "## Rerun", "", "```", str(meta.get("command", "")), "```"]
+    return "\n".join(lines) + "\n"
+
+
+def write_report(agg: dict[str, Any], meta: dict[str, Any], out: Path) -> dict[str, Path]:
+    paths = {"json": out / "sweep.json", "html": out / "sweep.html", "md": out / "sweep.md"}
+    tmp = out / "sweep.json.tmp"
+    tmp.write_text(json.dumps({**agg, "meta": {k: v for k, v in meta.items() if k != "plots"}}, indent=1,
+                              default=str, allow_nan=True) + "\n")
+    os.replace(tmp, paths["json"])
+    paths["html"].write_text(render_html(agg, meta), encoding="utf-8", errors="backslashreplace")
+    paths["md"].write_text(render_markdown(agg, meta), encoding="utf-8", errors="backslashreplace")
+    return paths
+
+
+# --- command -------------------------------------------------------------------------------------
+EPILOG = """\
+exit codes: 0 every accepted sample passed in every simulator (refused samples are counted, not
+failures); 1 a sample failed, errored or did not run; 2 bad usage or a bad sweep file; 130
+interrupted (rerun the same command to resume: finished checks are kept in OUT/results.jsonl).
+Outputs in --out: samples/*.toml (one reproducer per sample: progmo check FILE), results.jsonl,
+sweep.json, sweep.html, sweep.md. Sweep file format: python -m progmo.sweep --help-format."""
+
+
+def parser() -> argparse.ArgumentParser:
+    from .cli import executor_options
+
+    p = cliutil.parser("progmo sweep", "Tolerance report over distributions of runs: each sample of the sweep "
+                       "file is a scene checked in the simulators; per metric the quantiles, the worst "
+                       "sample (a reproducer), the budget margin and a suggested budget.")
+    p.epilog = EPILOG
+    p.formatter_class = cliutil.HelpFormatter
+    p.add_argument("scenes", nargs="*", metavar="SCENE",
+                   help="scene files or bundled names (default: the sweep file's `scene`)")
+    p.add_argument("--spec", metavar="FILE", default=None,
+                   help="sweep file (default: the bundled references/sweeps/<scene>.toml)")
+    p.add_argument("-o", "--out", default="out/sweep", metavar="DIR", help="output folder (default: out/sweep)")
+    p.add_argument("-j", "--jobs", type=int, default=None, metavar="N",
+                   help="checks at once on the local executor (default: number of CPUs)")
+    executor_options(p)
+    p.add_argument("--samples", type=int, default=None, metavar="N", help="override the sweep file's samples")
+    p.add_argument("--fresh", action="store_true", help="discard OUT/results.jsonl instead of resuming")
+    p.add_argument("--no-plots", action="store_true", help="leave the plots out of sweep.html")
+    p.add_argument("--help-format", action="store_true", help="print the sweep file format and exit")
+    return p
+
+
+def _say(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    from .checks import CheckOptions
+    from .report import provenance
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    ns = parser().parse_args(argv)
+    if ns.help_format:
+        print(__doc__)
+        return EXIT_OK
+    out = Path(ns.out)
+    try:
+        scene_args = list(ns.scenes)
+        spec_path = Path(ns.spec) if ns.spec else None
+        if spec_path is None:
+            if not scene_args:
+                raise SweepError("give a SCENE (with a bundled sweep) or --spec FILE")
+            found = bundled_spec(Path(scene_args[0]).stem)
+            if found is None:
+                raise SweepError(f"no bundled sweep for {scene_args[0]!r} (references/sweeps/): give --spec FILE")
+            spec_path = found
+        spec = load_spec(spec_path)
+        if ns.samples is not None:
+            if ns.samples < 1:
+                raise SweepError("--samples must be >= 1")
+            spec.samples = ns.samples
+        if not scene_args:
+            if spec.scene is None:
+                raise SweepError(f"{spec_path}: no SCENE given and the sweep file names no `scene`")
+            scene_args = [spec.scene]
+        scene_files = []
+        for s in scene_args:
+            p = Path(s)
+            scene_files.append(p if p.is_file() else data.scene_file(s))
+        out.mkdir(parents=True, exist_ok=True)
+        samples: list[Sample] = []
+        texts: dict[str, str] = {}
+        for f in scene_files:
+            texts[str(f)] = f.read_text()
+            samples += make_samples(Path(f), spec, out)
+    except (SweepError, ValueError, OSError) as e:
+        _say(f"progmo sweep: error: {last_line(e) if not isinstance(e, SweepError) else e}")
+        return EXIT_USAGE
+
+    results_path = out / "results.jsonl"
+    digest = spec_digest(spec, texts)
+    stamp = out / "sweep.digest"
+    if ns.fresh or (stamp.is_file() and stamp.read_text().strip() != digest):
+        if results_path.is_file() and not ns.fresh:
+            _say("progmo sweep: the sweep file or a scene changed since the results in OUT: starting afresh")
+        results_path.unlink(missing_ok=True)
+    stamp.write_text(digest + "\n")
+    drop_torn_tail(results_path)
+    records = read_results(results_path)
+    by_path = {s.path: s for s in samples}
+    tasks = [Task(s.path, s.scene, m) for s in samples if not s.refused for m in spec.simulators
+             if (s.scene, s.index, m) not in records]
+    total = sum(1 for s in samples if not s.refused) * len(spec.simulators)
+    _say(f"progmo sweep: {len(samples)} sample(s) ({sum(1 for s in samples if s.refused)} refused) x "
+         f"{len(spec.simulators)} simulator(s): {total} check(s), {total - len(tasks)} already done, "
+         f"{len(tasks)} to run on the {ns.executor} executor")
+    options = CheckOptions()  # replay step and horizon are in each sample's [tolerances]
+    jobs = ns.jobs if ns.jobs is not None else default_jobs()
+    interrupted = usage = False
+    t0 = time.perf_counter()
+    done = 0
+    try:
+        with open(results_path, "a") as sink:
+            for task, r in executors.run(tasks, options, executor=ns.executor, jobs=jobs, address=ns.address):
+                s = by_path[task.scene_path]
+                rec = {"scene": s.scene, "sample": s.index, "simulator": task.simulator,
+                       "result": {k: v for k, v in r.to_json().items() if k != "series"}}
+                sink.write(json.dumps(rec) + "\n")
+                sink.flush()
+                records.setdefault((s.scene, s.index, task.simulator), rec)
+                done += 1
+                _say(f"[{total - len(tasks) + done}/{total}] {s.scene} #{s.index} / {task.simulator}: {r.status} "
+                     f"({r.wall_seconds:.1f} s){': ' + r.reason[:160] if r.reason and r.status != 'pass' else ''}")
+    except executors.ExecutorError as e:
+        usage = True
+        _say(f"progmo sweep: error: {e}")
+    except KeyboardInterrupt:
+        interrupted = True
+        _say(f"progmo sweep: interrupted after {done} of {len(tasks)} checks; rerun the same command to resume")
+    wall = time.perf_counter() - t0
+    agg = aggregate(samples, spec, records)
+    import shlex
+
+    meta = provenance(Path.cwd(), "progmo sweep " + shlex.join(argv))
+    meta.update(executor=ns.executor, address=ns.address or os.environ.get("RAY_ADDRESS") or "",
+                wall_seconds=round(wall, 2), checks_this_run=done,
+                checks_per_second=round(done / wall, 3) if wall > 0 and done else None,
+                plots=not ns.no_plots)
+    paths = write_report(agg, meta, out)
+    print(f"progmo sweep: {summary_line(agg)}")
+    print(f"report: {paths['html']}  (summary: {paths['md']}; data: {paths['json']}; results: {results_path})")
+    if interrupted:
+        return EXIT_INTERRUPTED
+    if usage:
+        return EXIT_USAGE
+    return EXIT_OK if ok(agg) else EXIT_FAIL
+
+
+if __name__ == "__main__":
+    from ._stdio import run
+
+    sys.exit(run(main, "progmo sweep"))
