@@ -623,6 +623,7 @@ fn validate(scenes: &[PathBuf], json: bool) -> ExitCode {
                         "role": format!("{:?}", r.role).to_lowercase(), "initial_residual": x,
                     })).collect::<Vec<_>>(),
                     "initial_correction": corr.map(|c| serde_json::json!({"position": c.position, "velocity": c.velocity})),
+                    "set_aside": scene.set_aside.as_ref().map(|s| &s.0),
                 }));
             }
             Ok((traj, corr)) => {
@@ -644,6 +645,9 @@ fn validate(scenes: &[PathBuf], json: bool) -> ExitCode {
                     scene.span().0,
                     scene.span().1
                 );
+                for r in scene.set_aside.iter().flat_map(|s| &s.0) {
+                    say!("  closure row {} set aside: {}", r.row, r.reason);
+                }
                 if let Some(c) = corr {
                     say!(
                         "  initial state assembled: |dq| = {:.3e}, |dv| = {:.3e}",

@@ -203,6 +203,54 @@ fn tables_at<'a>(v: &'a toml::Value, path: &str) -> Vec<&'a toml::Table> {
     cur.into_iter().filter_map(|c| c.as_table()).collect()
 }
 
+/// A two-link planar chain with one closure (closures of different kinds use different keys).
+fn maximal_closure(closure: &str) -> String {
+    format!(
+        r#"
+name = "maximal_closure"
+[model]
+kind = "tree"
+[[model.bodies]]
+name = "l1"
+mass = 1.0
+com = [0.5, 0.0, 0.0]
+inertia = [0.01, 0.1, 0.1]
+joints = [{{ name = "q1", type = "hinge", axis = [0.0, 0.0, 1.0] }}]
+[[model.bodies]]
+name = "l2"
+parent = "l1"
+pos = [1.0, 0.0, 0.0]
+mass = 1.0
+com = [0.5, 0.0, 0.0]
+inertia = [0.01, 0.1, 0.1]
+joints = [{{ name = "q2", type = "hinge", axis = [0.0, 0.0, 1.0] }}]
+{closure}
+[initial]
+[time]
+t1 = 1.0
+"#
+    )
+}
+
+const WELD: &str = r#"[[model.closures]]
+name = "w"
+kind = "weld"
+body_a = "l2"
+point_a = [0.0, 0.0, 0.0]
+quat_a = [1.0, 0.0, 0.0, 0.0]
+body_b = "world"
+point_b = [1.0, 0.0, 0.0]
+quat_b = [1.0, 0.0, 0.0, 0.0]"#;
+
+const DISTANCE: &str = r#"[[model.closures]]
+name = "rope"
+kind = "distance"
+body_a = "l2"
+point_a = [1.0, 0.0, 0.0]
+body_b = "l1"
+point_b = [0.0, 1.0, 0.0]
+distance = 2.23606797749979"#;
+
 #[test]
 fn the_maximal_examples_load_match_the_schema_and_use_every_key() {
     let s = json_schema();
@@ -212,6 +260,8 @@ fn the_maximal_examples_load_match_the_schema_and_use_every_key() {
         MAXIMAL_LAGRANGIAN,
         MAXIMAL_LAGRANGIAN_DIAGONAL,
         MAXIMAL_URDF,
+        &maximal_closure(WELD),
+        &maximal_closure(DISTANCE),
     ];
     for text in examples {
         Scene::from_text(Path::new("maximal"), text).unwrap_or_else(|e| panic!("{e}"));

@@ -57,6 +57,8 @@ CHECKERS = (*SIMULATORS, SOLVER_ONLY)
 #: metrics with budgets (``programme_residual`` in a scene's table judges ``solver_residual``)
 BUDGETED = ("solver_residual", "parity_mass", "parity_bias", "instant_u", "replay_residual",
             "replay_deviation")
+#: metrics of scenes with loop closures (``[[model.closures]]``), budgeted in addition
+CLOSURE_BUDGETED = ("parity_closure", "reaction_closure")
 #: metrics of the solver_only check (``reference_error`` only where the scene gives references)
 SOLVER_ONLY_BUDGETED = ("solver_residual", "formulation_deviation", "formulation_force_deviation",
                         "reference_error")
@@ -98,6 +100,13 @@ def default_budgets(settings: dict[str, Any]) -> dict[str, tuple[float, str]]:
         "replay_deviation": (1e-6, "default (cross-simulator): max |dq|, |dv| of the replay from the "
                                    "solver (catalog 4e-13 .. 2e-9); an unstable programme needs a "
                                    "replay_horizon and its own budget"),
+        "parity_closure": (1e-11, "default (algebraic identity): the simulator's closure Jacobian "
+                                  "rows vs ours, both ways, as relative distances to the other's row "
+                                  "space (frame and sign free; catalog <= 2e-15)"),
+        "reaction_closure": (1e-9, "default (algebraic, through a constraint solve): the closures' "
+                                   "generalized reaction J^T f from the simulator's own multipliers under "
+                                   "the solver's u vs ours B_c^T lambda_c, relative to its max (Pinocchio "
+                                   "catalog <= 1e-13; MuJoCo's soft equalities need a scene budget)"),
         "formulation_deviation": (1e-8, f"default (integrated): max |dq|, |dv| between two formulations "
                                         f"solved at rtol {REF_RTOL:g}: both carry the integration error "
                                         "(about 1e4 x rtol for non-stiff scenes) and the conditioning of B"),
@@ -275,7 +284,9 @@ def _export(c: _Check) -> None:
 def _budgets(c: _Check) -> None:
     """Every metric's budget and the replayed span."""
     c.tol = {k: (float(v[0]), str(v[1])) for k, v in dict(c.scene.tolerances).items()}
-    c.res.budgets = budgets_for(c.tol, dict(c.scene.settings), c.simulator)
+    closures = bool(c.backend.report.get("closures"))
+    c.res.budgets = budgets_for(c.tol, dict(c.scene.settings), c.simulator,
+                                BUDGETED + CLOSURE_BUDGETED if closures else BUDGETED)
     full = c.scene.t1 - c.scene.t0
     horizon = c.options.horizon or (c.tol["replay_horizon"][0] if "replay_horizon" in c.tol else full)
     c.horizon = min(horizon, full)
@@ -378,7 +389,12 @@ def _parity(c: _Check) -> None:
     idx = np.unique(np.linspace(0, 2 * ref.steps, max(1, c.options.samples)).round().astype(int))
     times = ref.t[idx]
     sM = sR = 0.0
-    dmt, drt, dU = [], [], []
+    dmt, drt, dU, dJ, dR = [], [], [], [], []
+    sRc = 0.0
+    names = [r["name"] for r in scene.rows]
+    programme = [i for i, r in enumerate(scene.rows) if r["role"] == "programme"]
+    closures = be.report.get("closures", [])
+    closure_idx = [names.index(r) for cl in closures for r in cl["rows"] if r not in cl["set_aside"]]
     for k in idx:
         tk, qk, vk, ak = ref.t[k], ref.q[k], ref.v[k], ref.a[k]
         dyn = scene.dynamics(tk, qk, vk)
@@ -388,8 +404,17 @@ def _parity(c: _Check) -> None:
         dmt.append(float(np.abs(Ms - A).max()))
         drt.append(float(np.abs(rs - rhs).max()))
         sM, sR = max(sM, float(np.abs(A).max())), max(sR, float(np.abs(rhs).max()))
-        us = be.instant_u(tk, qk, vk, ak, np.asarray(dyn["B"]), np.asarray(dyn["gamma"]))
+        B = np.asarray(dyn["B"])
+        us = be.instant_u(tk, qk, vk, ak, B, np.asarray(dyn["gamma"]), programme)
         dU.append(float(np.abs(us - ref.u[k]).max()))
+        if closures:
+            Jsim = be.closure_jacobian(tk, qk, vk)
+            dJ.append(row_space_distance(B[closure_idx], Jsim))
+            # closure reactions: ours B_c^T lambda_c; the simulator's J^T f under the same u
+            ours_r = B[closure_idx].T @ np.asarray(ref.lam[k])[closure_idx]
+            sim_r = Jsim.T @ be.closure_forces(tk, qk, vk, ref.u[k])
+            dR.append(float(np.abs(sim_r - ours_r).max()))
+            sRc = max(sRc, float(np.abs(ours_r).max()))
     sR = sR if sR > 0 else 1.0
     # u relative to its own scale; without a programme (u = 0) relative to the forces.
     uabs = float(np.abs(ref.u).max()) if ref.u.size else 0.0
@@ -399,8 +424,17 @@ def _parity(c: _Check) -> None:
     c.res.notes.append(f"parity scales: max|A| {sM:.3g}, max|G+Q| {sR:.3g}; instant_u scale "
                        f"{'max|u|' if uabs > 0 else 'max|G+Q| (u = 0)'} {sU:.3g}; {len(idx)} sample states")
     c.first = {"parity_mass": (times, pm), "parity_bias": (times, pb), "instant_u": (times, iu)}
+    gate = ["parity_mass", "parity_bias"]
+    if closures:
+        c.res.metrics["parity_closure"] = float(max(dJ))
+        c.first["parity_closure"] = (times, np.array(dJ))
+        rc = np.array(dR) / max(sRc, 1e-300)
+        c.res.metrics["reaction_closure"] = float(rc.max())
+        c.first["reaction_closure"] = (times, rc)
+        c.res.notes.append(f"closure reaction scale: max|B_c^T lambda_c| {sRc:.3g}")
+        gate.append("parity_closure")
     bval = {b.metric: b.value for b in c.res.budgets}
-    bad = [m for m in ("parity_mass", "parity_bias") if not (c.res.metrics[m] <= bval[m])]
+    bad = [m for m in gate if not (c.res.metrics[m] <= bval[m])]
     if bad:
         c.res.notes.append("model parity failed (" + ", ".join(bad) + "): the exported model differs "
                            "from ours, the replay was not run and nothing is blamed on the dynamics")
@@ -412,8 +446,30 @@ def _parity(c: _Check) -> None:
         c.res.budgets = budgets
         c.res.reason = "model parity: " + "; ".join(
             f"{b.metric} {b.value:.3g} > {b.budget:.3g}" for b in c.res.breaches
-            if b.metric in ("parity_mass", "parity_bias")) + "; replay not run"
+            if b.metric in gate) + "; replay not run"
         raise _Stop(c.res.status, c.res.reason)
+
+
+def row_space_distance(ours: np.ndarray, sim: np.ndarray) -> float:
+    """Closure Jacobian parity: the largest relative distance of a row of either matrix from the
+    row space of the other (|b - proj b| / |b|; rows below 1e-12 of the largest norm, e.g. the
+    gradient-free z row of a planar loop, are skipped). Free of frame, sign and scaling of rows."""
+    def dist(X: np.ndarray, Y: np.ndarray) -> float:
+        if not len(X):
+            return 0.0
+        scale = max(float(np.abs(X).max()), float(np.abs(Y).max()) if Y.size else 0.0, 1e-300)
+        if not Y.size:
+            return float(np.linalg.norm(X, axis=1).max()) / scale
+        U, S, Vt = np.linalg.svd(Y, full_matrices=False)
+        basis = Vt[S > 1e-12 * S.max()] if S.size and S.max() > 0 else Vt[:0]
+        worst = 0.0
+        for x in X:
+            n = np.linalg.norm(x)
+            if n <= 1e-12 * scale:
+                continue
+            worst = max(worst, float(np.linalg.norm(x - basis.T @ (basis @ x)) / n))
+        return worst
+    return max(dist(ours, sim), dist(sim, ours))
 
 
 #: coordinates whose solver and replay q(t) the report overlays
@@ -449,6 +505,11 @@ def _replay(c: _Check) -> None:
         raise _Stop("error", f"{c.simulator} replay: non-finite programme residual at "
                              f"t = {rp.t[np.argmax(~np.isfinite(rabs))]:.6g}")
     res.metrics["replay_residual"] = float(rabs.max())
+    closures = be.report.get("closures", [])
+    if closures and R.shape[1]:  # the closure rows alone (info: how well the simulator holds the loops)
+        names = [r["name"] for r in scene.rows]
+        ci = [names.index(r) for cl in closures for r in cl["rows"] if r not in cl["set_aside"]]
+        res.info["replay_closure_residual"] = float(np.abs(R[:, ci]).max())
     res.metrics["replay_deviation"] = float(dev.max())
     g = growth_rate(rp.t, dev)
     res.info["replay_growth_rate"] = g

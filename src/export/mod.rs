@@ -57,8 +57,8 @@ mod urdf;
 #[cfg(test)]
 mod tests;
 
-pub use mjcf::mjcf;
-pub use urdf::{urdf, UrdfReport};
+pub use mjcf::{mjcf, mjcf_closed};
+pub use urdf::{urdf, urdf_closed, UrdfReport};
 
 use crate::tree::{Body, Model};
 use nalgebra::Matrix3;
@@ -138,6 +138,47 @@ pub struct ExportReport {
     pub root_joint: Option<RootJoint>,
     /// Free-text notes on conventions the harness must respect.
     pub notes: Vec<String>,
+    /// Loop closures of the scene and how the document carries them (see [`ClosureExport`]).
+    #[serde(default)]
+    pub closures: Vec<ClosureExport>,
+}
+
+/// MuJoCo equality softness of exported closures (measured in `MUJOCO_CLOSURES.md`): solref
+/// timeconst = this many steps of `<option timestep>` (dampratio 1); the harness keeps the ratio
+/// when it replays at another step.
+pub const MUJOCO_SOLREF_STEPS: f64 = 4.0;
+/// MuJoCo equality solimp of exported closures (near-rigid; the measured best).
+pub const MUJOCO_SOLIMP: [f64; 3] = [0.9999, 0.9999, 0.001];
+
+/// A loop closure (`[[model.closures]]`) as the exported document carries it, and the report's
+/// entry. MJCF: sites `site_a`/`site_b` (body frames as ours) joined by `<equality>` `connect`
+/// (point) or `weld` (weld), softness [`MUJOCO_SOLREF_STEPS`], [`MUJOCO_SOLIMP`]; a distance is
+/// refused (MuJoCo's fixed-length tendon equality is not exact: `MUJOCO_CLOSURES.md`). URDF has no closures: each
+/// body-side site is a massless link on a fixed joint (a Pinocchio frame), and the harness builds
+/// `pin.RigidConstraintModel`s (CONTACT_3D / CONTACT_6D) between the frames; a world side
+/// (`body_b = None`) is the world point `point_b` / orientation `quat_b`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ClosureExport {
+    pub name: String,
+    /// `point`, `weld` or `distance`.
+    pub kind: String,
+    pub body_a: String,
+    /// Body-frame point and frame orientation (w, x, y, z) of side a.
+    pub point_a: [f64; 3],
+    pub quat_a: [f64; 4],
+    /// None: the world.
+    pub body_b: Option<String>,
+    pub point_b: [f64; 3],
+    pub quat_b: [f64; 4],
+    pub distance: Option<f64>,
+    /// Site (MJCF) / frame (URDF link) names of the two sides; `site_b` is absent from a URDF
+    /// without a world link.
+    pub site_a: String,
+    pub site_b: String,
+    /// The scene's rows of this closure, in order (world-frame x, y, z [, rx, ry, rz]; one row
+    /// for a distance); `set_aside` lists those the solver set aside as dependent at t0.
+    pub rows: Vec<String>,
+    pub set_aside: Vec<String>,
 }
 
 /// Root joint required by a URDF export.

@@ -925,3 +925,41 @@ fn bundled_tree_scenes_export() {
         assert_eq!(r.format, Format::Urdf, "{name}");
     }
 }
+
+/// Loop closures reach the documents (sites + equality in MJCF, site frames in URDF) and the
+/// report lists them with their rows; expression system rows are still refused, naming them.
+#[test]
+fn closures_are_exported_and_other_system_rows_refused() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("references/scenes");
+    let s = crate::scene::Scene::load(dir.join("slider_crank_tree.toml")).unwrap();
+    let o = ExportOptions::default();
+    let (x, r) = s.export(Format::Mjcf, &o).unwrap();
+    assert!(
+        x.contains("<site name=\"pin__a\" pos=\"0.3 0.0 0.0\""),
+        "{x}"
+    );
+    assert!(
+        x.contains("<connect name=\"pin\" site1=\"pin__a\" site2=\"pin__b\" solref=\"0.004 1\"")
+    );
+    assert!(x.contains("equality=\"enable\""));
+    assert_eq!(r.closures.len(), 1);
+    assert_eq!(r.closures[0].rows, ["pin_x", "pin_y", "pin_z"]);
+    assert_eq!(r.closures[0].set_aside, ["pin_z"]);
+    let (u, r) = s.export(Format::Urdf, &o).unwrap();
+    assert!(u.contains("<link name=\"pin__a\"/>") && u.contains("<link name=\"pin__b\"/>"));
+    assert_eq!(r.q_map.len(), 3); // site frames add no coordinates
+                                  // the four-bar's crank row as a system constraint instead: refused, naming it
+    let text = std::fs::read_to_string(dir.join("four_bar.toml"))
+        .unwrap()
+        .replace("[[programme]]", "[[constraints]]");
+    let s = crate::scene::Scene::from_text(&dir.join("four_bar.toml"), &text).unwrap();
+    match s.export(Format::Mjcf, &o) {
+        Err(ExportError::Unsupported { what, .. }) => {
+            assert!(
+                what.contains("`crank`") && !what.contains("joint_b"),
+                "{what}"
+            )
+        }
+        other => panic!("{other:?}"),
+    }
+}

@@ -1,11 +1,11 @@
 //! URDF writer (for Pinocchio 4.1).
 
 use super::{
-    attractor_forces, check_options, children, esc, num, nums, Conversion, CoordMap, ExportError,
-    ExportOptions, ExportReport, Format, HarnessForce, RootJoint,
+    attractor_forces, check_options, children, esc, num, nums, ClosureExport, Conversion, CoordMap,
+    ExportError, ExportOptions, ExportReport, Format, HarnessForce, RootJoint,
 };
 use crate::tree::{JointType, Model};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 use std::collections::{HashMap, HashSet};
 use std::fmt::Write;
 
@@ -53,6 +53,17 @@ pub(crate) fn rpy(r: &Matrix3<f64>) -> [f64; 3] {
 /// (x, y, z, w). Springs and dampers are not part of URDF dynamics: they are listed as
 /// [`HarnessForce`]s.
 pub fn urdf(tree: &Model, options: &ExportOptions) -> Result<(String, UrdfReport), ExportError> {
+    urdf_closed(tree, &[], options)
+}
+
+/// [`urdf`] with the sites of loop closures (see [`ClosureExport`]): each site is a massless link
+/// `site` on a fixed joint `{site}__fixed` (a frame in Pinocchio; no coordinates), placed in its
+/// body's link frame; the harness closes the loops with Pinocchio constraint models.
+pub fn urdf_closed(
+    tree: &Model,
+    closures: &[ClosureExport],
+    options: &ExportOptions,
+) -> Result<(String, UrdfReport), ExportError> {
     check_options(options)?;
     let bodies = tree.bodies();
     let joints = tree.joints();
@@ -308,6 +319,49 @@ pub fn urdf(tree: &Model, options: &ExportOptions) -> Result<(String, UrdfReport
     }
     x.push_str(&links);
     x.push_str(&ujoints);
+    // closure sites: massless links on fixed joints, in the link frame of their body
+    for c in closures {
+        let sides = [
+            (&c.site_a, Some(&c.body_a), c.point_a, c.quat_a),
+            (&c.site_b, c.body_b.as_ref(), c.point_b, c.quat_b),
+        ];
+        for (site, body, point, quat) in sides {
+            let (parent, xyz) = match body {
+                Some(name) => {
+                    let b = tree.body_id(name).ok_or_else(|| {
+                        unsupported(format!("closure body '{name}' is not in the tree"))
+                    })?;
+                    (name.clone(), Vector3::from(point) - off(b))
+                }
+                None if root_ball.is_none() => ("world".to_string(), Vector3::from(point)),
+                None => continue, // no world link: the harness takes the report's point
+            };
+            if !link_names.insert(site.clone()) {
+                return Err(collide(site));
+            }
+            let jname = format!("{site}__fixed");
+            if !joint_names.insert(jname.clone()) {
+                return Err(collide(&jname));
+            }
+            let r = UnitQuaternion::from_quaternion(Quaternion::new(
+                quat[0], quat[1], quat[2], quat[3],
+            ))
+            .to_rotation_matrix()
+            .into_inner();
+            let _ = writeln!(
+                x,
+                "  <link name=\"{}\"/>\n  <joint name=\"{}\" type=\"fixed\">\n    \
+                 <parent link=\"{}\"/>\n    <child link=\"{}\"/>\n    \
+                 <origin xyz=\"{}\" rpy=\"{}\"/>\n  </joint>",
+                esc(site),
+                esc(&jname),
+                esc(&parent),
+                esc(site),
+                nums(xyz.as_slice()),
+                nums(&rpy(&r))
+            );
+        }
+    }
     let _ = writeln!(x, "</robot>");
 
     let mut notes = vec![
@@ -345,6 +399,7 @@ pub fn urdf(tree: &Model, options: &ExportOptions) -> Result<(String, UrdfReport
         gravity: tree.fields().gravity,
         root_joint,
         notes,
+        closures: closures.to_vec(),
     };
     Ok((x, report))
 }

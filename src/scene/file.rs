@@ -20,7 +20,16 @@ pub const ROOT_JOINTS: [&str; 2] = ["fixed", "free"];
 /// Keys of `[model]` only a lagrangian model has.
 pub const LAGRANGIAN_ONLY: [&str; 4] = ["coordinates", "mass_matrix", "mass_diagonal", "potential"];
 /// Keys of `[model]` only a tree model has.
-pub const TREE_ONLY: [&str; 5] = ["bodies", "sites", "gravity", "attractors", "point_forces"];
+pub const TREE_ONLY: [&str; 6] = [
+    "bodies",
+    "sites",
+    "gravity",
+    "attractors",
+    "point_forces",
+    "closures",
+];
+/// Loop-closure kinds (`kind` of a `[[model.closures]]` entry).
+pub const CLOSURE_KINDS: [&str; 3] = ["point", "weld", "distance"];
 /// Joint types (`type` of a joint).
 pub const JOINT_TYPES: [&str; 4] = ["hinge", "slide", "ball", "free"];
 /// Joint types that need an `axis`.
@@ -346,6 +355,10 @@ pub struct ModelFile {
     #[serde(default)]
     #[schemars(with = "Vec<FrameFile>")]
     pub frames: Vec<Spanned<FrameFile>>,
+    /// tree: loop closures between bodies (system rows: point 3, weld 6, distance 1).
+    #[serde(default)]
+    #[schemars(with = "Vec<ClosureFile>")]
+    pub closures: Vec<Spanned<ClosureFile>>,
 }
 
 /// A frame fixed in a link of an imported robot.
@@ -368,6 +381,45 @@ pub struct FrameFile {
 
 fn unit_quat() -> [f64; 4] {
     [1.0, 0.0, 0.0, 0.0]
+}
+
+/// A loop closure: a point (or frame) of body a held on a point (or frame) of body b (or the
+/// world). Its rows are system constraints named after it.
+#[derive(Clone, Debug, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+#[schemars(rename = "closure")]
+pub struct ClosureFile {
+    /// Closure name (an identifier): prefix of its row names (name_x, name_y, name_z; weld also
+    /// name_rx, name_ry, name_rz; distance: name).
+    #[schemars(with = "Identifier")]
+    pub name: String,
+    /// point: point_a = point_b (3 rows); weld: frame a = frame b (6 rows); distance: |point_a -
+    /// point_b| = distance (1 row).
+    #[schemars(schema_with = "schema::closure_kind")]
+    pub kind: Spanned<String>,
+    /// First body.
+    pub body_a: String,
+    /// Point of body_a, its body frame (m).
+    #[serde(default)]
+    pub point_a: [f64; 3],
+    /// weld: orientation of frame a in body_a, quaternion (w, x, y, z).
+    #[serde(default)]
+    #[schemars(with = "[f64; 4]", extend("default" = [1.0, 0.0, 0.0, 0.0]))]
+    pub quat_a: Option<[f64; 4]>,
+    /// Second body, or world.
+    #[serde(default = "world")]
+    pub body_b: String,
+    /// Point of body_b (world: world coordinates) (m).
+    #[serde(default)]
+    pub point_b: [f64; 3],
+    /// weld: orientation of frame b in body_b, quaternion (w, x, y, z).
+    #[serde(default)]
+    #[schemars(with = "[f64; 4]", extend("default" = [1.0, 0.0, 0.0, 0.0]))]
+    pub quat_b: Option<[f64; 4]>,
+    /// distance: the fixed distance (m), > 0; required for distance, refused otherwise.
+    #[serde(default)]
+    #[schemars(with = "Option<f64>", extend("exclusiveMinimum" = 0.0))]
+    pub distance: Option<f64>,
 }
 
 /// A rigid body of a tree model.

@@ -1,5 +1,6 @@
 //! From the TOML file to a validated [`Scene`].
 
+use super::closures::{Closure, ClosureRows, SetAside};
 use super::error::{SceneError, Source};
 use super::file::*;
 use super::lagrangian::LagrangianModel;
@@ -83,10 +84,11 @@ pub(super) fn load(src: Source) -> R<Scene> {
     let model = file.model.get_ref();
     let kind = model.kind.get_ref().as_str();
     let mut import_notes = vec![];
+    let mut extra: (Vec<Closure>, SetAsideRows) = (vec![], None);
     let (system, spans) = match kind {
         "lagrangian" => {
             let (m, mut sym) = lagrangian(&src, model, &params)?;
-            let (c, spans) = rows(&src, &file, &mut sym)?;
+            let (c, spans) = rows(&src, &file, &mut sym, &[])?;
             let (q0, v0) = initial(&src, &file, &params, &m.q_names(), &m.v_names(), None)?;
             let (t0, t1) = span(&file);
             let p = Problem {
@@ -102,9 +104,9 @@ pub(super) fn load(src: Source) -> R<Scene> {
             (SceneSystem::Lagrangian(p), spans)
         }
         "tree" | "urdf" => {
-            let (m, mut sym, notes) = tree_scene(&src, model, &params)?;
+            let (m, mut sym, notes, (closures, closure_rows)) = tree_scene(&src, model, &params)?;
             import_notes = notes;
-            let (c, spans) = rows(&src, &file, &mut sym)?;
+            let (c, mut spans) = rows(&src, &file, &mut sym, &closure_rows)?;
             let neutral = tree::neutral(m.tree());
             let (q0, v0) = initial(
                 &src,
@@ -115,7 +117,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
                 Some((m.tree(), neutral.as_slice())),
             )?;
             let (t0, t1) = span(&file);
-            let p = Problem {
+            let mut p = Problem {
                 model: m,
                 constraints: c,
                 t0,
@@ -125,6 +127,15 @@ pub(super) fn load(src: Source) -> R<Scene> {
             };
             check_mass(&src, &file, &p)?;
             check_finite_at_start(&src, &file, &p)?;
+            let set_aside = closure_rows_kept(
+                &src,
+                &file,
+                &mut p,
+                &mut spans,
+                closure_rows.len(),
+                &settings,
+            )?;
+            extra = (closures, set_aside);
             (SceneSystem::Tree(p), spans)
         }
         other => {
@@ -159,9 +170,75 @@ pub(super) fn load(src: Source) -> R<Scene> {
         references,
         source: src,
         row_spans: spans,
+        closures: extra.0,
+        set_aside: extra.1,
         view: Arc::new(view),
         import_notes,
     })
+}
+
+type SetAsideRows = Option<(Vec<SetAside>, ExprConstraints)>;
+
+/// Set aside the closure rows dependent at t0 ([`super::closures::set_aside_dependent`]), then
+/// check the number of rows left. The set-aside rows must hold at t0 too; they stay available
+/// (as constraints of their own) for monitoring.
+fn closure_rows_kept<M: Model>(
+    src: &Source,
+    file: &SceneFile,
+    p: &mut Problem<M, ExprConstraints>,
+    spans: &mut Vec<Range<usize>>,
+    n_closure: usize,
+    settings: &Settings,
+) -> R<SetAsideRows> {
+    if n_closure == 0 {
+        return Ok(None);
+    }
+    let nc = file.constraints.len();
+    let aside = super::closures::set_aside_dependent(p, nc..nc + n_closure, &settings.rank());
+    let s = p.constraints.rows().len();
+    let drop: Vec<usize> = aside.iter().map(|(i, _)| *i).collect();
+    let keep: Vec<usize> = (0..s).filter(|i| !drop.contains(i)).collect();
+    let (kept, removed) = p.constraints.split(&keep, &drop);
+    // The set-aside rows must hold at the initial state like every other row.
+    let mut ws = removed.workspace::<f64>();
+    let mut g = vec![0.0; drop.len()];
+    let zero = vec![0.0; p.v0.len()];
+    removed.eval(&mut ws, p.t0, &p.q0, &p.v0, &zero, &mut g);
+    for (k, &i) in drop.iter().enumerate() {
+        if !(g[k].abs() <= settings.consistency_tol) {
+            return Err(src.error(
+                spans[i].clone(),
+                &format!("row {}", removed.rows()[k].name),
+                format!(
+                    "closure row `{}` is set aside as dependent at t0 but the initial state                      violates it by {:.3e}: the loop is not assembled",
+                    removed.rows()[k].name,
+                    g[k]
+                ),
+            ));
+        }
+    }
+    let nv = p.model.nv();
+    if keep.len() > nv {
+        let first = keep[nv];
+        return Err(src.error(
+            spans[first].clone(),
+            &format!("row {}", p.constraints.rows()[first].name),
+            format!(
+                "too many independent rows: {} (constraints, closures and programme) for {nv}                  degrees of freedom",
+                keep.len()
+            ),
+        ));
+    }
+    let report = aside
+        .into_iter()
+        .map(|(i, reason)| SetAside {
+            row: p.constraints.rows()[i].name.clone(),
+            reason,
+        })
+        .collect();
+    *spans = keep.iter().map(|&i| spans[i].clone()).collect();
+    p.constraints = kept;
+    Ok(Some((report, removed)))
 }
 
 /// Evaluate parameters (numbers or expressions of other parameters) in dependency order.
@@ -298,7 +375,7 @@ fn and_list(names: &[&str]) -> String {
     }
 }
 
-fn is_identifier(s: &str) -> bool {
+pub(super) fn is_identifier(s: &str) -> bool {
     let mut c = s.chars();
     matches!(c.next(), Some(ch) if ch.is_ascii_alphabetic() || ch == '_')
         && c.all(|ch| ch.is_ascii_alphanumeric() || ch == '_')
@@ -328,6 +405,7 @@ fn lagrangian(
         || m.gravity.is_some()
         || !m.point_forces.is_empty()
         || !m.attractors.is_empty()
+        || !m.closures.is_empty()
     {
         return Err(src.error(
             m.kind.span(),
@@ -497,7 +575,7 @@ fn tree_scene(
     src: &Source,
     m: &ModelFile,
     params: &[(String, f64)],
-) -> R<(TreeSceneModel, Symbols, Vec<String>)> {
+) -> R<(TreeSceneModel, Symbols, Vec<String>, ClosureRows)> {
     let urdf = m.kind.get_ref() == "urdf";
     let (specs, joint_names, link_sites, notes) = if urdf {
         urdf_specs(src, m, params)?
@@ -602,6 +680,7 @@ fn tree_scene(
             pos: sf.pos,
         });
     }
+    let closures = super::closures::load(src, m, &tree, &joint_names, &mut sites)?;
     let q_names = tree.q_names().to_vec();
     let v_names = tree.v_names().to_vec();
     let mut sym = symbols(
@@ -666,7 +745,7 @@ fn tree_scene(
         coordinate_forces.push((i, e));
     }
     let model = TreeSceneModel::new(tree, sym.layout.clone(), point_forces, coordinate_forces);
-    Ok((model, sym, notes))
+    Ok((model, sym, notes, closures))
 }
 
 /// Bodies, joint names, link and frame names (sites) and notes of a `urdf` model.
@@ -983,6 +1062,7 @@ fn rows(
     src: &Source,
     file: &SceneFile,
     sym: &mut Symbols,
+    closure_rows: &[(RowFile, String)],
 ) -> R<(ExprConstraints, Vec<Range<usize>>)> {
     let mut specs = vec![];
     let mut exprs = vec![];
@@ -992,6 +1072,11 @@ fn rows(
         .iter()
         .enumerate()
         .map(|(i, r)| (r, Role::System, format!("constraints[{i}]")))
+        .chain(
+            closure_rows
+                .iter()
+                .map(|(r, field)| (r, Role::System, field.clone())),
+        )
         .chain(
             file.programme
                 .iter()
@@ -1038,9 +1123,11 @@ fn rows(
         spans.push(r.expr.span());
     }
     let nv = sym.layout.nv;
-    if specs.len() > nv {
+    // Closure rows are counted after the dependent ones are set aside (`closure_rows_kept`).
+    if specs.len() - closure_rows.len() > nv {
         // Point at the first row beyond the number of degrees of freedom.
         let nc = file.constraints.len();
+        let n_user = specs.len() - closure_rows.len();
         let (row, field) = if nv < nc {
             (&file.constraints[nv], format!("constraints[{nv}]"))
         } else {
@@ -1050,8 +1137,7 @@ fn rows(
             row.name.span(),
             &field,
             format!(
-                "too many rows: {} (constraints + programme) for {nv} degrees of freedom, at most {nv}",
-                specs.len()
+                "too many rows: {n_user} (constraints + programme) for {nv} degrees of freedom, at most {nv}"
             ),
         ));
     }

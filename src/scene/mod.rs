@@ -9,6 +9,7 @@
 //!
 //! Every error names the file, line, column and field ([`SceneError`]).
 
+pub mod closures;
 mod error;
 mod export;
 pub mod file;
@@ -86,6 +87,10 @@ pub struct Scene {
     pub source: Source,
     /// Byte span of each row's expression in the file (row order of the constraints).
     pub row_spans: Vec<std::ops::Range<usize>>,
+    /// Loop closures of a tree scene (`[[model.closures]]`), for the exporters.
+    pub closures: Vec<closures::Closure>,
+    /// Closure rows set aside as dependent at t0 (with why), and those rows, for monitoring.
+    pub set_aside: Option<(Vec<closures::SetAside>, ExprConstraints)>,
     /// What 3D views draw besides the mechanism: body shapes, targets, traced sites.
     pub view: std::sync::Arc<crate::output::View>,
     /// What an imported robot file had that the model does not use (joint limits, mimic,
@@ -225,6 +230,20 @@ impl Scene {
                 format!("the initial state cannot be used: {code}"),
             ),
         }
+    }
+
+    /// Residuals of the closure rows set aside at t0 (none: empty) at (t, q, v): they hold along
+    /// the motion when they were truly dependent, so callers monitor them.
+    pub fn set_aside_residuals(&self, t: f64, q: &[f64], v: &[f64]) -> Vec<(String, f64)> {
+        use crate::programme::Constraints;
+        let Some((_, rows)) = &self.set_aside else {
+            return vec![];
+        };
+        let mut ws = rows.workspace::<f64>();
+        let mut g = vec![0.0; rows.rows().len()];
+        let zero = vec![0.0; v.len()];
+        rows.eval(&mut ws, t, q, v, &zero, &mut g);
+        rows.rows().iter().map(|r| r.name.clone()).zip(g).collect()
     }
 
     /// A tolerance by name.

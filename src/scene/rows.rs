@@ -109,6 +109,19 @@ impl ExprConstraints {
         }
     }
 
+    /// Two row sets from this one: the rows `keep` and the rows `other` (each in the given order).
+    pub fn split(&self, keep: &[usize], other: &[usize]) -> (Self, Self) {
+        let part = |ix: &[usize]| {
+            ExprConstraints::new(
+                ix.iter().map(|&i| self.specs[i].clone()).collect(),
+                ix.iter().map(|&i| self.exprs[i].clone()).collect(),
+                self.layout.clone(),
+                self.signals.clone(),
+            )
+        };
+        (part(keep), part(other))
+    }
+
     /// The expressions, in row order.
     pub fn exprs(&self) -> &[Expr] {
         &self.exprs

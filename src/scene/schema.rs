@@ -3,8 +3,8 @@
 //! it with `PROGMO_BLESS=1 cargo test --test schema` (the test fails while the copy differs).
 
 use super::file::{
-    SceneFile, JOINTS_WITH_AXIS, JOINT_TYPES, LAGRANGIAN_ONLY, MODEL_KINDS, ROOT_JOINTS,
-    SIMULATORS, TARGET_KINDS, TREE_ONLY, URDF_ONLY,
+    SceneFile, CLOSURE_KINDS, JOINTS_WITH_AXIS, JOINT_TYPES, LAGRANGIAN_ONLY, MODEL_KINDS,
+    ROOT_JOINTS, SIMULATORS, TARGET_KINDS, TREE_ONLY, URDF_ONLY,
 };
 use crate::solve::{DRIFT_NAMES, FORMULATION_NAMES, INTEGRATOR_NAMES};
 use schemars::transform::{RecursiveTransform, RestrictFormats};
@@ -71,6 +71,11 @@ fn tidy(s: &mut Schema) {
 
 fn string_enum(names: &[&str]) -> Schema {
     json_schema!({ "type": "string", "enum": names })
+}
+
+/// `kind` of a closure.
+pub(super) fn closure_kind(_: &mut SchemaGenerator) -> Schema {
+    string_enum(&CLOSURE_KINDS)
 }
 
 /// `model.kind`.

@@ -7,7 +7,11 @@ scene itself (to evaluate its expression forces at the simulator's own states):
 * ``model_terms(t, q, v) -> (M, rhs)`` in OUR coordinates, ``rhs`` = every non-control generalized
   force the simulator's equations contain (``-bias + passive + harness forces``, including the
   scene's point and coordinate forces as the simulator applies them), to compare with our ``G + Q``;
-* ``instant_u(t, q, v, a, B, gamma) -> u`` the control force the simulator itself derives;
+* ``instant_u(t, q, v, a, B, gamma, programme) -> u`` the control force the simulator itself
+  derives (with loop closures: split over the simulator's own closure Jacobian and our programme
+  rows ``B[programme]``);
+* ``closure_jacobian(t, q, v)`` the simulator's Jacobian of the scene's loop closures (rows in its
+  own order and frame) in OUR v, and ``closure_forces(t, q, v, u)`` its closure multipliers under u;
 * ``replay(ref, record_frames) -> Replay`` open-loop replay of ``ref.u`` (u at each RK4 stage).
 
 A back-end that meets a harness force it cannot apply raises :class:`Unsupported` naming it, and
@@ -50,7 +54,11 @@ class Backend(Protocol):
     def model_terms(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
 
     def instant_u(self, t: float, q: np.ndarray, v: np.ndarray, a: np.ndarray, B: np.ndarray,
-                  gamma: np.ndarray) -> np.ndarray: ...
+                  gamma: np.ndarray, programme: list[int] | None = None) -> np.ndarray: ...
+
+    def closure_jacobian(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray: ...
+
+    def closure_forces(self, t: float, q: np.ndarray, v: np.ndarray, u: np.ndarray) -> np.ndarray: ...
 
     def replay(self, ref: Any, frame_every: int = 0) -> Any: ...
 

@@ -1,7 +1,11 @@
 """MuJoCo 4.0 back-end: the scene's MJCF export, RK4 with u fed at every stage through
 ``mjcb_control`` (process-global: always cleared in ``finally``). The scene's point forces go
 through ``xfrc_applied`` (force at the body's CoM plus the moment of its lever arm), its coordinate
-forces and the attractors through ``qfrc_applied``, all evaluated from the stage's own state."""
+forces and the attractors through ``qfrc_applied``, all evaluated from the stage's own state.
+
+Loop closures are the export's ``<equality>`` elements (soft constraints: see
+``src/export/MUJOCO_CLOSURES.md``); their solref timeconst keeps its ratio to the step when the
+replay changes the step."""
 
 from __future__ import annotations
 
@@ -51,12 +55,20 @@ class MujocoBackend:
             else:  # springs and dampers are in the MJCF (qfrc_passive)
                 pass
         self._jac = np.zeros((3, m.nv))
+        self._h0 = float(m.opt.timestep)
+        self._solref0 = np.array(m.eq_solref, float).copy()
+        #: rows of each closure in MuJoCo's efc order (connect 3, weld 6, tendon 1)
+        self.closure_names = [c["name"] for c in report.get("closures", [])]
         self.body_names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, i) for i in range(m.nbody)]
         self.body_id = {n: i for i, n in enumerate(self.body_names)}
 
     def notes(self) -> list[str]:
         ch = self.report.get("mass_changes", [])
         s = f"MuJoCo {mujoco.__version__}, RK4, u written to qfrc_applied at every stage (mjcb_control)"
+        if self.m.neq:
+            s += (f"; closures {', '.join(self.closure_names)} as equality constraints (solref timeconst "
+                  f"{self._solref0[0, 0] / self._h0:g} steps, solimp {' '.join(f'{x:g}' for x in self.m.eq_solimp[0, :3])}; "
+                  "Newton, tolerance 1e-15)")
         if ch:
             s += "; mass floor on " + ", ".join(
                 f'{c["body"]} (+m {c["delta_mass"]:.0e}, +I {c["delta_inertia"]:.0e})' for c in ch)
@@ -122,19 +134,62 @@ class MujocoBackend:
         P = cm.P(q)
         return P.T @ M @ P, P.T @ (rhs_sim - M @ cm.Pdot_v(q, v))
 
-    def instant_u(self, t, q, v, a, B, gamma):
+    def _equality_rows(self) -> np.ndarray:
+        """Indices of the efc rows of equality constraints (after mj_forward), in efc order."""
+        return np.flatnonzero(np.asarray(self.d.efc_type)[: self.d.nefc] == mujoco.mjtConstraint.mjCNSTR_EQUALITY)
+
+    def closure_jacobian(self, t, q, v) -> np.ndarray:
+        """MuJoCo's Jacobian of the equality (closure) rows, efc order, in OUR v."""
+        m, d, cm = self.m, self.d, self.cm
+        if not m.neq:
+            return np.zeros((0, cm.nv))
+        mujoco.set_mjcb_control(None)
+        self._set(t, q, v)
+        mujoco.mj_forward(m, d)
+        J = np.asarray(d.efc_J).reshape(-1, m.nv)[: d.nefc][self._equality_rows()]
+        return J @ cm.P(q)
+
+    def closure_forces(self, t, q, v, u) -> np.ndarray:
+        """MuJoCo's equality forces (efc_force, efc order) at (t, q, v) under the control force u."""
         m, d, cm = self.m, self.d, self.cm
         mujoco.set_mjcb_control(None)
         self._set(t, q, v)
-        d.qacc[:] = cm.a_to_sim(q, v, a)
-        mujoco.mj_inverse(m, d)
-        f = d.qfrc_inverse.copy() - self.harness() - self.expression(t) - self._xfrc_generalized()
-        return cm.f_from_sim(q, f)
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        d.qfrc_applied[:] = cm.f_to_sim(q, u) + self.harness() + self.expression(t)
+        mujoco.mj_forward(m, d)
+        return np.asarray(d.efc_force)[: d.nefc][self._equality_rows()].copy()
+
+    def instant_u(self, t, q, v, a, B, gamma, programme=None):
+        """u from MuJoCo's inverse dynamics (mj_inverse, equality off: M a + bias - passive). With
+        closures (``programme``: the programme rows' indices in B) that force is split over MuJoCo's
+        own closure Jacobian (efc_J) and our programme rows (least squares), u = B_p^T lambda_p."""
+        m, d, cm = self.m, self.d, self.cm
+        mujoco.set_mjcb_control(None)
+        Jc = self.closure_jacobian(t, q, v) if m.neq else None
+        eq = int(mujoco.mjtDisableBit.mjDSBL_EQUALITY)
+        flags = m.opt.disableflags
+        m.opt.disableflags = flags | eq
+        try:
+            self._set(t, q, v)
+            d.qacc[:] = cm.a_to_sim(q, v, a)
+            mujoco.mj_inverse(m, d)
+            f = d.qfrc_inverse.copy() - self.harness() - self.expression(t) - self._xfrc_generalized()
+        finally:
+            m.opt.disableflags = flags
+        total = cm.f_from_sim(q, f)
+        if Jc is None:
+            return total
+        Bp = B[programme] if programme is not None else B[:0]
+        lam = np.linalg.lstsq(np.vstack([Jc, Bp]).T, total, rcond=None)[0]
+        return Bp.T @ lam[len(Jc):]
 
     def replay(self, ref: Reference, frame_every: int = 0) -> Replay:
         m, d, cm = self.m, self.d, self.cm
         h, n, t0 = ref.h, ref.steps, ref.t0
         m.opt.timestep = h
+        if m.neq:  # closures: solref timeconst keeps its ratio to the step (MUJOCO_CLOSURES.md)
+            m.eq_solref[:, 0] = self._solref0[:, 0] * h / self._h0
         nq, nv = len(ref.q[0]), len(ref.v[0])
         Q = np.zeros((n + 1, nq))
         V = np.zeros((n + 1, nv))

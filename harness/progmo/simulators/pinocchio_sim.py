@@ -3,7 +3,16 @@ acceleration oracle, Lie-group-correct (RKMK4 with ``dexpinv = inv(dIntegrate(..
 model has ball or free joints; springs, dampers and attractors applied by the harness from
 Pinocchio's own state as the export report prescribes; the scene's point forces as Pinocchio
 external forces (``fext``, one spatial force per joint in its local frame) through ``aba`` and
-``rnea``, its coordinate forces added to tau."""
+``rnea``, its coordinate forces added to tau.
+
+Loop closures (the report's ``closures``; URDF cannot carry them): one ``pin.RigidConstraintModel``
+per closure between the frames of its two sites (``CONTACT_3D`` point, ``CONTACT_6D`` weld,
+``LOCAL_WORLD_ALIGNED`` rows; a world side is joint 0 at the report's point), and the replay's
+acceleration oracle is ``pin.constraintDynamics`` (``initConstraintDynamics`` once,
+``ProximalSettings`` of :data:`PROX`) instead of ``aba``, with u (and every scene force, point
+forces mapped through ``rnea`` with ``fext``) applied at every RK4 stage. Baumgarte gains
+:data:`BAUMGARTE` (Kp, Kd) = (0, 0): the closures drift only with the RK4 error, which the replay
+metrics then measure (Pinocchio solves J a = -gamma exactly at every stage)."""
 
 from __future__ import annotations
 
@@ -14,7 +23,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pinocchio as pin
 
-from . import BlowUp, ExpressionForces, attractor_force, require_forces
+from . import BlowUp, ExpressionForces, Unsupported, attractor_force, require_forces
 from .replay import CoordMap, Reference, Replay
 
 ACC_LIMIT = 1e8
@@ -32,6 +41,20 @@ def version() -> str:
 
 
 SUPPORTED = ("attractor", "spring", "damper", "point_force", "coordinate_force")
+
+#: proximal solver of constraintDynamics: absolute and relative accuracy, mu, iterations. mu > 0
+#: regularises the rows a planar loop's spatial closure leaves without gradient (the solver sets
+#: them aside); the iterations refine the solution to the accuracy.
+PROX = (1e-13, 1e-13, 1e-8, 50)
+#: Baumgarte corrector gains (Kp, Kd) of the closure constraint models: none (see the module doc)
+BAUMGARTE = (0.0, 0.0)
+#: Pinocchio's contact type of each closure kind (distance: no constraint model in Pinocchio 4.1)
+CONTACT = {"point": "CONTACT_3D", "weld": "CONTACT_6D"}
+
+
+def _se3(point, quat_wxyz) -> "pin.SE3":
+    w, x, y, z = quat_wxyz
+    return pin.SE3(pin.Quaternion(w, x, y, z).normalized().toRotationMatrix(), np.array(point, float))
 
 
 class PinocchioBackend:
@@ -88,13 +111,51 @@ class PinocchioBackend:
         if "attractor" in withhold:
             self.attractors = []
         self.data = model.createData()
+        self._closures(report.get("closures", []))
+        sites = {c[k] for c in report.get("closures", []) for k in ("site_a", "site_b")}
         self.body_frames = [(f.name, i) for i, f in enumerate(model.frames)
-                            if f.type == pin.FrameType.BODY and f.name != "universe"]
+                            if f.type == pin.FrameType.BODY and f.name != "universe" and f.name not in sites]
         #: our body name -> the Pinocchio joint that carries its link
         self.body_joint = {name: model.frames[i].parentJoint for name, i in self.body_frames}
 
+    def _closures(self, closures: list[dict]) -> None:
+        """Constraint models of the loop closures (module doc)."""
+        model = self.model
+        self.cmodels = pin.StdVec_RigidConstraintModel()
+        self.closure_rows: list[tuple[str, int]] = []  # (closure, row count) in model order
+        for c in closures:
+            if c["kind"] not in CONTACT:
+                raise Unsupported(f"Pinocchio has no constraint model for the {c['kind']} closure "
+                                  f"{c['name']!r} (RigidConstraintModel: CONTACT_3D and CONTACT_6D only)")
+
+            def side(site: str, body, point, quat):
+                if body is None and not model.existFrame(site):
+                    return 0, _se3(point, quat)
+                fr = model.frames[model.getFrameId(site)]
+                return fr.parentJoint, fr.placement
+            j1, p1 = side(c["site_a"], c["body_a"], c["point_a"], c["quat_a"])
+            j2, p2 = side(c["site_b"], c["body_b"], c["point_b"], c["quat_b"])
+            cm = pin.RigidConstraintModel(getattr(pin.ContactType, CONTACT[c["kind"]]), model, j1, p1, j2, p2,
+                                          pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+            cm.name = c["name"]
+            bp = cm.m_baumgarte_parameters if hasattr(cm, "m_baumgarte_parameters") else None
+            if bp is not None:
+                bp.Kp, bp.Kd = BAUMGARTE
+            self.cmodels.append(cm)
+            self.closure_rows.append((c["name"], 3 if c["kind"] == "point" else 6))
+        self.cdatas = pin.StdVec_RigidConstraintData()
+        for cm in self.cmodels:
+            self.cdatas.append(cm.createData())
+        self.prox = pin.ProximalSettings(*PROX)
+        if len(self.cmodels):
+            pin.initConstraintDynamics(model, self.data, self.cmodels, self.cdatas)
+
     def notes(self) -> list[str]:
-        s = f"Pinocchio {pin.__version__}, harness RK4{' (RKMK4, Lie group)' if self.lie else ''} with pin.aba"
+        oracle = "pin.constraintDynamics (closures: " + ", ".join(
+            f"{n} {'CONTACT_3D' if k == 3 else 'CONTACT_6D'}" for n, k in self.closure_rows) + \
+            f"; proximal accuracy {PROX[0]:g}, mu {PROX[2]:g}; Baumgarte Kp, Kd = {BAUMGARTE})" \
+            if len(self.cmodels) else "pin.aba"
+        s = f"Pinocchio {pin.__version__}, harness RK4{' (RKMK4, Lie group)' if self.lie else ''} with {oracle}"
         if self.report.get("root_joint"):
             s += f"; root joint {self.report['root_joint']['python']}"
         return [s]
@@ -155,10 +216,42 @@ class PinocchioBackend:
         P = cm.P(q)
         return P.T @ M @ P, P.T @ (rhs_sim - M @ cm.Pdot_v(q, v))
 
-    def instant_u(self, t, q, v, a, B, gamma):
+    def closure_jacobian(self, t, q, v) -> np.ndarray:
+        """Pinocchio's Jacobian of the closure constraints (rows in model order) in OUR v."""
+        if not len(self.cmodels):
+            return np.zeros((0, self.cm.nv))
+        qs = self.cm.q_to_sim(q)
+        pin.computeJointJacobians(self.model, self.data, qs)  # includes forward kinematics
+        for cmod, cdat in zip(self.cmodels, self.cdatas):
+            cmod.calc(self.model, self.data, cdat)  # the contact placements oMc1, oMc2
+        J = pin.getConstraintsJacobian(self.model, self.data, self.cmodels, self.cdatas)
+        return np.asarray(J) @ self.cm.P(q)
+
+    def closure_forces(self, t, q, v, u) -> np.ndarray:
+        """The closures' multipliers (contact forces, rows in model order) of constraintDynamics
+        under the control force u (our coordinates) at (t, q, v)."""
+        qs, vs = self.cm.q_to_sim(q), self.cm.v_to_sim(q, v)
+        tau = self.cm.f_to_sim(q, u) + self.harness(qs, vs) + self._external(t, qs, vs)
+        pin.constraintDynamics(self.model, self.data, qs, vs, tau, self.cmodels, self.cdatas, self.prox)
+        return np.concatenate([np.asarray(d.contact_force.vector if k == 6 else d.contact_force.linear)
+                               for d, (_, k) in zip(self.cdatas, self.closure_rows)])
+
+    def instant_u(self, t, q, v, a, B, gamma, programme=None):
         """Ideal reaction of the programme rows (B a = gamma in our coordinates) by Pinocchio's
-        constrained dynamics: J a_sim + gamma_pin = 0 with J = B P^T, gamma_pin = -(gamma + J Pdv)."""
+        constrained dynamics: J a_sim + gamma_pin = 0 with J = B P^T, gamma_pin = -(gamma + J Pdv).
+        With closures (``programme``: the programme rows' indices in B): the force Pinocchio's
+        inverse dynamics needs for a (rnea) split over Pinocchio's own closure Jacobian and our
+        programme rows (least squares), u = B_p^T lambda_p."""
         model, data, cm = self.model, self.data, self.cm
+        if len(self.cmodels):
+            qs, vs = cm.q_to_sim(q), cm.v_to_sim(q, v)
+            f = pin.rnea(model, data, qs, vs, cm.a_to_sim(q, v, a)) - self.harness(qs, vs) \
+                - self._external(t, qs, vs)
+            total = cm.f_from_sim(q, f)
+            Bp = B[programme] if programme is not None else B[:0]
+            Jc = self.closure_jacobian(t, q, v)
+            lam = np.linalg.lstsq(np.vstack([Jc, Bp]).T, total, rcond=None)[0]
+            return Bp.T @ lam[len(Jc):]
         qs, vs = cm.q_to_sim(q), cm.v_to_sim(q, v)
         P = cm.P(q)
         J = np.ascontiguousarray(B @ P.T)
@@ -172,7 +265,14 @@ class PinocchioBackend:
         q = self.cm.q_from_sim(qs)
         fext, fc = self.expression(t, qs, vs)
         tau = self.cm.f_to_sim(q, ref.u_at(t)) + self.harness(qs, vs) + fc
-        if fext is None:
+        if len(self.cmodels):
+            if fext is not None:  # point forces by Pinocchio's own mapping J^T f (rnea difference)
+                z = np.zeros(self.model.nv)
+                tau = tau + pin.rnea(self.model, self.data, qs, vs, z) \
+                    - pin.rnea(self.model, self.data, qs, vs, z, fext)
+            a = pin.constraintDynamics(self.model, self.data, qs, vs, tau, self.cmodels, self.cdatas,
+                                       self.prox)
+        elif fext is None:
             a = pin.aba(self.model, self.data, qs, vs, tau)
         else:
             a = pin.aba(self.model, self.data, qs, vs, tau, fext)

@@ -1,0 +1,368 @@
+//! Loop closures of tree scenes (`[[model.closures]]`): system rows that close a kinematic loop.
+//!
+//! A closure is compiled into ordinary expression rows over two synthetic sites (`NAME__a` on
+//! body a, `NAME__b` on body b; a world point is a constant), so its jet is the exact chain-rule
+//! jet of [`super::rows`] through the tree's point kinematics (no second kinematics kernel):
+//! - `point`: p_a - p_b = 0 (rows NAME_x, NAME_y, NAME_z, world frame);
+//! - `weld`: the point rows plus the vector part of conj(F_b) (x) F_a = 0 (NAME_rx, NAME_ry,
+//!   NAME_rz), F = body quaternion (x) frame quaternion, i.e. the frames' relative rotation;
+//! - `distance`: |p_a - p_b| - d = 0 (NAME).
+//!
+//! They are system rows (role system, paper 2.2: their reactions are joint forces, not control).
+//! A planar loop closed by a spatial point gives a row whose gradient dg/dv vanishes, and loops
+//! can repeat each other's rows: [`set_aside_dependent`] keeps the first independent rows in
+//! declaration order at t0 and sets the others aside (reported, and their residual monitored).
+
+use super::error::{SceneError, Source};
+use super::file::{ClosureFile, ModelFile, RowFile};
+use super::rows::ExprConstraints;
+use super::signals::Site;
+use crate::formulation::RankTolerances;
+use crate::linalg;
+use crate::model::Model;
+use crate::programme::jet::Jet;
+use crate::programme::Constraints;
+use crate::solve::Problem;
+use crate::tree;
+use nalgebra::DMatrix;
+use toml::Spanned;
+
+/// What a closure holds together.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ClosureKind {
+    /// Two points coincide (3 rows).
+    Point,
+    /// Two frames coincide (6 rows).
+    Weld,
+    /// Two points keep a distance (1 row).
+    Distance,
+}
+
+/// A loop closure as loaded (bodies resolved, `body_b = None`: the world).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Closure {
+    pub name: String,
+    pub kind: ClosureKind,
+    pub body_a: String,
+    pub point_a: [f64; 3],
+    /// Frame a's orientation in body a (w, x, y, z), normalised.
+    pub quat_a: [f64; 4],
+    /// None: the world.
+    pub body_b: Option<String>,
+    pub point_b: [f64; 3],
+    pub quat_b: [f64; 4],
+    /// `distance` only.
+    pub distance: Option<f64>,
+}
+
+/// A closure row set aside as dependent at t0, with why.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct SetAside {
+    /// Row name.
+    pub row: String,
+    /// Why it was set aside (one sentence).
+    pub reason: String,
+}
+
+pub(super) fn site_name(closure: &str, side: char) -> String {
+    format!("{closure}__{side}")
+}
+
+fn num(x: f64) -> String {
+    format!("({x:e})")
+}
+
+fn normalised(q: [f64; 4]) -> Option<[f64; 4]> {
+    let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
+    (n.is_finite() && n > 0.0).then(|| q.map(|x| x / n))
+}
+
+/// The closures and their rows, each with the field it is reported under.
+pub(super) type ClosureRows = (Vec<Closure>, Vec<(RowFile, String)>);
+
+/// Validate the closures of `m`, adding their synthetic sites to `sites`. Returns the closures and
+/// their rows (name and expression, spanned at the closure) in declaration order, with the field
+/// each row is reported under.
+pub(super) fn load(
+    src: &Source,
+    m: &ModelFile,
+    tree: &tree::Model,
+    joint_names: &[&str],
+    sites: &mut Vec<Site>,
+) -> Result<ClosureRows, SceneError> {
+    let mut closures = vec![];
+    let mut rows = vec![];
+    for (ci, c) in m.closures.iter().enumerate() {
+        let cf: &ClosureFile = c.get_ref();
+        let field = format!("model.closures[{ci}]");
+        let err = |key: &str, msg: String| src.error(c.span(), &format!("{field}.{key}"), msg);
+        if !super::load::is_identifier(&cf.name) {
+            return Err(err("name", "a closure name must be an identifier".into()));
+        }
+        if closures.iter().any(|x: &Closure| x.name == cf.name) {
+            return Err(err(
+                "name",
+                format!("closure name `{}` is used twice", cf.name),
+            ));
+        }
+        let kind = match cf.kind.get_ref().as_str() {
+            "point" => ClosureKind::Point,
+            "weld" => ClosureKind::Weld,
+            "distance" => ClosureKind::Distance,
+            other => {
+                return Err(src.error(
+                    cf.kind.span(),
+                    &format!("{field}.kind"),
+                    format!(
+                        "unknown closure kind `{other}`: expected `point`, `weld` or `distance`"
+                    ),
+                ))
+            }
+        };
+        let body_a = tree
+            .body_id(&cf.body_a)
+            .ok_or_else(|| err("body_a", format!("unknown body `{}`", cf.body_a)))?;
+        let body_b = if cf.body_b == "world" {
+            None
+        } else {
+            Some(
+                tree.body_id(&cf.body_b)
+                    .ok_or_else(|| err("body_b", format!("unknown body `{}`", cf.body_b)))?,
+            )
+        };
+        if body_b == Some(body_a) {
+            return Err(err(
+                "body_b",
+                format!(
+                    "a closure joins two different bodies, not `{}` to itself",
+                    cf.body_a
+                ),
+            ));
+        }
+        let finite = cf.point_a.iter().chain(&cf.point_b).all(|x| x.is_finite());
+        if !finite {
+            return Err(err("point_a", "closure points must be finite".into()));
+        }
+        if kind != ClosureKind::Weld && (cf.quat_a.is_some() || cf.quat_b.is_some()) {
+            return Err(err(
+                "quat_a",
+                "quat_a/quat_b orient the frames of a `weld` closure only".into(),
+            ));
+        }
+        let quat = |q: Option<[f64; 4]>, key: &str| {
+            normalised(q.unwrap_or([1.0, 0.0, 0.0, 0.0]))
+                .ok_or_else(|| err(key, "a quaternion must be finite and nonzero".into()))
+        };
+        let quat_a = quat(cf.quat_a, "quat_a")?;
+        let quat_b = quat(cf.quat_b, "quat_b")?;
+        let distance = match (kind, cf.distance) {
+            (ClosureKind::Distance, Some(d)) if d.is_finite() && d > 0.0 => Some(d),
+            (ClosureKind::Distance, Some(d)) => {
+                return Err(err(
+                    "distance",
+                    format!("the distance must be > 0, not {d}"),
+                ))
+            }
+            (ClosureKind::Distance, None) => {
+                return Err(err(
+                    "distance",
+                    "a `distance` closure needs `distance`".into(),
+                ))
+            }
+            (_, Some(_)) => {
+                return Err(err(
+                    "distance",
+                    "`distance` belongs to `distance` closures".into(),
+                ))
+            }
+            (_, None) => None,
+        };
+        for (side, body, point) in [('a', Some(body_a), cf.point_a), ('b', body_b, cf.point_b)] {
+            let Some(body) = body else { continue };
+            let name = site_name(&cf.name, side);
+            if sites.iter().any(|s| s.name == name) || joint_names.contains(&name.as_str()) {
+                return Err(err(
+                    "name",
+                    format!(
+                        "closure `{}` needs the site name `{name}`, already taken",
+                        cf.name
+                    ),
+                ));
+            }
+            sites.push(Site {
+                name,
+                body,
+                pos: point,
+            });
+        }
+        let closure = Closure {
+            name: cf.name.clone(),
+            kind,
+            body_a: cf.body_a.clone(),
+            point_a: cf.point_a,
+            quat_a,
+            body_b: body_b.map(|_| cf.body_b.clone()),
+            point_b: cf.point_b,
+            quat_b,
+            distance,
+        };
+        for (name, expr) in closure.rows() {
+            let row = RowFile {
+                name: Spanned::new(c.span(), name),
+                expr: Spanned::new(c.span(), expr),
+            };
+            rows.push((row, field.clone()));
+        }
+        closures.push(closure);
+    }
+    Ok((closures, rows))
+}
+
+impl Closure {
+    /// Number of rows.
+    pub fn n_rows(&self) -> usize {
+        match self.kind {
+            ClosureKind::Point => 3,
+            ClosureKind::Weld => 6,
+            ClosureKind::Distance => 1,
+        }
+    }
+
+    /// The rows as (name, expression) over the synthetic sites' signals.
+    pub fn rows(&self) -> Vec<(String, String)> {
+        let a = site_name(&self.name, 'a');
+        let b = site_name(&self.name, 'b');
+        let pa = ["x", "y", "z"].map(|c| format!("{a}.{c}"));
+        let pb: [String; 3] = match self.body_b {
+            Some(_) => ["x", "y", "z"].map(|c| format!("{b}.{c}")),
+            None => self.point_b.map(num),
+        };
+        let d: Vec<String> = (0..3).map(|k| format!("{} - {}", pa[k], pb[k])).collect();
+        let n = &self.name;
+        match self.kind {
+            ClosureKind::Distance => vec![(
+                n.clone(),
+                format!(
+                    "sqrt(({})^2 + ({})^2 + ({})^2) - {}",
+                    d[0],
+                    d[1],
+                    d[2],
+                    num(self.distance.unwrap_or(0.0))
+                ),
+            )],
+            ClosureKind::Point | ClosureKind::Weld => {
+                let mut rows: Vec<(String, String)> = ["x", "y", "z"]
+                    .iter()
+                    .zip(d)
+                    .map(|(c, e)| (format!("{n}_{c}"), e))
+                    .collect();
+                if self.kind == ClosureKind::Weld {
+                    // Frame quaternions F = body (x) frame, then conj(F_b) (x) F_a.
+                    let body_q = |s: &str| ["qw", "qx", "qy", "qz"].map(|c| format!("{s}.{c}"));
+                    let fa = qmul(&body_q(&a), &self.quat_a.map(num));
+                    let fb = match self.body_b {
+                        Some(_) => qmul(&body_q(&b), &self.quat_b.map(num)),
+                        None => self.quat_b.map(num),
+                    };
+                    let conj_b = [
+                        fb[0].clone(),
+                        format!("(-({}))", fb[1]),
+                        format!("(-({}))", fb[2]),
+                        format!("(-({}))", fb[3]),
+                    ];
+                    let rel = qmul(&conj_b, &fa);
+                    for (k, c) in ["rx", "ry", "rz"].iter().enumerate() {
+                        rows.push((format!("{n}_{c}"), rel[k + 1].clone()));
+                    }
+                }
+                rows
+            }
+        }
+    }
+}
+
+/// Hamilton product of quaternions (w, x, y, z) written as expression text.
+fn qmul(p: &[String; 4], q: &[String; 4]) -> [String; 4] {
+    let m = |i: usize, j: usize| format!("({})*({})", p[i], q[j]);
+    [
+        format!("{} - {} - {} - {}", m(0, 0), m(1, 1), m(2, 2), m(3, 3)),
+        format!("{} + {} + {} - {}", m(0, 1), m(1, 0), m(2, 3), m(3, 2)),
+        format!("{} - {} + {} + {}", m(0, 2), m(1, 3), m(2, 0), m(3, 1)),
+        format!("{} + {} - {} + {}", m(0, 3), m(1, 2), m(2, 1), m(3, 0)),
+    ]
+}
+
+/// Rows of `candidates` (closure rows) dependent at (t0, q0, v0) on the rows before them, in
+/// declaration order: a row is kept when adding its normalised gradient dg/dv to the rows kept
+/// so far raises the numerical rank (column-pivoted QR of [`linalg::qr_colpiv`] with the solver's
+/// `dependent` tolerance); a row whose gradient vanishes (below `vanishing` of the largest) is
+/// set aside too. Rows outside `candidates` are always kept. Returns (row index, reason).
+pub(super) fn set_aside_dependent<M: Model>(
+    p: &Problem<M, ExprConstraints>,
+    candidates: std::ops::Range<usize>,
+    tol: &RankTolerances,
+) -> Vec<(usize, String)> {
+    let c = &p.constraints;
+    let s = c.rows().len();
+    let (nq, nv) = (p.model.nq(), p.model.nv());
+    let segments = p.model.segments();
+    let mut jet = Jet::new(c, segments, nq, nv);
+    jet.compute(c, segments, p.t0, &p.q0, &p.v0);
+    let norms: Vec<f64> = (0..s).map(|i| jet.b.row(i).norm()).collect();
+    let scale = norms.iter().cloned().fold(0.0, f64::max);
+    let mut kept: Vec<usize> = vec![];
+    let mut out = vec![];
+    for i in 0..s {
+        if !candidates.contains(&i) {
+            kept.push(i);
+            continue;
+        }
+        if norms[i] <= tol.vanishing * scale || norms[i] == 0.0 {
+            out.push((
+                i,
+                format!(
+                    "its gradient dg/dv vanishes at t0 (|dg/dv| = {:.1e}): the loop keeps it by \
+                     itself (e.g. a planar loop closed by a spatial point)",
+                    norms[i]
+                ),
+            ));
+            continue;
+        }
+        // B_hat^T of the kept rows plus row i (nv x k), normalised rows.
+        let k = kept.len() + 1;
+        if k > nv {
+            out.push((
+                i,
+                "the rows before it already fill every degree of freedom".into(),
+            ));
+            continue;
+        }
+        let mut bt = DMatrix::<f64>::zeros(nv, k);
+        for (col, &r) in kept.iter().chain(std::iter::once(&i)).enumerate() {
+            let inv = 1.0 / norms[r].max(f64::MIN_POSITIVE);
+            for j in 0..nv {
+                bt[(j, col)] = jet.b[(r, j)] * inv;
+            }
+        }
+        let mut beta = vec![0.0; k];
+        let mut perm = vec![0; k];
+        let rank = linalg::qr_colpiv(&mut bt, nv, k, &mut beta, &mut perm, tol.dependent);
+        let rmin = (0..k)
+            .map(|j| bt[(j, j)].abs())
+            .fold(f64::INFINITY, f64::min);
+        if rank < k || rmin < tol.dependent {
+            out.push((
+                i,
+                format!(
+                    "it depends on the rows before it at t0 (smallest |R_jj| of the normalised \
+                     gradients {rmin:.1e} < {:.0e})",
+                    tol.dependent
+                ),
+            ));
+        } else {
+            kept.push(i);
+        }
+    }
+    out
+}
