@@ -905,6 +905,7 @@ fn scene_trees() -> Vec<(String, std::sync::Arc<tree::Model>)> {
         .filter(|p| p.extension().is_some_and(|e| e == "toml"))
         .collect();
     paths.sort();
+    crate::import::ensure_robot_path_for_tests();
     for p in paths {
         let s = crate::scene::Scene::load(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
         if let crate::scene::SceneSystem::Tree(pr) = &s.system {

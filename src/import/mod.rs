@@ -56,3 +56,32 @@ pub fn resolve(file: &str, scene_dir: &Path) -> Result<PathBuf, String> {
         ))
     }
 }
+
+/// Test support: example-robot-data's `share` folder inside this checkout's `.venv` (what
+/// harness/setup.sh installs), for tests run without `$PROGMO_ROBOT_PATH`.
+#[doc(hidden)]
+pub fn checkout_robot_path() -> Option<std::path::PathBuf> {
+    let lib = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/lib");
+    std::fs::read_dir(lib)
+        .into_iter()
+        .flatten()
+        .filter_map(|e| e.ok())
+        .map(|e| e.path().join("site-packages/cmeel.prefix/share"))
+        .find(|p| p.join("example-robot-data").is_dir())
+}
+
+/// Test support: set `$PROGMO_ROBOT_PATH` to [`checkout_robot_path`] when it is unset (once per
+/// process, before any scene is loaded; inherited by the processes the test starts).
+#[doc(hidden)]
+pub fn ensure_robot_path_for_tests() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        if std::env::var_os("PROGMO_ROBOT_PATH").is_some() {
+            return;
+        }
+        let share = checkout_robot_path().unwrap_or_else(|| {
+            panic!("the robot scenes need example-robot-data: run `bash harness/setup.sh` (installs it into .venv) or set PROGMO_ROBOT_PATH")
+        });
+        std::env::set_var("PROGMO_ROBOT_PATH", share);
+    });
+}

@@ -22,22 +22,5 @@ pub fn toml_files(dir: &str) -> Vec<PathBuf> {
 /// `$PROGMO_ROBOT_PATH`; when it is unset, point it at the copy harness/setup.sh installs into
 /// `.venv` (the Python package does the same for its own doors: `progmo.data.robot_path`).
 pub fn robot_path() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| {
-        if std::env::var_os("PROGMO_ROBOT_PATH").is_some() {
-            return;
-        }
-        let lib = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(".venv/lib");
-        let share = std::fs::read_dir(&lib)
-            .into_iter()
-            .flatten()
-            .map(|e| e.unwrap().path().join("site-packages/cmeel.prefix/share"))
-            .find(|p| p.join("example-robot-data").is_dir())
-            .unwrap_or_else(|| {
-                panic!("the robot scenes need example-robot-data: run `bash harness/setup.sh` (installs it into .venv) or set PROGMO_ROBOT_PATH")
-            });
-        // Set once, before any scene is loaded by this test process (and inherited by the CLI
-        // processes it starts).
-        std::env::set_var("PROGMO_ROBOT_PATH", share);
-    });
+    progmo::import::ensure_robot_path_for_tests();
 }
