@@ -85,3 +85,48 @@ def test_negative_control_heavier_link_fails(path):
 
 def test_urdf_scenes_are_present():
     assert {p.stem for p in urdf_scenes()} >= {"panda_circle", "ur5_tool_path"}
+
+
+def frame_worst(scene, model: pin.Model) -> tuple[float, int]:
+    """Largest |position difference| (m) and |rotation-matrix difference| over every link of ours
+    that Pinocchio's model also names (`Scene.body_poses` vs `pin.framesForwardKinematics`), at
+    random states; and how many links were compared."""
+    d = model.createData()
+    names = [model.names[j] for j in range(1, model.njoints)]
+    perm = [scene.q_names.index(n) for n in names]
+    rng = np.random.default_rng(zlib.crc32(scene.name.encode()) + 1)
+    w, count = 0.0, 0
+    for _ in range(10):
+        q = np.array(scene.q0) + rng.uniform(-0.5, 0.5, len(perm))
+        pin.framesForwardKinematics(model, d, q[perm])
+        count = 0
+        for name, pos, quat in scene.body_poses(q):
+            if not model.existFrame(name):
+                continue
+            f = d.oMf[model.getFrameId(name)]
+            wq, x, y, z = quat
+            R = pin.Quaternion(wq, x, y, z).normalized().toRotationMatrix()
+            w = max(w, np.abs(np.array(pos) - f.translation).max(), np.abs(R - f.rotation).max())
+            count += 1
+    return w, count
+
+
+@pytest.mark.parametrize("path", urdf_scenes(), ids=lambda p: p.stem)
+def test_imported_link_frames_match_pinocchio(path):
+    """Issue 13 item 3: link positions and orientations of the imported robot agree with
+    Pinocchio's frames of the same URDF (robots are about 1 m: 1e-12 m and 1e-12 in R)."""
+    scene = progmo.load(str(path))
+    w, count = frame_worst(scene, pin_model(path))
+    print(f"{scene.name}: {count} links, max |dp|, |dR| = {w:.2e}")
+    assert count >= scene.q0.size, "every moving link compared"
+    assert w <= TOL, f"{scene.name}: link frames differ by {w:.2e}"
+
+
+@pytest.mark.parametrize("path", urdf_scenes(), ids=lambda p: p.stem)
+def test_negative_control_moved_joint_origin_fails_frames(path):
+    """A joint origin 1 mm off in Pinocchio's model must fail the frame comparison."""
+    scene = progmo.load(str(path))
+    model = pin_model(path)
+    model.jointPlacements[2].translation += np.array([1e-3, 0.0, 0.0])
+    w, _ = frame_worst(scene, model)
+    assert w > 1e-4
