@@ -84,7 +84,7 @@ def test_negative_control_heavier_link_fails(path):
 
 
 def test_urdf_scenes_are_present():
-    assert {p.stem for p in urdf_scenes()} >= {"panda_circle", "ur5_tool_path"}
+    assert {p.stem for p in urdf_scenes()} >= {"panda_circle", "ur5_tool_path", "xarm7_elbow_height"}
 
 
 def frame_worst(scene, model: pin.Model) -> tuple[float, int]:
@@ -132,7 +132,7 @@ def test_negative_control_moved_joint_origin_fails_frames(path):
     assert w > 1e-4
 
 
-JAC_LINK = {"panda_circle": "panda_hand_tcp", "ur5_tool_path": "tool0"}
+JAC_LINK = {"panda_circle": "panda_hand_tcp", "ur5_tool_path": "tool0", "xarm7_elbow_height": "link_eef"}
 
 
 def jacobian_scene(path: pathlib.Path, tmp: pathlib.Path, link: str) -> "progmo.Scene":
