@@ -346,3 +346,201 @@ fn baumgarte_terms_enter_as_written() {
     let want = -2.0 * bg.alpha * gd - bg.beta * bg.beta * g;
     assert!((gdd - want).abs() < 1e-13, "{gdd} vs {want}");
 }
+
+mod common;
+
+/// max |x - y| / max(max |y|, 1).
+fn rel_diff(x: &[f64], y: &[f64]) -> f64 {
+    let d = x
+        .iter()
+        .zip(y)
+        .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+    d / max_abs(y).max(1.0)
+}
+
+/// cond(A) at (t, q, v) (2-norm, from the symmetric eigenvalues).
+fn cond_a<M: Model, C: Constraints>(p: &Problem<M, C>, t: f64, q: &[f64], v: &[f64]) -> f64 {
+    let mut ev = Evaluator::<M, C, f64>::new(&p.model, &p.constraints);
+    ev.prepare(t, q, v);
+    let e = ev.mass.clone().symmetric_eigenvalues();
+    e.max() / e.min()
+}
+
+/// The articulated-body formulation (A^-1 by the tree's factorization, A never formed) against the
+/// null-space and KKT forms at (t, q, v): dv/dt and lambda to 100 eps cond(A) relative (algebraic
+/// class: a range-space method loses eps cond(A)); returns the largest relative difference.
+fn articulated_vs_dense<M: Model, C: Constraints>(
+    p: &Problem<M, C>,
+    t: f64,
+    q: &[f64],
+    v: &[f64],
+    what: &str,
+) -> f64 {
+    assert!(
+        p.model.has_mass_factor(),
+        "{what}: a tree model has the factorization"
+    );
+    let (a, l, du) = accelerations(p, Formulation::ArticulatedBody, t, q, v);
+    let tol = 100.0 * EPS * cond_a(p, t, q, v);
+    assert!(du < tol.max(100.0 * EPS), "{what}: D u = {du:e}");
+    let mut worst = 0.0f64;
+    for f in [Formulation::NullSpace, Formulation::Kkt] {
+        let (a0, l0, _) = accelerations(p, f, t, q, v);
+        let (ea, el) = (rel_diff(&a, &a0), rel_diff(&l, &l0));
+        assert!(
+            ea <= tol && el <= tol,
+            "{what} vs {f:?}: dv/dt {ea:.1e}, lambda {el:.1e} > {tol:.1e}"
+        );
+        worst = worst.max(ea).max(el);
+    }
+    worst
+}
+
+/// Deterministic states near (q0, v0): the initial state and small perturbations.
+fn near_states(q0: &[f64], v0: &[f64], t0: f64, rng: &mut Lcg) -> Vec<(f64, Vec<f64>, Vec<f64>)> {
+    let mut out = vec![(t0, q0.to_vec(), v0.to_vec())];
+    for _ in 0..3 {
+        let q = q0.iter().map(|x| x + 0.01 * rng.next()).collect();
+        let v = v0.iter().map(|x| x + 0.3 * rng.next()).collect();
+        out.push((t0 + 0.1 * rng.next().abs(), q, v));
+    }
+    out
+}
+
+/// Every tree scene of the catalog and of tests/scenes (robots, closures, ball and free joints,
+/// point forces): articulated-body agrees with the dense formulations.
+#[test]
+fn articulated_body_agrees_on_every_tree_scene() {
+    use progmo::scene::{Scene, SceneSystem};
+    let mut rng = Lcg(15);
+    let mut seen = vec![];
+    for path in common::toml_files("references/scenes")
+        .into_iter()
+        .chain(common::toml_files("tests/scenes"))
+    {
+        let scene = Scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
+        let SceneSystem::Tree(p) = &scene.system else {
+            continue;
+        };
+        let mut worst = 0.0f64;
+        for (t, q, v) in near_states(&p.q0, &p.v0, p.t0, &mut rng) {
+            let mut q = q;
+            progmo::model::normalize(p.model.segments(), &mut q);
+            worst = worst.max(articulated_vs_dense(p, t, &q, &v, &scene.name));
+        }
+        eprintln!(
+            "{:24} nv {:3}: max relative difference {worst:.1e}",
+            scene.name,
+            p.v0.len()
+        );
+        seen.push(scene.name.clone());
+    }
+    // the catalog's trees are all here (a loader change that hid them would pass vacuously)
+    for name in [
+        "chain_8",
+        "heavy_top",
+        "four_bar",
+        "panda_circle",
+        "xarm7_elbow_height",
+    ] {
+        assert!(
+            seen.iter().any(|s| s == name),
+            "{name} not checked: {seen:?}"
+        );
+    }
+}
+
+/// Random chains (masses 0.05 ... 1, lengths 0.1 ... 0.5, bends, velocities) of 2 ... 64 links.
+#[test]
+fn articulated_body_agrees_on_random_chains() {
+    use progmo::problems::chain::ChainSpec;
+    let mut rng = Lcg(1515);
+    for n in [2, 3, 5, 9, 17, 33, 64] {
+        let spec = ChainSpec {
+            masses: Some((0..n).map(|_| 0.525 + 0.475 * rng.next()).collect()),
+            length: 0.3 + 0.2 * rng.next(),
+            q0: Some(0.1 * rng.next()),
+            ..ChainSpec::uniform(n)
+        };
+        let scene = spec.scene().unwrap();
+        progmo::with_problem!(&scene.system, p => {
+            let v: Vec<f64> = (0..n).map(|_| rng.next()).collect();
+            let w = articulated_vs_dense(p, 0.3, &p.q0, &v, &format!("chain_{n}"));
+            eprintln!("random chain n = {n:3}: max relative difference {w:.1e}");
+        });
+    }
+}
+
+/// `auto` is null-space, bit for bit, below AUTO_ARTICULATED_NV velocities and articulated-body
+/// from there on (trees); on models without the factorization it is always null-space.
+#[test]
+fn auto_resolves_by_size_and_model() {
+    use progmo::formulation::AUTO_ARTICULATED_NV;
+    use progmo::problems::chain::ChainSpec;
+    for n in [AUTO_ARTICULATED_NV - 1, AUTO_ARTICULATED_NV] {
+        let scene = ChainSpec::uniform(n).scene().unwrap();
+        progmo::with_problem!(&scene.system, p => {
+            let v: Vec<f64> = (0..n).map(|k| 0.1 * k as f64).collect();
+            let (a, l, _) = accelerations(p, Formulation::Auto, 0.2, &p.q0, &v);
+            let want = if n < AUTO_ARTICULATED_NV {
+                Formulation::NullSpace
+            } else {
+                Formulation::ArticulatedBody
+            };
+            let (a0, l0, _) = accelerations(p, want, 0.2, &p.q0, &v);
+            assert_eq!((a, l), (a0, l0), "n = {n}: auto is {want:?}");
+            assert_eq!(Formulation::Auto.resolve(n, true), want);
+        });
+    }
+    assert_eq!(
+        Formulation::Auto.resolve(10 * AUTO_ARTICULATED_NV, false),
+        Formulation::NullSpace
+    );
+    let p = particle::example_2_1();
+    let (a, _, _) = accelerations(
+        &p,
+        Formulation::Auto,
+        0.0,
+        &[0.2, 0.4, 1.3],
+        &[0.3, -0.7, 0.2],
+    );
+    let (a0, _, _) = accelerations(
+        &p,
+        Formulation::NullSpace,
+        0.0,
+        &[0.2, 0.4, 1.3],
+        &[0.3, -0.7, 0.2],
+    );
+    assert_eq!(a, a0);
+}
+
+/// Over dual numbers (the Radau Jacobian and the jets): the derivative of dv/dt along a direction
+/// in (q, v) agrees between articulated-body and null-space on a chain.
+#[test]
+fn articulated_body_derivatives_agree_over_duals() {
+    use progmo::problems::chain::ChainSpec;
+    type Dual64 = progmo::scalar::Dual<f64>;
+    let n = 12;
+    let scene = ChainSpec::uniform(n).scene().unwrap();
+    progmo::with_problem!(&scene.system, p => {
+        let mut rng = Lcg(7);
+        let dir: Vec<f64> = (0..2 * n).map(|_| rng.next()).collect();
+        let q: Vec<Dual64> = (0..n).map(|k| Dual64::new(p.q0[k], dir[k])).collect();
+        let v: Vec<Dual64> = (0..n).map(|k| Dual64::new(0.2 * rng.next(), dir[n + k])).collect();
+        let t = Dual64::from_re(0.3);
+        let mut out = vec![];
+        for f in [Formulation::ArticulatedBody, Formulation::NullSpace] {
+            let mut ev = Evaluator::<_, _, Dual64>::new(&p.model, &p.constraints);
+            ev.evaluate(f, &RankTolerances::default(), None, t, &q, &v).unwrap();
+            out.push(ev.acc.clone());
+        }
+        let (re0, re1): (Vec<f64>, Vec<f64>) = (out[0].iter().map(|x| x.re).collect(), out[1].iter().map(|x| x.re).collect());
+        let (d0, d1): (Vec<f64>, Vec<f64>) = (out[0].iter().map(|x| x.eps).collect(), out[1].iter().map(|x| x.eps).collect());
+        let qf: Vec<f64> = q.iter().map(|x| x.re).collect();
+        let vf: Vec<f64> = v.iter().map(|x| x.re).collect();
+        let tol = 100.0 * EPS * cond_a(p, 0.3, &qf, &vf);
+        assert!(rel_diff(&re0, &re1) <= tol, "values {:.1e}", rel_diff(&re0, &re1));
+        assert!(rel_diff(&d0, &d1) <= tol, "derivatives {:.1e}", rel_diff(&d0, &d1));
+        assert!(max_abs(&d1) > 1e-3, "the direction moves dv/dt");
+    });
+}

@@ -180,7 +180,7 @@ class Scene:
         atol: float | None = None,
         integrator: Literal["dop853", "dopri5", "radau5", "rk4"] | None = None,
         step: float | None = None,
-        formulation: Literal["null_space", "null_space_stacked", "kkt", "range_space", "udwadia_kalaba"] | None = None,
+        formulation: Literal["auto", "null_space", "null_space_stacked", "kkt", "range_space", "udwadia_kalaba", "articulated_body"] | None = None,
         drift: Literal["projection", "baumgarte", "none"] | None = None,
         max_samples: int | None = None,
         strict: bool | None = None,
@@ -199,13 +199,13 @@ class Scene:
     def residuals(self, t: F64, q: F64, v: F64, a: F64 | None = None) -> F64: ...
     def dynamics(self, t: float, q: F64, v: F64) -> Dynamics: ...
     def accelerations(
-        self, t: float, q: F64, v: F64, formulation: Literal["null_space", "null_space_stacked", "kkt", "range_space", "udwadia_kalaba"]
+        self, t: float, q: F64, v: F64, formulation: Literal["auto", "null_space", "null_space_stacked", "kkt", "range_space", "udwadia_kalaba", "articulated_body"]
     ) -> dict[str, F64]:
         """One right-hand side (no drift control): {"a": dv/dt, "u", "reactions", "lambda"}."""
     def rhs_benchmark(
         self,
         iterations: int,
-        formulation: Literal["null_space", "null_space_stacked", "kkt", "range_space", "udwadia_kalaba"],
+        formulation: Literal["auto", "null_space", "null_space_stacked", "kkt", "range_space", "udwadia_kalaba", "articulated_body"],
         t: float | None = None,
         q: F64 | None = None,
         v: F64 | None = None,

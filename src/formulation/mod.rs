@@ -21,6 +21,17 @@
 //! - [`Formulation::UdwadiaKalaba`] (Udwadia & Kalaba, Proc. R. Soc. A 439 (1992) 407-410):
 //!   a = a0 + W (B W)^+ (gamma - B a0), a0 = A^-1 F, W W^T = A^-1; here W = L^-T from the Cholesky
 //!   factor A = L L^T and the pseudo-inverse from a QR of (B W)^T.
+//! - [`Formulation::ArticulatedBody`] (O(n s^2 + s^3) on kinematic trees, A never formed): the
+//!   range-space equations with A^-1 applied by the articulated-body factorization (Featherstone,
+//!   RBDA 2008, Table 7.1; `crate::tree::aba_factor`): a0 = A^-1 F, X = A^-1 B_hat^T by s unit-force
+//!   solves, (B_hat X) lambda_hat = gamma_hat - B_hat a0 (Cholesky of the s x s SPD matrix),
+//!   a = a0 + X lambda_hat. u = A a - F comes from an O(n) product (inverse dynamics with v = 0).
+//!   On models without that factorization ([`crate::model::Model::has_mass_factor`] false:
+//!   lagrangian scenes and the hand-written problems) the same equations with A^-1 from a dense
+//!   Cholesky factor of A.
+//! - [`Formulation::Auto`] (the default): [`Formulation::ArticulatedBody`] on models with the
+//!   articulated-body factorization and at least [`AUTO_ARTICULATED_NV`] velocities, else
+//!   [`Formulation::NullSpace`] ([`Formulation::resolve`]).
 //!
 //! Rows of B are normalized to unit length before factorizing (this changes neither null(B) nor
 //! the solution), so rank decisions compare like with like. A row whose gradient vanishes or a set of
@@ -45,17 +56,100 @@ pub enum Formulation {
     RangeSpace,
     /// Udwadia-Kalaba with the Moore-Penrose pseudo-inverse.
     UdwadiaKalaba,
+    /// Range space with A^-1 from the articulated-body factorization: O(n) per solve on trees.
+    ArticulatedBody,
+    /// [`Formulation::ArticulatedBody`] on trees of at least [`AUTO_ARTICULATED_NV`] velocities,
+    /// else [`Formulation::NullSpace`] (see [`Formulation::resolve`]).
+    Auto,
 }
 
+/// Smallest number of velocities at which [`Formulation::Auto`] picks the articulated-body
+/// formulation on a tree. Measured (`progmo bench --only anchor`, chains with 2 programme rows,
+/// README's Benchmarks): null-space is faster below, articulated-body from here on.
+pub const AUTO_ARTICULATED_NV: usize = 48;
+
 impl Formulation {
-    /// All formulations, for comparisons.
-    pub const ALL: [Formulation; 5] = [
+    /// All methods, for comparisons ([`Formulation::Auto`] names one of them).
+    pub const ALL: [Formulation; 6] = [
         Formulation::NullSpace,
         Formulation::NullSpaceStacked,
         Formulation::Kkt,
         Formulation::RangeSpace,
         Formulation::UdwadiaKalaba,
+        Formulation::ArticulatedBody,
     ];
+
+    /// Every value a setting may take: `Auto`, then [`Formulation::ALL`].
+    pub const NAMED: [Formulation; 7] = [
+        Formulation::Auto,
+        Formulation::NullSpace,
+        Formulation::NullSpaceStacked,
+        Formulation::Kkt,
+        Formulation::RangeSpace,
+        Formulation::UdwadiaKalaba,
+        Formulation::ArticulatedBody,
+    ];
+
+    /// The method this setting stands for on a model with `nv` velocities that has (`factored`) or
+    /// lacks the articulated-body factorization: `Auto` picks [`Formulation::ArticulatedBody`] when
+    /// `factored` and `nv >= AUTO_ARTICULATED_NV`, else [`Formulation::NullSpace`]; every other
+    /// value is itself.
+    pub fn resolve(self, nv: usize, factored: bool) -> Formulation {
+        match self {
+            Formulation::Auto if factored && nv >= AUTO_ARTICULATED_NV => {
+                Formulation::ArticulatedBody
+            }
+            Formulation::Auto => Formulation::NullSpace,
+            f => f,
+        }
+    }
+}
+
+/// A(q) as the articulated-body formulation uses it: factored once, then solves and products.
+pub trait MassOperator<S: Scalar> {
+    /// Factor A; a reciprocal condition estimate, or where A is not positive definite.
+    fn factor(&mut self) -> Result<f64, Singular>;
+    /// `x <- A^-1 x`.
+    fn solve(&mut self, x: &mut [S]);
+    /// `out = A x`.
+    fn mul(&mut self, x: &[S], out: &mut [S]);
+}
+
+/// The dense A with its Cholesky factor L (the lower triangle of `l`, as `linalg::cholesky` leaves it).
+struct DenseCholesky<'a, S: Scalar> {
+    a: &'a DMatrix<S>,
+    l: &'a DMatrix<S>,
+    n: usize,
+}
+
+impl<S: Scalar> MassOperator<S> for DenseCholesky<'_, S> {
+    fn factor(&mut self) -> Result<f64, Singular> {
+        let (mut lmin, mut lmax) = (f64::INFINITY, 0.0f64);
+        for i in 0..self.n {
+            let l = re(self.l[(i, i)]).abs();
+            lmin = lmin.min(l);
+            lmax = lmax.max(l);
+        }
+        Ok(if self.n == 0 {
+            1.0
+        } else {
+            (lmin / lmax).powi(2)
+        })
+    }
+    fn solve(&mut self, x: &mut [S]) {
+        linalg::cholesky_solve(self.l, self.n, x);
+    }
+    fn mul(&mut self, x: &[S], out: &mut [S]) {
+        for o in out.iter_mut() {
+            *o = S::zero();
+        }
+        for (j, col) in self.a.column_iter().enumerate() {
+            let xj = x[j];
+            for (o, &y) in out.iter_mut().zip(col.iter()) {
+                *o += y * xj;
+            }
+        }
+    }
 }
 
 /// Why the accelerations could not be computed.
@@ -152,6 +246,7 @@ pub struct FormulationWork<S: Scalar> {
     tmp2: Vec<S>,
     inv: DMatrix<S>,
     x: DMatrix<S>,
+    ainv_bt: DMatrix<S>,
 }
 
 impl<S: Scalar> FormulationWork<S> {
@@ -172,6 +267,7 @@ impl<S: Scalar> FormulationWork<S> {
             tmp2: vec![z; nv + s],
             inv: DMatrix::from_element(nv, nv, z),
             x: DMatrix::from_element(nv, s, z),
+            ainv_bt: DMatrix::from_element(nv, s, z),
         }
     }
 
@@ -189,6 +285,82 @@ impl<S: Scalar> FormulationWork<S> {
         tol: &RankTolerances,
         acc: &mut [S],
         lambda: &mut [S],
+    ) -> Result<Diagnostics, FormulationError> {
+        let nv = self.nv;
+        let mut diag = self.factor_rows(b, gamma, row_scale, tol)?;
+        match formulation.resolve(nv, false) {
+            Formulation::NullSpace | Formulation::Auto => {
+                self.null_space(a, force, gamma, acc, &mut diag)?
+            }
+            Formulation::NullSpaceStacked => {
+                self.null_space_stacked(a, force, gamma, acc, &mut diag)?
+            }
+            Formulation::Kkt => self.kkt(a, force, b, gamma, acc, &mut diag)?,
+            Formulation::RangeSpace => self.range_space(a, force, b, gamma, acc, &mut diag)?,
+            Formulation::UdwadiaKalaba => {
+                self.udwadia_kalaba(a, force, b, gamma, acc, &mut diag)?
+            }
+            Formulation::ArticulatedBody => {
+                // no O(n) factorization here: A^-1 from a dense Cholesky factor
+                self.load_mass(a);
+                linalg::cholesky(&mut self.k, nv)
+                    .map_err(|e| FormulationError::SingularSystem { rcond: e.rcond })?;
+                let l = std::mem::replace(&mut self.k, DMatrix::from_element(0, 0, S::zero()));
+                let mut op = DenseCholesky { a, l: &l, n: nv };
+                let r = self.range_operator(&mut op, force, gamma, acc, &mut diag);
+                self.k = l;
+                r?
+            }
+        }
+        // Reaction u = A a - F = B^T lambda = B_hat^T N lambda. With Q^T u = w:
+        // R P^T (N lambda) = w[..s], and D u = w[s..] should vanish (2.7).
+        for i in 0..nv {
+            self.tmp[i] = -force[i];
+        }
+        for (j, col) in a.column_iter().enumerate() {
+            let aj = acc[j];
+            for (t, &x) in self.tmp[..nv].iter_mut().zip(col.iter()) {
+                *t += x * aj;
+            }
+        }
+        self.reaction(force, &mut diag, lambda);
+        Ok(diag)
+    }
+
+    /// [`Formulation::ArticulatedBody`] with A as an operator (`op`: the model's articulated-body
+    /// factorization), A never formed: the same rank decisions, diagnostics and multipliers as
+    /// [`FormulationWork::solve`], with u = A a - F from `op.mul`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn solve_factored(
+        &mut self,
+        op: &mut impl MassOperator<S>,
+        force: &[S],
+        b: &DMatrix<S>,
+        gamma: &[S],
+        row_scale: &[f64],
+        tol: &RankTolerances,
+        acc: &mut [S],
+        lambda: &mut [S],
+    ) -> Result<Diagnostics, FormulationError> {
+        let nv = self.nv;
+        let mut diag = self.factor_rows(b, gamma, row_scale, tol)?;
+        self.range_operator(op, force, gamma, acc, &mut diag)?;
+        op.mul(&acc[..nv], &mut self.tmp[..nv]);
+        for (t, &f) in self.tmp[..nv].iter_mut().zip(force.iter()) {
+            *t -= f;
+        }
+        self.reaction(force, &mut diag, lambda);
+        Ok(diag)
+    }
+
+    /// Normalize the rows (B_hat = N^-1 B into `bt` and `x`) and factor B_hat^T P = Q R; the
+    /// vanishing and dependent rows are refused here, before any method runs.
+    fn factor_rows(
+        &mut self,
+        b: &DMatrix<S>,
+        gamma: &[S],
+        row_scale: &[f64],
+        tol: &RankTolerances,
     ) -> Result<Diagnostics, FormulationError> {
         let (nv, s) = (self.nv, self.s);
         let mut diag = Diagnostics {
@@ -256,28 +428,13 @@ impl<S: Scalar> FormulationWork<S> {
                 });
             }
         }
-        match formulation {
-            Formulation::NullSpace => self.null_space(a, force, gamma, acc, &mut diag)?,
-            Formulation::NullSpaceStacked => {
-                self.null_space_stacked(a, force, gamma, acc, &mut diag)?
-            }
-            Formulation::Kkt => self.kkt(a, force, b, gamma, acc, &mut diag)?,
-            Formulation::RangeSpace => self.range_space(a, force, b, gamma, acc, &mut diag)?,
-            Formulation::UdwadiaKalaba => {
-                self.udwadia_kalaba(a, force, b, gamma, acc, &mut diag)?
-            }
-        }
-        // Reaction u = A a - F = B^T lambda = B_hat^T N lambda. With Q^T u = w:
-        // R P^T (N lambda) = w[..s], and D u = w[s..] should vanish (2.7).
-        for i in 0..nv {
-            self.tmp[i] = -force[i];
-        }
-        for (j, col) in a.column_iter().enumerate() {
-            let aj = acc[j];
-            for (t, &x) in self.tmp[..nv].iter_mut().zip(col.iter()) {
-                *t += x * aj;
-            }
-        }
+        Ok(diag)
+    }
+
+    /// From u = A a - F in `tmp[..nv]`: the diagnostics of u (2.7) and lambda from
+    /// R P^T (N lambda) = (Q^T u)[..s].
+    fn reaction(&mut self, force: &[S], diag: &mut Diagnostics, lambda: &mut [S]) {
+        let (nv, s) = (self.nv, self.s);
         // Scale of the terms of u = A a - F, so that du measures round-off, not cancellation.
         let (mut umax, mut unorm) = (0.0f64, 0.0f64);
         for i in 0..nv {
@@ -300,7 +457,73 @@ impl<S: Scalar> FormulationWork<S> {
             let row = self.perm[j];
             lambda[row] = self.tmp[j] / self.norms[row];
         }
-        Ok(diag)
+    }
+
+    /// Range space with A^-1 from `op` (module docs, [`Formulation::ArticulatedBody`]):
+    /// a0 = A^-1 F, X = A^-1 B_hat^T, (B_hat X) lambda_hat = gamma_hat - B_hat a0 by Cholesky,
+    /// a = a0 + X lambda_hat.
+    fn range_operator(
+        &mut self,
+        op: &mut impl MassOperator<S>,
+        force: &[S],
+        gamma: &[S],
+        acc: &mut [S],
+        diag: &mut Diagnostics,
+    ) -> Result<(), FormulationError> {
+        let (nv, s) = (self.nv, self.s);
+        let rcond = op
+            .factor()
+            .map_err(|e| FormulationError::SingularSystem { rcond: e.rcond })?;
+        diag.factorizations += 1;
+        diag.system_rcond = rcond;
+        acc[..nv].copy_from_slice(&force[..nv]);
+        op.solve(&mut acc[..nv]);
+        if s == 0 {
+            return Ok(());
+        }
+        // X = A^-1 B_hat^T, one solve per row (column r of `x` is B_hat_r^T)
+        for r in 0..s {
+            for j in 0..nv {
+                self.tmp[j] = self.x[(j, r)];
+            }
+            op.solve(&mut self.tmp[..nv]);
+            for j in 0..nv {
+                self.ainv_bt[(j, r)] = self.tmp[j];
+            }
+        }
+        // K = B_hat X (s x s, SPD; lower triangle) in `inv`, rhs = gamma_hat - B_hat a0
+        for c in 0..s {
+            for r in c..s {
+                let mut k = S::zero();
+                for j in 0..nv {
+                    k += self.x[(j, r)] * self.ainv_bt[(j, c)];
+                }
+                self.inv[(r, c)] = k;
+            }
+            let mut ba0 = S::zero();
+            for j in 0..nv {
+                ba0 += self.x[(j, c)] * acc[j];
+            }
+            self.rhs[c] = gamma[c] / self.norms[c] - ba0;
+        }
+        linalg::cholesky(&mut self.inv, s)
+            .map_err(|e| FormulationError::SingularSystem { rcond: e.rcond })?;
+        diag.factorizations += 1;
+        let (mut lmin, mut lmax) = (f64::INFINITY, 0.0f64);
+        for i in 0..s {
+            let l = re(self.inv[(i, i)]).abs();
+            lmin = lmin.min(l);
+            lmax = lmax.max(l);
+        }
+        diag.system_rcond = rcond.min((lmin / lmax).powi(2));
+        linalg::cholesky_solve(&self.inv, s, &mut self.rhs[..s]);
+        for r in 0..s {
+            let lr = self.rhs[r];
+            for j in 0..nv {
+                acc[j] += self.ainv_bt[(j, r)] * lr;
+            }
+        }
+        Ok(())
     }
 
     /// (2.8)-(2.10) in the basis Q of the QR of B_hat^T (module docs): K = Q^T A Q,

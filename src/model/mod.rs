@@ -85,6 +85,35 @@ pub trait Model: Send + Sync {
             *x += y;
         }
     }
+
+    /// Whether [`Model::mass_factor`], [`Model::mass_solve`] and [`Model::mass_mul`] work in O(n)
+    /// without forming A (kinematic trees: the articulated-body factorization). Default false: the
+    /// articulated-body formulation then factors the dense A (Cholesky) instead, and `auto` never
+    /// picks it.
+    fn has_mass_factor(&self) -> bool {
+        false
+    }
+
+    /// Factor A(q) for [`Model::mass_solve`] and [`Model::mass_mul`]; returns a reciprocal condition
+    /// estimate (pivot ratio) or the pivot at which A is not positive definite. Called only when
+    /// [`Model::has_mass_factor`] is true.
+    fn mass_factor<S: Scalar>(
+        &self,
+        _ws: &mut Self::Workspace<S>,
+        _q: &[S],
+    ) -> Result<f64, crate::linalg::Singular> {
+        unreachable!("mass_factor on a model without has_mass_factor")
+    }
+
+    /// `x <- A(q)^-1 x` with the last [`Model::mass_factor`].
+    fn mass_solve<S: Scalar>(&self, _ws: &mut Self::Workspace<S>, _x: &mut [S]) {
+        unreachable!("mass_solve on a model without has_mass_factor")
+    }
+
+    /// `out = A(q) x` at the q of the last [`Model::mass_factor`].
+    fn mass_mul<S: Scalar>(&self, _ws: &mut Self::Workspace<S>, _x: &[S], _out: &mut [S]) {
+        unreachable!("mass_mul on a model without has_mass_factor")
+    }
 }
 
 /// dq/dt = N(q) v for the given segments.

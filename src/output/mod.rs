@@ -127,7 +127,7 @@
 //! - `initial_correction`: `null`, or `{"position", "velocity"}` when the initial state was
 //!   assembled.
 //! - `settings`: the [`Settings`](crate::solve::Settings) as serialized by serde, e.g. the
-//!   default: `{"formulation": "null_space", "integrator": "dop853", "rtol": 1e-10,
+//!   default: `{"formulation": "auto", "integrator": "dop853", "rtol": 1e-10,
 //!   "atol": 1e-12, "h_max": null, "max_steps": 10000000, "drift": {"kind": "projection",
 //!   "tol": 1e-12, "max_iter": 8}, "rank_dependent": 1e-10, "rank_vanishing": 1e-12,
 //!   "output": "steps", "max_drift": null, "consistency_tol": 1e-10, "assemble": false,

@@ -319,6 +319,22 @@ impl<M: Model, L: ForceLaw> Model for WithForce<M, L> {
         self.inner.applied_forces(ws, t, q, v, f);
         self.law.add(t, q, v, f);
     }
+    fn has_mass_factor(&self) -> bool {
+        self.inner.has_mass_factor()
+    }
+    fn mass_factor<S: Scalar>(
+        &self,
+        ws: &mut M::Workspace<S>,
+        q: &[S],
+    ) -> Result<f64, crate::linalg::Singular> {
+        self.inner.mass_factor(ws, q)
+    }
+    fn mass_solve<S: Scalar>(&self, ws: &mut M::Workspace<S>, x: &mut [S]) {
+        self.inner.mass_solve(ws, x)
+    }
+    fn mass_mul<S: Scalar>(&self, ws: &mut M::Workspace<S>, x: &[S], out: &mut [S]) {
+        self.inner.mass_mul(ws, x, out)
+    }
 }
 
 /// The joint torque -k q_j - c v_j (a stiff, damped spring at rest at 0) on a Euclidean joint.

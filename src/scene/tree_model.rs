@@ -192,6 +192,22 @@ impl Model for TreeSceneModel {
         self.add_user_forces(ws, t, q, v);
         f.copy_from_slice(ws.buf.as_slice());
     }
+    fn has_mass_factor(&self) -> bool {
+        true
+    }
+    fn mass_factor<S: Scalar>(
+        &self,
+        ws: &mut TreeWork<S>,
+        q: &[S],
+    ) -> Result<f64, crate::linalg::Singular> {
+        tree::aba_factor(&self.tree, &mut ws.data, q)
+    }
+    fn mass_solve<S: Scalar>(&self, ws: &mut TreeWork<S>, x: &mut [S]) {
+        tree::aba_solve(&self.tree, &mut ws.data, x)
+    }
+    fn mass_mul<S: Scalar>(&self, ws: &mut TreeWork<S>, x: &[S], out: &mut [S]) {
+        tree::mass_mul(&self.tree, &mut ws.data, x, out)
+    }
 }
 
 impl TreeSceneModel {

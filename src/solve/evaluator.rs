@@ -1,8 +1,9 @@
 //! One evaluation of the programmed-motion right-hand side at (t, q, v): dv/dt and multipliers.
 
 use crate::formulation::{
-    Diagnostics, Formulation, FormulationError, FormulationWork, RankTolerances,
+    Diagnostics, Formulation, FormulationError, FormulationWork, MassOperator, RankTolerances,
 };
+use crate::linalg::Singular;
 use crate::model::Model;
 use crate::programme::jet::Jet;
 use crate::programme::{Constraints, Level, Role};
@@ -27,7 +28,9 @@ pub struct Evaluator<'a, M: Model, C: Constraints, S: Scalar> {
     /// Derivatives of the constraint rows at the last evaluated state.
     pub jet: Jet<C, S>,
     fw: FormulationWork<S>,
-    /// Mass matrix A(q) at the last state.
+    /// Mass matrix A(q) at the last [`Evaluator::prepare`], [`Evaluator::prepare_geometry`] or
+    /// evaluation with a dense formulation (the articulated-body formulation on a tree never forms
+    /// it, and leaves it as it was).
     pub mass: DMatrix<S>,
     /// F = G + Q at the last state.
     pub force: Vec<S>,
@@ -90,6 +93,7 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
     }
 
     /// Solve for dv/dt and the multipliers at (t, q, v). Allocates nothing unless it fails.
+    /// `formulation` is resolved by [`Formulation::resolve`] (`auto`: by nv and the model).
     pub fn evaluate(
         &mut self,
         formulation: Formulation,
@@ -99,7 +103,17 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
         q: &[S],
         v: &[S],
     ) -> Result<(), FormulationError> {
-        self.prepare(t, q, v);
+        let factored = self.model.has_mass_factor();
+        let formulation = formulation.resolve(self.model.nv(), factored);
+        // the articulated-body formulation on a tree: A is never formed
+        let factored = factored && formulation == Formulation::ArticulatedBody;
+        if factored {
+            self.model
+                .natural_forces(&mut self.mws, t, q, v, &mut self.force, &mut self.qf);
+            self.jet.compute(self.cons, self.model.segments(), t, q, v);
+        } else {
+            self.prepare(t, q, v);
+        }
         if let Some(bg) = baumgarte {
             for i in 0..self.jet.rows() {
                 let level = self.jet.levels()[i];
@@ -113,17 +127,35 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
                 }
             }
         }
-        self.diag = self.fw.solve(
-            formulation,
-            &self.mass,
-            &self.force,
-            &self.jet.b,
-            &self.jet.gamma,
-            &self.row_scale,
-            tol,
-            &mut self.acc,
-            &mut self.lambda,
-        )?;
+        self.diag = if factored {
+            let mut op = ModelMass {
+                model: self.model,
+                ws: &mut self.mws,
+                q,
+            };
+            self.fw.solve_factored(
+                &mut op,
+                &self.force,
+                &self.jet.b,
+                &self.jet.gamma,
+                &self.row_scale,
+                tol,
+                &mut self.acc,
+                &mut self.lambda,
+            )?
+        } else {
+            self.fw.solve(
+                formulation,
+                &self.mass,
+                &self.force,
+                &self.jet.b,
+                &self.jet.gamma,
+                &self.row_scale,
+                tol,
+                &mut self.acc,
+                &mut self.lambda,
+            )?
+        };
         Ok(())
     }
 
@@ -139,5 +171,24 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
                 }
             }
         }
+    }
+}
+
+/// A model's articulated-body factorization at q as the formulation's [`MassOperator`].
+struct ModelMass<'m, 'w, 'q, M: Model, S: Scalar> {
+    model: &'m M,
+    ws: &'w mut M::Workspace<S>,
+    q: &'q [S],
+}
+
+impl<M: Model, S: Scalar> MassOperator<S> for ModelMass<'_, '_, '_, M, S> {
+    fn factor(&mut self) -> Result<f64, Singular> {
+        self.model.mass_factor(self.ws, self.q)
+    }
+    fn solve(&mut self, x: &mut [S]) {
+        self.model.mass_solve(self.ws, x)
+    }
+    fn mul(&mut self, x: &[S], out: &mut [S]) {
+        self.model.mass_mul(self.ws, x, out)
     }
 }

@@ -70,7 +70,9 @@ pub enum Output {
 /// The method: every field documents its default (`Settings::default()`).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Settings {
-    /// Formulation of the accelerations. Default: the paper's null-space form.
+    /// Formulation of the accelerations. Default: `auto`, the paper's null-space form except on
+    /// trees of at least [`crate::formulation::AUTO_ARTICULATED_NV`] velocities, where the
+    /// articulated-body form is faster ([`Formulation::resolve`]).
     pub formulation: Formulation,
     /// Integrator. Default: DOP853.
     pub integrator: Method,
@@ -231,7 +233,7 @@ pub fn quoted(names: &[String]) -> String {
 impl Default for Settings {
     fn default() -> Self {
         Settings {
-            formulation: Formulation::NullSpace,
+            formulation: Formulation::Auto,
             integrator: Method::Dop853,
             rtol: crate::integrate::DEFAULT_RTOL,
             atol: crate::integrate::DEFAULT_ATOL,

@@ -63,6 +63,8 @@ pub struct TreeData<S: Scalar> {
     fk_valid: bool,
     /// World-frame motion subspace column of each dof (CRBA).
     pub(crate) sw_dof: Vec<Motion<S>>,
+    /// The articulated-body factorization's per-link scratch ([`super::aba_factor`]).
+    pub(crate) aba: Vec<super::aba::AbaLink<S>>,
 }
 
 impl<S: Scalar> TreeData<S> {
@@ -74,6 +76,7 @@ impl<S: Scalar> TreeData<S> {
             fk_q: vec![c(0.0); model.nq()],
             fk_valid: false,
             sw_dof: vec![Motion::zero(); model.nv()],
+            aba: vec![super::aba::AbaLink::new(); model.links.len()],
         }
     }
 }

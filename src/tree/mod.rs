@@ -42,12 +42,14 @@
 //! assert_eq!(dv.len(), 3);
 //! ```
 
+mod aba;
 mod config;
 mod dynamics;
 mod kinematics;
 mod model;
 pub mod spatial;
 
+pub use aba::{aba_factor, aba_solve, mass_mul};
 pub use config::{difference_configuration, integrate_configuration, quat_exp, quat_log};
 pub use dynamics::{
     applied_forces, bias, body_point_force, body_torque, crba, gravity_forces, kinetic_energy,

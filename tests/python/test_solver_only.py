@@ -40,7 +40,7 @@ def test_the_slider_crank_passes_solver_only_against_its_closed_form():
     assert r.info["reference_values"] == 9
     assert r.metrics["reference_error"] < 1e-10, r.metrics
     assert r.metrics["formulation_deviation"] < 1e-9, r.metrics
-    assert any("null_space against kkt" in n for n in r.notes), r.notes
+    assert any("auto against kkt" in n for n in r.notes), r.notes  # the default formulation
 
 
 def test_the_references_are_evaluated_from_the_file():

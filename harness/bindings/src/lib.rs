@@ -212,7 +212,7 @@ impl PyScene {
     /// Solve (the GIL is released meanwhile). Keyword overrides in the core's one vocabulary
     /// (`progmo::solve::Overrides`, the scene file's `[solver]`/`[time]` names): output_dt, t1,
     /// rtol, atol, integrator ("dop853", "dopri5", "radau5", "rk4" with step), formulation
-    /// ("null_space", "null_space_stacked", "kkt", "range_space", "udwadia_kalaba"), drift
+    /// (`progmo::solve::FORMULATION_NAMES`: "auto", "null_space", ..., "articulated_body"), drift
     /// ("projection", "baumgarte", "none"), max_samples (default 10^7), strict. The span and
     /// settings are checked by `progmo::solve::validate` first (ValueError naming the argument).
     /// Returns a `Solution` (partial on an early stop: see its `code` / `raise_if_stopped`).

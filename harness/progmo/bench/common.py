@@ -17,8 +17,9 @@ import numpy as np
 
 from .._core import FORMULATIONS as _FORMULATIONS, INTEGRATORS as _INTEGRATORS
 
-#: the core's vocabulary (progmo::solve); the sweeps use every formulation and the adaptive integrators
-FORMULATIONS = tuple(_FORMULATIONS)
+#: the core's vocabulary (progmo::solve); the sweeps use every formulation (not `auto`, which names
+#: one of them) and the adaptive integrators
+FORMULATIONS = tuple(n for n in _FORMULATIONS if n != "auto")
 INTEGRATORS = tuple(n for n in _INTEGRATORS if n != "rk4")
 
 

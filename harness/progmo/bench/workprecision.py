@@ -93,8 +93,10 @@ def residual_run(scene, formulation="null_space", integrator="dop853", tol=1e-8)
 
 COLORS = {"dop853": "tab:blue", "dopri5": "tab:green", "radau5": "tab:red",
           "scipy DOP853": "black", "scipy Radau": "tab:purple"}
-STYLES = {"null_space": "-", "null_space_stacked": (0, (5, 1, 1, 1)), "kkt": "--", "range_space": ":", "udwadia_kalaba": "-."}
-MARKERS = {"null_space": "o", "null_space_stacked": "D", "kkt": "s", "range_space": "^", "udwadia_kalaba": "x"}
+STYLES = {"null_space": "-", "null_space_stacked": (0, (5, 1, 1, 1)), "kkt": "--", "range_space": ":", "udwadia_kalaba": "-.",
+          "articulated_body": (0, (1, 1))}
+MARKERS = {"null_space": "o", "null_space_stacked": "D", "kkt": "s", "range_space": "^", "udwadia_kalaba": "x",
+           "articulated_body": "v"}
 
 
 def plot(scene_name: str, rows: list[dict], ref: Reference, res_run, out: Path, prov: Provenance) -> list[Path]:
