@@ -1,5 +1,6 @@
 //! Criterion benchmarks of the solver core on the shared test problems: one right-hand side
-//! (accelerations and multipliers) per formulation, and whole solves.
+//! (accelerations and multipliers) per formulation (chains up to n = 128 for the articulated-body
+//! formulation), and whole solves.
 //!
 //! Run: `cargo bench --bench core`.
 
@@ -14,8 +15,17 @@ use progmo::solve::{
 use std::hint::black_box;
 
 fn rhs_group<M: Model, C: Constraints>(c: &mut Criterion, name: &str, p: &Problem<M, C>) {
+    rhs_group_of(c, name, p, &Formulation::ALL)
+}
+
+fn rhs_group_of<M: Model, C: Constraints>(
+    c: &mut Criterion,
+    name: &str,
+    p: &Problem<M, C>,
+    formulations: &[Formulation],
+) {
     let mut g = c.benchmark_group(format!("rhs/{name}"));
-    for f in Formulation::ALL {
+    for &f in formulations {
         let mut ev = Evaluator::<M, C, f64>::new(&p.model, &p.constraints);
         let tol = RankTolerances::default();
         // Two nearby states, alternated: every evaluation is at a new q, as in a solve (nothing
@@ -46,12 +56,24 @@ fn rhs(c: &mut Criterion) {
     rhs_group(c, "example_2_1", &particle::example_2_1());
     rhs_group(c, "heavy_top", &rigid_body::heavy_top());
     rhs_group(c, "double_pendulum", &pendulum::double_pendulum());
-    // generated tree scenes (expression rows, a body-point signal): the sizes of issue 5's targets
+    // generated tree scenes (expression rows, a body-point signal): the sizes of issue 5's targets,
+    // and of issue 15's (the articulated-body formulation against the dense ones up to n = 128)
     for n in [7, 30] {
         let scene = chain::ChainSpec::uniform(n)
             .scene()
             .expect("generated chain loads");
         progmo::with_problem!(&scene.system, p => rhs_group(c, &format!("chain_{n}"), p));
+    }
+    let long = [
+        Formulation::NullSpace,
+        Formulation::Kkt,
+        Formulation::ArticulatedBody,
+    ];
+    for n in [64, 128] {
+        let scene = chain::ChainSpec::uniform(n)
+            .scene()
+            .expect("generated chain loads");
+        progmo::with_problem!(&scene.system, p => rhs_group_of(c, &format!("chain_{n}"), p, &long));
     }
 }
 

@@ -68,11 +68,36 @@ fn right_hand_side_does_not_allocate() {
     assert_eq!(allocations_per_evaluation(&rigid_body::heavy_top()), 0);
     assert_eq!(allocations_per_evaluation(&pendulum::rod_and_swing()), 0);
     let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("references/scenes");
-    for name in ["heavy_top", "double_pendulum", "example_2_1"] {
+    // chain_8: the articulated-body factorization on a tree of hinges; heavy_top: on a ball joint
+    for name in ["heavy_top", "double_pendulum", "example_2_1", "chain_8"] {
         let scene = progmo::scene::Scene::load(dir.join(format!("{name}.toml"))).unwrap();
         let n = progmo::with_problem!(&scene.system, p => allocations_per_evaluation(p));
         assert_eq!(n, 0, "{name}");
     }
+}
+
+/// Over dual numbers too (the Radau Jacobian evaluates the right-hand side over Dual64): the
+/// articulated-body formulation on a tree allocates nothing.
+#[test]
+fn articulated_body_over_duals_does_not_allocate() {
+    type D = progmo::scalar::Dual<f64>;
+    let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("references/scenes");
+    let scene = progmo::scene::Scene::load(dir.join("chain_8.toml")).unwrap();
+    let n = progmo::with_problem!(&scene.system, p => {
+        let mut ev = Evaluator::<_, _, D>::new(&p.model, &p.constraints);
+        let q: Vec<D> = p.q0.iter().map(|&x| D::new(x, 1.0)).collect();
+        let v: Vec<D> = p.v0.iter().map(|&x| D::from_re(x)).collect();
+        let tol = RankTolerances::default();
+        let f = Formulation::ArticulatedBody;
+        ev.evaluate(f, &tol, None, D::from_re(p.t0), &q, &v).unwrap();
+        let before = count();
+        for k in 0..10 {
+            ev.evaluate(f, &tol, None, D::from_re(p.t0 + 0.01 * k as f64), &q, &v)
+                .unwrap();
+        }
+        count() - before
+    });
+    assert_eq!(n, 0);
 }
 
 #[test]

@@ -66,7 +66,7 @@ pub enum Formulation {
 /// Smallest number of velocities at which [`Formulation::Auto`] picks the articulated-body
 /// formulation on a tree. Measured (`progmo bench --only anchor`, chains with 2 programme rows,
 /// README's Benchmarks): null-space is faster below, articulated-body from here on.
-pub const AUTO_ARTICULATED_NV: usize = 48;
+pub const AUTO_ARTICULATED_NV: usize = 20;
 
 impl Formulation {
     /// All methods, for comparisons ([`Formulation::Auto`] names one of them).

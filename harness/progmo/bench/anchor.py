@@ -352,10 +352,16 @@ def rhs_cpu(scene, iters: int, formulation: str) -> float:
     return (time.thread_time() - t) / iters
 
 
+#: progmo's formulations timed: the paper's null-space form, KKT, the articulated-body form
+#: (O(n) per row on trees) and `auto`, the default (null_space below AUTO_ARTICULATED_NV velocities,
+#: articulated_body from there on), which the targets judge
+PROGMO = ("null_space", "kkt", "articulated_body", "auto")
+
+
 class Timing:
-    """Per-call seconds of progmo's null_space and kkt right-hand sides and of every C++ variant on
-    one scene at its initial state: the minimum over every loop of every round. A round is `reps`
-    short loops of each side, strictly alternated; each figure spends about `budget_s` per round."""
+    """Per-call seconds of progmo's right-hand sides (PROGMO) and of every C++ variant on one scene
+    at its initial state: the minimum over every loop of every round. A round is `reps` short loops
+    of each side, strictly alternated; each figure spends about `budget_s` per round."""
 
     def __init__(self, scene, proc: Process, budget_s: float, reps: int = 5):
         self.scene, self.proc, self.reps = scene, proc, reps
@@ -372,7 +378,7 @@ class Timing:
         t, q, v = sc.t0, np.array(sc.q0), np.array(sc.v0)
 
         def progmo():
-            for f in ("null_space", "kkt"):
+            for f in PROGMO:
                 self._keep(f"progmo_{f}", rhs_cpu(sc, self.iters, f))
 
         def cpp():
@@ -391,15 +397,17 @@ class Timing:
         row.update({f"{k}_s": x for k, x in best.items()})
         row["same_best"] = min(SAME, key=lambda k: best[k])
         row["same_best_s"] = best[row["same_best"]]
-        row["ratio_null_space"] = best["progmo_null_space"] / row["same_best_s"]
-        row["ratio_kkt"] = best["progmo_kkt"] / row["same_best_s"]
+        for f in PROGMO:
+            row[f"ratio_{f}"] = best[f"progmo_{f}"] / row["same_best_s"]
         row["ratio_null_space_kkt"] = best["progmo_null_space"] / best["kkt"]
+        row["ratio_auto_kkt"] = best["progmo_auto"] / best["kkt"]
         return row
 
 
 HEADER = ["n", "aba_s", "kkt_s", "same_cat_s", "same_sep_s", "same_minv_s", "same_abaunit_s", "same_best",
-          "same_best_s", "progmo_null_space_s", "progmo_kkt_s", "ratio_null_space", "ratio_kkt",
-          "ratio_null_space_kkt", "agreement", "agreement_tol", "iterations", "rounds", "loops_per_round"]
+          "same_best_s", "progmo_null_space_s", "progmo_kkt_s", "progmo_articulated_body_s", "progmo_auto_s",
+          "ratio_null_space", "ratio_kkt", "ratio_articulated_body", "ratio_auto", "ratio_null_space_kkt",
+          "ratio_auto_kkt", "agreement", "agreement_tol", "iterations", "rounds", "loops_per_round"]
 
 
 def run(out: Path, prov: Provenance, ns: Sequence[int] = NS, rounds: int = 7, budget_s: float = 0.05,

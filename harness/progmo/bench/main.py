@@ -230,9 +230,9 @@ def main(argv: list[str] | None = None) -> int:
         sc = scaling.run(out, prov, quick=ns.quick or ns.smoke, ns=cfg.get("scaling_ns"))
         rows = sc["rows"]
         trs = [[r["n"], f"{r['progmo_null_space_s'] * 1e6:.2f}", f"{r['progmo_kkt_s'] * 1e6:.2f}",
-                f"{r['pin_fd_only_s'] * 1e6:.2f}", f"{r['pin_fd_u_s'] * 1e6:.2f}", f"{r['pin_pipeline_s'] * 1e6:.2f}",
+                f"{r['progmo_articulated_body_s'] * 1e6:.2f}", f"{r['pin_fd_only_s'] * 1e6:.2f}", f"{r['pin_fd_u_s'] * 1e6:.2f}", f"{r['pin_pipeline_s'] * 1e6:.2f}",
                 f"{r['progmo_null_space_s'] / r['pin_fd_u_s']:.2f}", f"{r['max_abs_da']:.1e}"] for r in rows]
-        hdr = ["n", "progmo null_space (us)", "progmo kkt (us)", "pin.forwardDynamics (us)",
+        hdr = ["n", "progmo null_space (us)", "progmo kkt (us)", "progmo articulated_body (us)", "pin.forwardDynamics (us)",
                "pin fd + u (us)", "user pipeline (us)", "progmo null_space / pin fd+u", "max|da| pin vs progmo"]
         inner = (page.doc(scaling.__doc__)
                  + f"<p>Python loop + call overhead (no-op Python function, 7 arguments): "
@@ -273,13 +273,15 @@ def main(argv: list[str] | None = None) -> int:
             b = an["build"]
             us = lambda x: f"{x * 1e6:.2f}"  # noqa: E731
             trs = [[r["n"], us(r["aba_s"]), us(r["kkt_s"]), f"{us(r['same_best_s'])} ({r['same_best']})",
-                    us(r["progmo_null_space_s"]), us(r["progmo_kkt_s"]), f"{r['ratio_null_space']:.2f}",
-                    f"{r['ratio_kkt']:.2f}", f"{r['ratio_null_space_kkt']:.2f}",
+                    us(r["progmo_null_space_s"]), us(r["progmo_kkt_s"]), us(r["progmo_articulated_body_s"]),
+                    us(r["progmo_auto_s"]), f"{r['ratio_null_space']:.2f}", f"{r['ratio_articulated_body']:.2f}",
+                    f"{r['ratio_auto']:.2f}", f"{r['ratio_auto_kkt']:.2f}",
                     f"{r['agreement']:.1e} ({r['agreement_tol']:.0e})"] for r in anchor_rows]
             hdr = ["n", "C++ ABA (us)", "C++ KKT forwardDynamics, J and gamma given (us)",
                    "C++ same work, best (us)", "progmo null_space (us)", "progmo kkt (us)",
-                   "progmo null_space / C++ same work", "progmo kkt / C++ same work",
-                   "progmo null_space / C++ KKT", "max rel. disagreement (tolerance)"]
+                   "progmo articulated_body (us)", "progmo auto, the default (us)",
+                   "progmo null_space / C++ same work", "progmo articulated_body / C++ same work",
+                   "progmo auto / C++ same work", "progmo auto / C++ KKT", "max rel. disagreement (tolerance)"]
             vrs = [[r["n"]] + [us(r[f"{v}_s"]) for v in anchor.SAME] for r in anchor_rows]
             inner = (page.doc(anchor.__doc__) + page.table(hdr, trs)
                      + "<p>Every same-work variant (us per call):</p>" + page.table(["n", *anchor.SAME], vrs)
@@ -290,8 +292,10 @@ def main(argv: list[str] | None = None) -> int:
             for r in anchor_rows:
                 summary.append(f"anchor n = {r['n']}: C++ ABA {us(r['aba_s'])} us, KKT (J, gamma given) {us(r['kkt_s'])} us, "
                                f"same work {us(r['same_best_s'])} us ({r['same_best']}); progmo null_space "
-                               f"{us(r['progmo_null_space_s'])} us, kkt {us(r['progmo_kkt_s'])} us; progmo/C++ same work "
-                               f"{r['ratio_null_space']:.2f} (null_space), {r['ratio_kkt']:.2f} (kkt)")
+                               f"{us(r['progmo_null_space_s'])} us, kkt {us(r['progmo_kkt_s'])} us, articulated_body "
+                               f"{us(r['progmo_articulated_body_s'])} us, auto {us(r['progmo_auto_s'])} us; progmo/C++ "
+                               f"same work {r['ratio_null_space']:.2f} (null_space), {r['ratio_kkt']:.2f} (kkt), "
+                               f"{r['ratio_articulated_body']:.2f} (articulated_body), {r['ratio_auto']:.2f} (auto)")
             if ns.accept:
                 import json as _json
 

@@ -43,7 +43,8 @@ def python_overhead(iters: int = 20000, repeats: int = 5) -> float:
     return _best_loop(lambda: noop(*args), iters, repeats)
 
 
-def measure(scene, formulations=("null_space", "kkt"), budget_s: float = 0.05, repeats: int = 3) -> dict:
+def measure(scene, formulations=("null_space", "kkt", "articulated_body"), budget_s: float = 0.05,
+            repeats: int = 3) -> dict:
     import pinocchio as pin
 
     from .scipy_pipeline import pipeline_for
@@ -87,8 +88,8 @@ def run(out: Path, prov: Provenance, quick: bool, ns=None) -> dict:
             log(f"[scaling] n = {n}")
             scene = Scene(str(d.write(f"chain_{n}", chain_toml(n, name=f"chain_{n}"))))
             rows.append(measure(scene, budget_s=budget))
-    header = ["n", "progmo_null_space_s", "progmo_kkt_s", "pin_fd_only_s", "pin_fd_u_s", "pin_pipeline_s",
-              "iterations", "max_abs_da"]
+    header = ["n", "progmo_null_space_s", "progmo_kkt_s", "progmo_articulated_body_s", "pin_fd_only_s", "pin_fd_u_s",
+              "pin_pipeline_s", "iterations", "max_abs_da"]
     write_csv(out / "scaling.csv", prov, header, ([r[h] for h in header] for r in rows))
     fig = _plot(rows, overhead)
     save_figure(fig, out / "scaling.png", prov)
@@ -105,6 +106,7 @@ def _plot(rows, overhead):
     fig, ax = plt.subplots(figsize=(7.5, 5.2))
     for key, lab, st in (("progmo_null_space_s", "progmo null_space (Rust loop)", "-o"),
                          ("progmo_kkt_s", "progmo kkt (Rust loop)", "--o"),
+                         ("progmo_articulated_body_s", "progmo articulated_body (Rust loop)", "-.o"),
                          ("pin_fd_u_s", "pin.forwardDynamics + u (Python loop)", "-s"),
                          ("pin_pipeline_s", "user pipeline: numpy J, gamma + forwardDynamics", ":s")):
         ax.loglog(n, [r[key] * 1e6 for r in rows], st, ms=4, label=lab)
