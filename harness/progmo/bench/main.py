@@ -4,7 +4,7 @@ Speed against error: writes CSV, PNG and index.html to DIR (default out/bench) a
 numbers. The `progmo` binary forwards `progmo bench ...` to `python -m progmo.bench.main ...`.
 
 Run times measured on the shared 2-core x86-64 machine (2026-11-21):
-  (full)   172 s wall (10 bundled scenes x 5 formulations x 3 integrators x 9 tolerances, 5
+  (full)   172 s wall (10 bundled scenes x 5 formulations (6 since issue 15) x 3 integrators x 9 tolerances, 5
            repeats; scipy sweeps of double_pendulum and chain_8; 15 conditioning scenes up to 128
            links; scaling n = 2 ... 128; the IVP Test Set car axis, 2 integrators x 9 tolerances;
            drift control over 10^4 periods, 7 alternating rounds)
