@@ -29,7 +29,7 @@ pub const TREE_ONLY: [&str; 6] = [
     "closures",
 ];
 /// Loop-closure kinds (`kind` of a `[[model.closures]]` entry).
-pub const CLOSURE_KINDS: [&str; 3] = ["point", "weld", "distance"];
+pub const CLOSURE_KINDS: [&str; 5] = ["point", "weld", "distance", "line", "plane"];
 /// Joint types (`type` of a joint).
 pub const JOINT_TYPES: [&str; 4] = ["hinge", "slide", "ball", "free"];
 /// Joint types that need an `axis`.
@@ -355,7 +355,8 @@ pub struct ModelFile {
     #[serde(default)]
     #[schemars(with = "Vec<FrameFile>")]
     pub frames: Vec<Spanned<FrameFile>>,
-    /// tree: loop closures between bodies (system rows: point 3, weld 6, distance 1).
+    /// tree: loop closures between bodies (system rows: point 3, weld 6, distance 1, line 2,
+    /// plane 1).
     #[serde(default)]
     #[schemars(with = "Vec<ClosureFile>")]
     pub closures: Vec<Spanned<ClosureFile>>,
@@ -394,7 +395,9 @@ pub struct ClosureFile {
     #[schemars(with = "Identifier")]
     pub name: String,
     /// point: point_a = point_b (3 rows); weld: frame a = frame b (6 rows); distance: |point_a -
-    /// point_b| = distance (1 row).
+    /// point_b| = distance (1 row); line: point_a on the line of body_b through point_b along
+    /// `axis` (2 rows); plane: point_a in the plane of body_b through point_b normal to `axis`
+    /// (1 row).
     #[schemars(schema_with = "schema::closure_kind")]
     pub kind: Spanned<String>,
     /// First body.
@@ -420,6 +423,10 @@ pub struct ClosureFile {
     #[serde(default)]
     #[schemars(with = "Option<f64>", extend("exclusiveMinimum" = 0.0))]
     pub distance: Option<f64>,
+    /// line: the line's direction; plane: the plane's normal; in body_b's frame (world: world
+    /// frame), nonzero, normalised implicitly. Required for line and plane, refused otherwise.
+    #[serde(default)]
+    pub axis: Option<[f64; 3]>,
 }
 
 /// A rigid body of a tree model.
