@@ -431,10 +431,8 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
             "include" | "replicate" | "frame" | "attach" => {
                 return Err(err(src, n, n.tag_name().name(), format!("<{}> is not supported (write the file out, e.g. with MuJoCo's mj_saveLastXML)", n.tag_name().name())))
             }
-            "option" => {
-                if n.attribute("gravity").is_some() {
-                    notes.push("<option gravity> not read: gravity comes from the scene's model.gravity".to_string());
-                }
+            "option" if n.attribute("gravity").is_some() => {
+                notes.push("<option gravity> not read: gravity comes from the scene's model.gravity".to_string());
             }
             "equality" | "tendon" | "actuator" | "contact" => notes.push(format!(
                 "<{}> not modelled (the programme's rows and the scene's forces are the only constraints and forces)",
@@ -594,15 +592,12 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
                 }
             };
             if let Some(r) = get("ref") {
-                if r.trim().parse::<f64>().map_or(true, |x| x != 0.0) {
+                if r.trim().parse::<f64>() != Ok(0.0) {
                     return Err(err(src, e, &format!("{jwhat}.ref"), format!("`ref=\"{r}\"` is not supported (q would be measured from another pose than MuJoCo's qpos)")));
                 }
             }
             let nonzero = |a: &str| {
-                get(a).is_some_and(|v| {
-                    v.split_whitespace()
-                        .any(|x| x.parse::<f64>().map_or(true, |x| x != 0.0))
-                })
+                get(a).is_some_and(|v| v.split_whitespace().any(|x| x.parse::<f64>() != Ok(0.0)))
             };
             let limited = match get("limited") {
                 Some("true") => true,
