@@ -579,6 +579,14 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
                 "hinge" => JointSpec::hinge(jname, axis()?).with_anchor(anchor),
                 "slide" => JointSpec::slide(jname, axis()?),
                 "ball" => JointSpec::ball(jname).with_anchor(anchor),
+                "free" if parent != WORLD => {
+                    return Err(err(
+                        src,
+                        e,
+                        &jwhat,
+                        "a free joint belongs to a top-level body (a child of <worldbody>), as MuJoCo requires",
+                    ))
+                }
                 "free" => JointSpec::free(jname),
                 other => {
                     return Err(err(
