@@ -12,8 +12,8 @@ use std::fmt;
 use toml::Spanned;
 
 /// Model kinds (`model.kind`).
-pub const MODEL_KINDS: [&str; 3] = ["lagrangian", "tree", "urdf"];
-/// Keys of `[model]` only a urdf model has.
+pub const MODEL_KINDS: [&str; 4] = ["lagrangian", "tree", "urdf", "mjcf"];
+/// Keys of `[model]` only an imported (urdf or mjcf) model has (mjcf: not root_joint).
 pub const URDF_ONLY: [&str; 4] = ["file", "root_joint", "frames", "locked_joints"];
 /// Root joints of a urdf model (`model.root_joint`).
 pub const ROOT_JOINTS: [&str; 2] = ["fixed", "free"];
@@ -335,9 +335,10 @@ pub struct ModelFile {
     #[serde(default)]
     #[schemars(with = "Vec<PointForceFile>")]
     pub point_forces: Vec<Spanned<PointForceFile>>,
-    // urdf
-    /// urdf: the robot description file, relative to the scene file or `package://PKG/path`
-    /// (found through $PROGMO_ROBOT_PATH; the Python package adds example-robot-data's).
+    // urdf, mjcf
+    /// urdf, mjcf: the robot description file (URDF or MuJoCo MJCF), relative to the scene file
+    /// or `package://PKG/path` (found through $PROGMO_ROBOT_PATH; the Python package adds
+    /// example-robot-data's).
     #[serde(default)]
     #[schemars(with = "Option<String>")]
     pub file: Option<Spanned<String>>,
@@ -346,12 +347,12 @@ pub struct ModelFile {
     #[serde(default)]
     #[schemars(schema_with = "schema::root_joint")]
     pub root_joint: Option<Spanned<String>>,
-    /// urdf: joints welded at q = 0 (e.g. a gripper's fingers), by name.
+    /// urdf, mjcf: joints welded at q = 0 (e.g. a gripper's fingers), by name.
     #[serde(default)]
     #[schemars(with = "Vec<String>")]
     pub locked_joints: Vec<Spanned<String>>,
-    /// urdf: extra frames fixed in links; like every link, each is a signal source (name.x,
-    /// name.qw, ...).
+    /// urdf, mjcf: extra frames fixed in links (bodies); like every link, each is a signal
+    /// source (name.x, name.qw, ...).
     #[serde(default)]
     #[schemars(with = "Vec<FrameFile>")]
     pub frames: Vec<Spanned<FrameFile>>,
