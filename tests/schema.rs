@@ -251,6 +251,15 @@ body_b = "l1"
 point_b = [0.0, 1.0, 0.0]
 distance = 2.23606797749979"#;
 
+const LINE: &str = r#"[[model.closures]]
+name = "guide"
+kind = "line"
+body_a = "l2"
+point_a = [1.0, 0.0, 0.0]
+body_b = "world"
+point_b = [0.0, 0.0, 0.0]
+axis = [1.0, 0.0, 0.0]"#;
+
 #[test]
 fn the_maximal_examples_load_match_the_schema_and_use_every_key() {
     let s = json_schema();
@@ -262,6 +271,7 @@ fn the_maximal_examples_load_match_the_schema_and_use_every_key() {
         MAXIMAL_URDF,
         &maximal_closure(WELD),
         &maximal_closure(DISTANCE),
+        &maximal_closure(LINE),
     ];
     for text in examples {
         Scene::from_text(Path::new("maximal"), text).unwrap_or_else(|e| panic!("{e}"));

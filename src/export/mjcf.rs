@@ -22,7 +22,8 @@ pub fn mjcf(tree: &Model, options: &ExportOptions) -> Result<(String, ExportRepo
 
 /// [`mjcf`] with loop closures (see [`ClosureExport`]): sites, `<equality>` elements, equality
 /// enabled and the constraint solver at its tightest (Newton, 200 iterations, tolerance 1e-15).
-/// A `distance` closure is [`ExportError::Unsupported`]: MuJoCo offers no exact one.
+/// A `distance` closure is [`ExportError::Unsupported`]: MuJoCo offers no exact one; nor does it
+/// offer a point on a line or in a plane (`line`, `plane`).
 pub fn mjcf_closed(
     tree: &Model,
     closures: &[ClosureExport],
@@ -39,6 +40,20 @@ pub fn mjcf_closed(
                  drifted 7.9e-5 m at h = 1e-3, where connect holds to 2e-8 m; \
                  src/export/MUJOCO_CLOSURES.md): the scene stays solver-only in MuJoCo",
                 c.name, options.name
+            ),
+        });
+    }
+    if let Some(c) = closures
+        .iter()
+        .find(|c| c.kind == "line" || c.kind == "plane")
+    {
+        return Err(ExportError::Unsupported {
+            format: Format::Mjcf,
+            what: format!(
+                "{} closure '{}' of scene '{}': MuJoCo has no equality constraint holding a point \
+                 on a line or in a plane of another body (connect, weld, joint, tendon and flex \
+                 only): the scene stays solver-only in MuJoCo",
+                c.kind, c.name, options.name
             ),
         });
     }
@@ -277,7 +292,7 @@ fn write_equalities(x: &mut String, closures: &[ClosureExport], o: &ExportOption
                     "    <weld name=\"{n}\" site1=\"{a}\" site2=\"{b}\" torquescale=\"1\" {soft}/>"
                 );
             }
-            _ => unreachable!("distance closures are refused before writing"),
+            _ => unreachable!("distance, line and plane closures are refused before writing"),
         }
     }
     let _ = writeln!(x, "  </equality>");

@@ -153,14 +153,16 @@ pub const MUJOCO_SOLIMP: [f64; 3] = [0.9999, 0.9999, 0.001];
 /// A loop closure (`[[model.closures]]`) as the exported document carries it, and the report's
 /// entry. MJCF: sites `site_a`/`site_b` (body frames as ours) joined by `<equality>` `connect`
 /// (point) or `weld` (weld), softness [`MUJOCO_SOLREF_STEPS`], [`MUJOCO_SOLIMP`]; a distance is
-/// refused (MuJoCo's fixed-length tendon equality is not exact: `MUJOCO_CLOSURES.md`). URDF has no closures: each
+/// refused (MuJoCo's fixed-length tendon equality is not exact: `MUJOCO_CLOSURES.md`), and so are
+/// a point on a line or in a plane (no such equality in MuJoCo, no such constraint model in
+/// Pinocchio 4.1). URDF has no closures: each
 /// body-side site is a massless link on a fixed joint (a Pinocchio frame), and the harness builds
 /// `pin.RigidConstraintModel`s (CONTACT_3D / CONTACT_6D) between the frames; a world side
 /// (`body_b = None`) is the world point `point_b` / orientation `quat_b`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ClosureExport {
     pub name: String,
-    /// `point`, `weld` or `distance`.
+    /// `point`, `weld`, `distance`, `line` or `plane`.
     pub kind: String,
     pub body_a: String,
     /// Body-frame point and frame orientation (w, x, y, z) of side a.
@@ -171,6 +173,9 @@ pub struct ClosureExport {
     pub point_b: [f64; 3],
     pub quat_b: [f64; 4],
     pub distance: Option<f64>,
+    /// `line` direction / `plane` normal, unit, in body_b's frame (world: world frame).
+    #[serde(default)]
+    pub axis: Option<[f64; 3]>,
     /// Site (MJCF) / frame (URDF link) names of the two sides; `site_b` is absent from a URDF
     /// without a world link.
     pub site_a: String,

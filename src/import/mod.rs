@@ -3,12 +3,15 @@
 //!
 //! - [`urdf`]: URDF (ROS) files: links, inertials, revolute / continuous / prismatic / fixed /
 //!   floating joints; visuals, collisions and meshes are not read.
+//! - [`mjcf`]: MuJoCo MJCF files: bodies, explicit inertials, hinge / slide / ball / free joints,
+//!   joint defaults; geoms, sites and assets are not read.
 //! - [`resolve`]: where `package://PKG/...` paths are found (`$PROGMO_ROBOT_PATH`, then
 //!   `$ROS_PACKAGE_PATH`).
 //!
 //! Errors are [`SceneError`](crate::scene::SceneError)s located in the description file (file,
 //! line, column, element).
 
+pub mod mjcf;
 pub mod urdf;
 
 use std::path::{Path, PathBuf};

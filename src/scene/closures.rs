@@ -6,7 +6,13 @@
 //! - `point`: p_a - p_b = 0 (rows NAME_x, NAME_y, NAME_z, world frame);
 //! - `weld`: the point rows plus the vector part of conj(F_b) (x) F_a = 0 (NAME_rx, NAME_ry,
 //!   NAME_rz), F = body quaternion (x) frame quaternion, i.e. the frames' relative rotation;
-//! - `distance`: |p_a - p_b| - d = 0 (NAME).
+//! - `distance`: |p_a - p_b| - d = 0 (NAME);
+//! - `line`: e_1 . (p_a - p_b) = 0, e_2 . (p_a - p_b) = 0 (NAME_u, NAME_v), e_1, e_2 = R_b times
+//!   two unit vectors perpendicular to the line's direction in body b ([`perpendiculars`]);
+//! - `plane`: n . (p_a - p_b) = 0 (NAME), n = R_b times the unit normal in body b.
+//!
+//! R_b is body b's rotation written from its quaternion signals (`NAME__b.qw`, ...), the identity
+//! for the world, so a line or plane carried by a moving body turns with it.
 //!
 //! They are system rows (role system, paper 2.2: their reactions are joint forces, not control).
 //! A planar loop closed by a spatial point gives a row whose gradient dg/dv vanishes, and loops
@@ -37,6 +43,23 @@ pub enum ClosureKind {
     Weld,
     /// Two points keep a distance (1 row).
     Distance,
+    /// A point of body a stays on a line of body b (2 rows).
+    Line,
+    /// A point of body a stays in a plane of body b (1 row).
+    Plane,
+}
+
+impl ClosureKind {
+    /// The scene file's name of the kind.
+    pub fn name(self) -> &'static str {
+        match self {
+            ClosureKind::Point => "point",
+            ClosureKind::Weld => "weld",
+            ClosureKind::Distance => "distance",
+            ClosureKind::Line => "line",
+            ClosureKind::Plane => "plane",
+        }
+    }
 }
 
 /// A loop closure as loaded (bodies resolved, `body_b = None`: the world).
@@ -54,6 +77,9 @@ pub struct Closure {
     pub quat_b: [f64; 4],
     /// `distance` only.
     pub distance: Option<f64>,
+    /// `line` (direction) and `plane` (normal) only: unit vector in body b's frame (world frame
+    /// for the world).
+    pub axis: Option<[f64; 3]>,
 }
 
 /// A closure row set aside as dependent at t0, with why.
@@ -110,12 +136,15 @@ pub(super) fn load(
             "point" => ClosureKind::Point,
             "weld" => ClosureKind::Weld,
             "distance" => ClosureKind::Distance,
+            "line" => ClosureKind::Line,
+            "plane" => ClosureKind::Plane,
             other => {
                 return Err(src.error(
                     cf.kind.span(),
                     &format!("{field}.kind"),
                     format!(
-                        "unknown closure kind `{other}`: expected `point`, `weld` or `distance`"
+                        "unknown closure kind `{other}`: expected `point`, `weld`, `distance`, \
+                         `line` or `plane`"
                     ),
                 ))
             }
@@ -178,6 +207,35 @@ pub(super) fn load(
             }
             (_, None) => None,
         };
+        let axis = match (kind, cf.axis) {
+            (ClosureKind::Line | ClosureKind::Plane, Some(a)) => {
+                let n = a.iter().map(|x| x * x).sum::<f64>().sqrt();
+                if !(n.is_finite() && n > 0.0) {
+                    return Err(err(
+                        "axis",
+                        format!("the axis must be finite and nonzero, not {a:?}"),
+                    ));
+                }
+                Some(a.map(|x| x / n))
+            }
+            (ClosureKind::Line | ClosureKind::Plane, None) => {
+                return Err(err(
+                    "axis",
+                    format!(
+                        "a `{}` closure needs `axis` (the line's direction or the plane's \
+                         normal, in body_b's frame)",
+                        kind.name()
+                    ),
+                ))
+            }
+            (_, Some(_)) => {
+                return Err(err(
+                    "axis",
+                    "`axis` belongs to `line` and `plane` closures".into(),
+                ))
+            }
+            (_, None) => None,
+        };
         for (side, body, point) in [('a', Some(body_a), cf.point_a), ('b', body_b, cf.point_b)] {
             let Some(body) = body else { continue };
             let name = site_name(&cf.name, side);
@@ -206,6 +264,7 @@ pub(super) fn load(
             point_b: cf.point_b,
             quat_b,
             distance,
+            axis,
         };
         for (name, expr) in closure.rows() {
             let row = RowFile {
@@ -225,7 +284,8 @@ impl Closure {
         match self.kind {
             ClosureKind::Point => 3,
             ClosureKind::Weld => 6,
-            ClosureKind::Distance => 1,
+            ClosureKind::Distance | ClosureKind::Plane => 1,
+            ClosureKind::Line => 2,
         }
     }
 
@@ -240,7 +300,29 @@ impl Closure {
         };
         let d: Vec<String> = (0..3).map(|k| format!("{} - {}", pa[k], pb[k])).collect();
         let n = &self.name;
+        // A vector fixed in body b, in the world frame: R_b c (the world: c itself).
+        let world = |c: [f64; 3]| -> [String; 3] {
+            match self.body_b {
+                Some(_) => rotate(&["qw", "qx", "qy", "qz"].map(|k| format!("{b}.{k}")), c),
+                None => c.map(num),
+            }
+        };
+        let dot = |e: [String; 3]| -> String {
+            (0..3)
+                .map(|k| format!("({})*({})", e[k], d[k]))
+                .collect::<Vec<_>>()
+                .join(" + ")
+        };
+        let axis = self.axis.unwrap_or([0.0, 0.0, 1.0]);
         match self.kind {
+            ClosureKind::Plane => vec![(n.clone(), dot(world(axis)))],
+            ClosureKind::Line => {
+                let (e1, e2) = perpendiculars(axis);
+                vec![
+                    (format!("{n}_u"), dot(world(e1))),
+                    (format!("{n}_v"), dot(world(e2))),
+                ]
+            }
             ClosureKind::Distance => vec![(
                 n.clone(),
                 format!(
@@ -280,6 +362,61 @@ impl Closure {
             }
         }
     }
+}
+
+/// R(q) c for a quaternion q = (w, x, y, z) given as expression text and a constant c: the rows of
+/// the rotation matrix (body -> world) of a unit quaternion, terms with c_j = 0 left out.
+fn rotate(q: &[String; 4], c: [f64; 3]) -> [String; 3] {
+    let [w, x, y, z] = q.clone().map(|e| format!("({e})"));
+    let r = [
+        [
+            format!("1 - 2*({y}^2 + {z}^2)"),
+            format!("2*({x}*{y} - {w}*{z})"),
+            format!("2*({x}*{z} + {w}*{y})"),
+        ],
+        [
+            format!("2*({x}*{y} + {w}*{z})"),
+            format!("1 - 2*({x}^2 + {z}^2)"),
+            format!("2*({y}*{z} - {w}*{x})"),
+        ],
+        [
+            format!("2*({x}*{z} - {w}*{y})"),
+            format!("2*({y}*{z} + {w}*{x})"),
+            format!("1 - 2*({x}^2 + {y}^2)"),
+        ],
+    ];
+    [0, 1, 2].map(|i| {
+        let terms: Vec<String> = (0..3)
+            .filter(|&j| c[j] != 0.0)
+            .map(|j| format!("({})*{}", r[i][j], num(c[j])))
+            .collect();
+        if terms.is_empty() {
+            "0".into()
+        } else {
+            terms.join(" + ")
+        }
+    })
+}
+
+/// Two unit vectors completing the unit vector `a` to a right-handed orthonormal basis (e_1, e_2,
+/// a): e_1 = a x e_k normalised, with e_k the coordinate axis least aligned with a, e_2 = a x e_1.
+pub fn perpendiculars(a: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+    let cross = |u: [f64; 3], v: [f64; 3]| {
+        [
+            u[1] * v[2] - u[2] * v[1],
+            u[2] * v[0] - u[0] * v[2],
+            u[0] * v[1] - u[1] * v[0],
+        ]
+    };
+    let k = (0..3)
+        .min_by(|&i, &j| a[i].abs().total_cmp(&a[j].abs()))
+        .unwrap_or(0);
+    let mut ek = [0.0; 3];
+    ek[k] = 1.0;
+    let e1 = cross(a, ek);
+    let n = e1.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let e1 = e1.map(|x| x / n);
+    (e1, cross(a, e1))
 }
 
 /// Hamilton product of quaternions (w, x, y, z) written as expression text.

@@ -3,7 +3,6 @@
 //! (`progmo export`, the binding, the check) goes through [`Scene::export`], so a check can never
 //! replay a model that silently lost a force or a constraint.
 
-use super::closures::ClosureKind;
 use super::{Scene, SceneSystem};
 use crate::export::{
     self, ClosureExport, ExportError, ExportOptions, ExportReport, Format, HarnessForce,
@@ -89,12 +88,7 @@ impl Scene {
                 let rows: Vec<String> = c.rows().into_iter().map(|(n, _)| n).collect();
                 ClosureExport {
                     name: c.name.clone(),
-                    kind: match c.kind {
-                        ClosureKind::Point => "point",
-                        ClosureKind::Weld => "weld",
-                        ClosureKind::Distance => "distance",
-                    }
-                    .into(),
+                    kind: c.kind.name().into(),
                     body_a: c.body_a.clone(),
                     point_a: c.point_a,
                     quat_a: c.quat_a,
@@ -102,6 +96,7 @@ impl Scene {
                     point_b: c.point_b,
                     quat_b: c.quat_b,
                     distance: c.distance,
+                    axis: c.axis,
                     site_a: super::closures::site_name(&c.name, 'a'),
                     site_b: super::closures::site_name(&c.name, 'b'),
                     set_aside: rows

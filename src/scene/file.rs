@@ -12,8 +12,8 @@ use std::fmt;
 use toml::Spanned;
 
 /// Model kinds (`model.kind`).
-pub const MODEL_KINDS: [&str; 3] = ["lagrangian", "tree", "urdf"];
-/// Keys of `[model]` only a urdf model has.
+pub const MODEL_KINDS: [&str; 4] = ["lagrangian", "tree", "urdf", "mjcf"];
+/// Keys of `[model]` only an imported (urdf or mjcf) model has (mjcf: not root_joint).
 pub const URDF_ONLY: [&str; 4] = ["file", "root_joint", "frames", "locked_joints"];
 /// Root joints of a urdf model (`model.root_joint`).
 pub const ROOT_JOINTS: [&str; 2] = ["fixed", "free"];
@@ -29,7 +29,7 @@ pub const TREE_ONLY: [&str; 6] = [
     "closures",
 ];
 /// Loop-closure kinds (`kind` of a `[[model.closures]]` entry).
-pub const CLOSURE_KINDS: [&str; 3] = ["point", "weld", "distance"];
+pub const CLOSURE_KINDS: [&str; 5] = ["point", "weld", "distance", "line", "plane"];
 /// Joint types (`type` of a joint).
 pub const JOINT_TYPES: [&str; 4] = ["hinge", "slide", "ball", "free"];
 /// Joint types that need an `axis`.
@@ -335,9 +335,10 @@ pub struct ModelFile {
     #[serde(default)]
     #[schemars(with = "Vec<PointForceFile>")]
     pub point_forces: Vec<Spanned<PointForceFile>>,
-    // urdf
-    /// urdf: the robot description file, relative to the scene file or `package://PKG/path`
-    /// (found through $PROGMO_ROBOT_PATH; the Python package adds example-robot-data's).
+    // urdf, mjcf
+    /// urdf, mjcf: the robot description file (URDF or MuJoCo MJCF), relative to the scene file
+    /// or `package://PKG/path` (found through $PROGMO_ROBOT_PATH; the Python package adds
+    /// example-robot-data's).
     #[serde(default)]
     #[schemars(with = "Option<String>")]
     pub file: Option<Spanned<String>>,
@@ -346,16 +347,17 @@ pub struct ModelFile {
     #[serde(default)]
     #[schemars(schema_with = "schema::root_joint")]
     pub root_joint: Option<Spanned<String>>,
-    /// urdf: joints welded at q = 0 (e.g. a gripper's fingers), by name.
+    /// urdf, mjcf: joints welded at q = 0 (e.g. a gripper's fingers), by name.
     #[serde(default)]
     #[schemars(with = "Vec<String>")]
     pub locked_joints: Vec<Spanned<String>>,
-    /// urdf: extra frames fixed in links; like every link, each is a signal source (name.x,
-    /// name.qw, ...).
+    /// urdf, mjcf: extra frames fixed in links (bodies); like every link, each is a signal
+    /// source (name.x, name.qw, ...).
     #[serde(default)]
     #[schemars(with = "Vec<FrameFile>")]
     pub frames: Vec<Spanned<FrameFile>>,
-    /// tree: loop closures between bodies (system rows: point 3, weld 6, distance 1).
+    /// tree: loop closures between bodies (system rows: point 3, weld 6, distance 1, line 2,
+    /// plane 1).
     #[serde(default)]
     #[schemars(with = "Vec<ClosureFile>")]
     pub closures: Vec<Spanned<ClosureFile>>,
@@ -394,7 +396,9 @@ pub struct ClosureFile {
     #[schemars(with = "Identifier")]
     pub name: String,
     /// point: point_a = point_b (3 rows); weld: frame a = frame b (6 rows); distance: |point_a -
-    /// point_b| = distance (1 row).
+    /// point_b| = distance (1 row); line: point_a on the line of body_b through point_b along
+    /// `axis` (2 rows); plane: point_a in the plane of body_b through point_b normal to `axis`
+    /// (1 row).
     #[schemars(schema_with = "schema::closure_kind")]
     pub kind: Spanned<String>,
     /// First body.
@@ -420,6 +424,10 @@ pub struct ClosureFile {
     #[serde(default)]
     #[schemars(with = "Option<f64>", extend("exclusiveMinimum" = 0.0))]
     pub distance: Option<f64>,
+    /// line: the line's direction; plane: the plane's normal; in body_b's frame (world: world
+    /// frame), nonzero, normalised implicitly. Required for line and plane, refused otherwise.
+    #[serde(default)]
+    pub axis: Option<[f64; 3]>,
 }
 
 /// A rigid body of a tree model.

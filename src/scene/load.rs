@@ -103,7 +103,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
             check_finite_at_start(&src, &file, &p)?;
             (SceneSystem::Lagrangian(p), spans)
         }
-        "tree" | "urdf" => {
+        "tree" | "urdf" | "mjcf" => {
             let (m, mut sym, notes, (closures, closure_rows)) = tree_scene(&src, model, &params)?;
             import_notes = notes;
             let (c, mut spans) = rows(&src, &file, &mut sym, &closure_rows)?;
@@ -142,7 +142,9 @@ pub(super) fn load(src: Source) -> R<Scene> {
             return Err(src.error(
                 model.kind.span(),
                 "model.kind",
-                format!("unknown model kind `{other}`: expected `lagrangian`, `tree` or `urdf`"),
+                format!(
+                    "unknown model kind `{other}`: expected `lagrangian`, `tree`, `urdf` or `mjcf`"
+                ),
             ))
         }
     };
@@ -576,9 +578,9 @@ fn tree_scene(
     m: &ModelFile,
     params: &[(String, f64)],
 ) -> R<(TreeSceneModel, Symbols, Vec<String>, ClosureRows)> {
-    let urdf = m.kind.get_ref() == "urdf";
-    let (specs, joint_names, link_sites, notes) = if urdf {
-        urdf_specs(src, m, params)?
+    let imported = matches!(m.kind.get_ref().as_str(), "urdf" | "mjcf");
+    let (specs, joint_names, link_sites, notes) = if imported {
+        import_specs(src, m, params)?
     } else {
         let (specs, joint_names) = tree_specs(src, m, params)?;
         (specs, joint_names, vec![], vec![])
@@ -748,13 +750,14 @@ fn tree_scene(
     Ok((model, sym, notes, closures))
 }
 
-/// Bodies, joint names, link and frame names (sites) and notes of a `urdf` model.
+/// Bodies, joint names, link and frame names (sites) and notes of a `urdf` or `mjcf` model.
 type Imported = (Vec<BodySpec>, Vec<String>, Vec<String>, Vec<String>);
 
-/// The bodies of a `urdf` model: the file's links ([`crate::import::urdf`]) plus `frames` as
-/// massless welded bodies.
-fn urdf_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Imported> {
-    use crate::import::{self, urdf};
+/// The bodies of a `urdf` or `mjcf` model: the file's links or bodies ([`crate::import::urdf`],
+/// [`crate::import::mjcf`]) plus `frames` as massless welded bodies.
+fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Imported> {
+    use crate::import::{self, mjcf, urdf};
+    let kind = m.kind.get_ref().as_str();
     let present: Vec<&str> = [
         ("coordinates", !m.coordinates.is_empty()),
         ("mass_matrix", m.mass_matrix.is_some()),
@@ -771,7 +774,7 @@ fn urdf_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Import
             m.kind.span(),
             "model",
             format!(
-                "a `urdf` model takes its bodies from the file: remove {}",
+                "a `{kind}` model takes its bodies from the file: remove {}",
                 and_list(&present)
             ),
         ));
@@ -780,7 +783,7 @@ fn urdf_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Import
         return Err(src.error(
             m.kind.span(),
             "model.file",
-            "a `urdf` model needs `file` (a path relative to the scene, or package://PKG/...)",
+            format!("a `{kind}` model needs `file` (a path relative to the scene, or package://PKG/...)"),
         ));
     };
     let dir = src.file.parent().unwrap_or(std::path::Path::new("."));
@@ -794,6 +797,13 @@ fn urdf_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Import
         )
     })?;
     let root = match m.root_joint.as_ref().map(|r| r.get_ref().as_str()) {
+        Some(_) if kind == "mjcf" => {
+            return Err(src.error(
+                m.root_joint.as_ref().expect("given").span(),
+                "model.root_joint",
+                "an `mjcf` model takes its joints from the file (a free root is a <freejoint/> there): remove root_joint",
+            ))
+        }
         None | Some("fixed") => urdf::RootJoint::Fixed,
         Some("free") => urdf::RootJoint::Free,
         Some(other) => {
@@ -810,7 +820,12 @@ fn urdf_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Import
         .map(|l| l.get_ref().clone())
         .collect();
     let usrc = Source { file: path, text };
-    let robot = urdf::import(&usrc, root, &locked).map_err(|mut e| {
+    let robot = if kind == "mjcf" {
+        mjcf::import(&usrc, &locked)
+    } else {
+        urdf::import(&usrc, root, &locked)
+    }
+    .map_err(|mut e| {
         // a locked joint the file lacks is the scene's mistake: locate it there
         if e.field == "locked_joints" {
             let k = locked
@@ -884,14 +899,20 @@ fn tree_specs(
         return Err(src.error(
             f.span(),
             "model.file",
-            format!("{} belong to `urdf` models", and_list(&URDF_ONLY)),
+            format!(
+                "{} belong to `urdf` and `mjcf` models",
+                and_list(&URDF_ONLY)
+            ),
         ));
     }
     if m.root_joint.is_some() || !m.frames.is_empty() || !m.locked_joints.is_empty() {
         return Err(src.error(
             m.kind.span(),
             "model",
-            format!("{} belong to `urdf` models", and_list(&URDF_ONLY)),
+            format!(
+                "{} belong to `urdf` and `mjcf` models",
+                and_list(&URDF_ONLY)
+            ),
         ));
     }
     if !m.coordinates.is_empty()

@@ -161,7 +161,7 @@ pub(super) fn model_kind_rules(s: &mut Schema) {
     assert_properties(s, &LAGRANGIAN_ONLY);
     assert_properties(s, &TREE_ONLY);
     assert_properties(s, &URDF_ONLY);
-    let [lagrangian, tree, urdf] = MODEL_KINDS;
+    let [lagrangian, tree, urdf, mjcf] = MODEL_KINDS;
     s.insert(
         "allOf".into(),
         json!([
@@ -185,6 +185,13 @@ pub(super) fn model_kind_rules(s: &mut Schema) {
                 "then": {
                     "required": ["file"],
                     "not": required_any(&[&LAGRANGIAN_ONLY[..], &["bodies"][..]].concat())
+                }
+            },
+            {
+                "if": { "properties": { "kind": { "const": mjcf } } },
+                "then": {
+                    "required": ["file"],
+                    "not": required_any(&[&LAGRANGIAN_ONLY[..], &["bodies", "root_joint"][..]].concat())
                 }
             }
         ]),

@@ -18,7 +18,7 @@ def test_bench_runs_end_to_end_and_every_output_names_its_rerun_command(tmp_path
     expected = ["workprecision.csv", "residual_double_pendulum.csv", "scipy.csv", "scipy_ratio.csv",
                 "conditioning.csv", "scaling.csv", "workprecision_double_pendulum.png",
                 "scipy_double_pendulum.png", "conditioning.png", "scaling.png", "index.html",
-                "testset.csv", "testset_caraxis.png", "drift.csv"]
+                "testset.csv", "testset_caraxis.png", "drift.csv", "robot.csv"]
     for name in expected:
         assert (out / name).stat().st_size > 0, name
     rerun = f"progmo bench --smoke --out {out}"
@@ -298,3 +298,67 @@ def test_small_problem_target_compares_against_the_accepted_figures():
     assert tg.small_problem_target(worse, accepted=fake).verdict == "MISSED by 1.30x (regression)"
     rec = tg.accepted_record(ok, prov)
     assert [r["n"] for r in rec["small_problem_rhs"]["rows"]] == [2, 4]
+
+
+# ---------------------------------------------------------------------------------------------
+# The robot part (bench/robot.py): the Panda of panda_circle beside Pinocchio (issue 13, item 6)
+
+
+def test_robot_part_agrees_with_pinocchio_and_reports_every_figure(tmp_path):
+    from progmo.bench import anchor, robot
+
+    _anchor_toolchain()
+    res = robot.run(tmp_path, common.Provenance(["--only", "robot"]), rounds=1, budget_s=0.002, check_states=3,
+                    solve_repeats=1, load_repeats=1)
+    r = res["rhs"]
+    assert (res["n"], res["s"]) == (7, 6)
+    assert set(r["agreement_by_variant"]) == set(anchor.VARIANTS) and r["agreement_states"] == 3
+    assert r["agreement"] <= r["agreement_tol"] == anchor.AGREEMENT, r
+    for k in ("aba_s", "kkt_s", "progmo_null_space_s", "progmo_kkt_s") + tuple(f"{v}_s" for v in anchor.SAME):
+        assert np.isfinite(r[k]) and r[k] > 0, k
+    s = res["solve"]
+    # both whole solves reach the scene's tolerance class against the tight reference
+    assert s["scipy_success"] and s["progmo_error"] < 1e-7 and s["scipy_error"] < 1e-7, s
+    assert s["progmo_cpu_s"] > 0 and s["scipy_cpu_s"] > 0 and s["progmo_rhs_evals"] > 0
+    assert all(np.isfinite(x) and x > 0 for x in res["load"].values())
+    rows = list(csv.DictReader(line for line in open(tmp_path / "robot.csv") if not line.startswith("#")))
+    assert [x["what"] for x in rows] == ["rhs_null_space_vs_cpp_same_work", "rhs_kkt_vs_cpp_same_work",
+                                         "rhs_null_space_vs_cpp_kkt_given", "whole_solve_vs_scipy_pin_python",
+                                         "urdf_load"]
+
+
+def test_robot_part_check_fails_on_a_wrong_circle_law(tmp_path):
+    # negative control: the C++ rows with the circle's radius flipped (a wrong gamma away from t0
+    # and t1, where the law's derivatives vanish) must fail the agreement check
+    from progmo.bench import anchor, robot
+
+    _anchor_toolchain()
+    exe, _ = anchor.build()
+    scene = Scene(str(common.scene_path(robot.SCENE)))
+    urdf, m = robot.urdf_file(common.scene_path(robot.SCENE))
+    model = robot.pin_model(urdf, m)
+    states = robot.trajectory_states(scene, 3)
+    good = robot.model_text(scene, model)
+    with anchor.Process(exe, scene, tmp_path, text=good) as proc:
+        worst, _ = robot.agreement(scene, model, proc, states)
+    assert max(worst.values()) < 1e-10
+    bad = good.replace("circle_cos 0.1 ", "circle_cos -0.1 ")
+    assert bad != good
+    with anchor.Process(exe, scene, tmp_path, text=bad) as proc, pytest.raises(anchor.AnchorFailed, match="disagree"):
+        robot.agreement(scene, model, proc, states)
+
+
+def test_bench_robot_part_on_the_page(tmp_path, monkeypatch):
+    from progmo.bench import anchor
+
+    def unavailable():
+        raise anchor.Unavailable("no C++ compiler (g++ or $CXX) on PATH")
+
+    # without the C++ anchor the whole solve and the load times still run; the page says why
+    monkeypatch.setattr(anchor, "toolchain", unavailable)
+    assert main(["--smoke", "--out", str(tmp_path), "--only", "robot"]) == 0
+    html = (tmp_path / "index.html").read_text()
+    assert "C++ RHS comparison SKIPPED</b>: no C++ compiler" in html
+    assert "scipy solve_ivp DOP853 + Pinocchio&#x27;s Python binding" in html or \
+        "scipy solve_ivp DOP853 + Pinocchio's Python binding" in html
+    assert "pin.buildModelFromUrdf" in html and (tmp_path / "robot.csv").stat().st_size > 0

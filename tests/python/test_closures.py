@@ -140,6 +140,23 @@ def test_distance_closure_is_solver_only(tmp_path):
     assert r.status == "not_checked" and not r.expected and "distance closure 'rod'" in r.reason, r.reason
 
 
+def test_line_closure_is_solver_only(tmp_path):
+    """A point on a line (or in a plane) of another body has no MuJoCo equality and no Pinocchio
+    constraint model: the MJCF export refuses it naming scene and closure, and both checks are
+    not_checked naming the closure (never a pass without the closure)."""
+    text = DISTANCE.replace('name = "distance_pendulum"', 'name = "line_slider"').replace(
+        'kind = "distance"', 'kind = "line"').replace("distance = 1.0", "axis = [0.6, -0.8, 0.0]").replace(
+        "v = { x = 0.8, y = 0.6 }", "v = { x = 0.3, y = -0.4 }")  # along the line
+    p = tmp_path / "line_slider.toml"
+    p.write_text(text)
+    scene = progmo.load(str(p))
+    with pytest.raises(progmo.ExportUnsupported, match="line closure 'rod' of scene 'line_slider'"):
+        scene.export("mjcf")
+    for sim in BOTH:
+        r = run_check(str(p), sim)
+        assert r.status == "not_checked" and not r.expected and "line closure 'rod'" in r.reason, (sim, r.reason)
+
+
 WELD = """name = "welded_pair"
 description = "Two links hinged at the origin and welded together at a rotated frame: one rigid body."
 purpose = "test: weld closure (MuJoCo weld over sites, Pinocchio CONTACT_6D)"

@@ -43,6 +43,10 @@ def test_wheel_in_a_fresh_venv_runs_solve_check_and_the_readme(tmp_path):
     run([py, "-c", "from progmo.bench import anchor, targets; assert anchor.SOURCE.is_file(), anchor.SOURCE; "
          "assert anchor.INSTALL_EIGEN.is_file(); targets.load_accepted()"], cwd=work, env=env)
 
+    # a bundled scene whose robot file (MJCF) ships beside it in the package
+    r = run([exe, "validate", "mjcf_arm"], cwd=work, env=env)
+    assert "mjcf_arm: ok: nq = 6" in r.stdout
+
     r = run([exe, "solve", "double_pendulum"], cwd=work, env=env)
     assert "double_pendulum: success" in r.stdout
     assert {p.name for p in (work / "out" / "double_pendulum").iterdir()} >= {

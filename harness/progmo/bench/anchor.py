@@ -226,10 +226,11 @@ def _nums(x) -> str:
 class Process:
     """One running anchor on one scene (context manager)."""
 
-    def __init__(self, exe: Path, scene, workdir: Path):
+    def __init__(self, exe: Path, scene, workdir: Path, text: str | None = None):
+        """`text`: the model file (default model_text(scene): the chains)."""
         self.scene = scene
         self.path = workdir / f"{scene.name}.anchor"
-        self.path.write_text(model_text(scene))
+        self.path.write_text(model_text(scene) if text is None else text)
         self.proc = subprocess.Popen([str(exe), str(self.path)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                      stderr=subprocess.PIPE, text=True)
         self.header = self._line()

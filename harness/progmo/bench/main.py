@@ -1,4 +1,4 @@
-"""`progmo bench [--quick] [--out DIR] [--only workprecision,scipy,conditioning,scaling,anchor,testset,drift,executors]`
+"""`progmo bench [--quick] [--out DIR] [--only workprecision,scipy,conditioning,scaling,anchor,robot,testset,drift,executors]`
 
 Speed against error: writes CSV, PNG and index.html to DIR (default out/bench) and prints the key
 numbers. The `progmo` binary forwards `progmo bench ...` to `python -m progmo.bench.main ...`.
@@ -14,6 +14,9 @@ Run times measured on the shared 2-core x86-64 machine (2026-11-21):
 The anchor is compiled on first use and cached: about 5 min of CPU (4-13 min wall on the shared
 2-core machine) for g++ on Pinocchio's headers; the part then takes about 20 s in a full run (7
 chains, 7 rounds of 5 loops), 7 s with --quick.
+  2026-11-24: `--only robot` (bench/robot.py: the Panda of panda_circle beside Pinocchio, issue 13
+  item 6) 9 s wall (7 timing rounds, 9 agreement states, 5 whole solves per side); it reuses the
+  anchor's binary (built on first use as above).
 """
 
 from __future__ import annotations
@@ -30,22 +33,25 @@ import numpy as np
 
 from .. import cliutil
 
-PARTS = ("workprecision", "scipy", "conditioning", "scaling", "anchor", "testset", "drift", "executors")
+PARTS = ("workprecision", "scipy", "conditioning", "scaling", "anchor", "robot", "testset", "drift", "executors")
 
 # sweep sizes; --quick is the default a test or a shared 2-core machine can afford
 QUICK: dict[str, Any] = dict(scenes=("double_pendulum", "chain_8"), tols=[1e-4, 1e-6, 1e-8, 1e-10], repeats=3,
              scipy_tols=[1e-4, 1e-6, 1e-8, 1e-10], radau_min_tol=1e-8, states=3,
-             testset_tols=[1e-4, 1e-6, 1e-8, 1e-10], drift_rounds=3, anchor_rounds=3, anchor_budget=0.02)
+             testset_tols=[1e-4, 1e-6, 1e-8, 1e-10], drift_rounds=3, anchor_rounds=3, anchor_budget=0.02,
+             robot=dict(rounds=3, budget_s=0.02, check_states=5, solve_repeats=3, load_repeats=10))
 # full: every bundled scene in the work-precision sweep (scipy only where a hand-written pipeline exists)
 FULL: dict[str, Any] = dict(scenes=("double_pendulum", "chain_8", "example_2_1", "example_2_1_through_rd0", "example_3_1_free",
                     "heavy_top", "planar_arm_line", "knife_edge", "appell_hamel", "slider_crank"),
             tols=[10.0 ** -k for k in range(4, 13)], repeats=5,
             scipy_tols=[10.0 ** -k for k in range(4, 13)], radau_min_tol=1e-10, states=5,
-            testset_tols=[10.0 ** -k for k in range(4, 13)], drift_rounds=7, anchor_rounds=7, anchor_budget=0.05)
+            testset_tols=[10.0 ** -k for k in range(4, 13)], drift_rounds=7, anchor_rounds=7, anchor_budget=0.05,
+            robot=dict(rounds=7, budget_s=0.05, check_states=9, solve_repeats=5, load_repeats=20))
 # --smoke: the smallest end-to-end run (tests): one scene, two tolerances, two chain lengths
 SMOKE: dict[str, Any] = dict(scenes=("double_pendulum",), tols=[1e-5, 1e-8], repeats=1, scipy_tols=[1e-5, 1e-8],
              radau_min_tol=1e-8, states=2, scaling_ns=[2, 7], conditioning="smoke", testset_tols=[1e-6], drift_rounds=1,
-             anchor_ns=[2, 7], anchor_rounds=1, anchor_budget=0.002, sweep_samples=2)
+             anchor_ns=[2, 7], anchor_rounds=1, anchor_budget=0.002, sweep_samples=2,
+             robot=dict(rounds=1, budget_s=0.002, check_states=3, solve_repeats=1, load_repeats=2))
 
 
 def parser() -> argparse.ArgumentParser:
@@ -80,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
 
     from .. import Scene
-    from . import anchor, conditioning, page, scaling, scipy_pipeline, targets as tg, testset, workprecision
+    from . import anchor, conditioning, page, robot, scaling, scipy_pipeline, targets as tg, testset, workprecision
     from .common import Provenance, count_zeros, log, scene_path, write_csv
 
     prov = Provenance(argv)
@@ -305,6 +311,24 @@ def main(argv: list[str] | None = None) -> int:
                 tg.ACCEPTED.write_text(_json.dumps(rec, indent=1) + "\n")
                 summary.append(f"anchor: accepted the small-problem figures into {tg.ACCEPTED}")
 
+    if "robot" in only:
+        title = f"4c. A real robot: the Panda ({robot.SCENE}) beside Pinocchio on the same URDF"
+        try:
+            rb = robot.run(out, prov, **cfg["robot"])
+        except (anchor.AnchorFailed, NotImplementedError, FileNotFoundError) as e:
+            failed.append(f"robot: {e}")
+            sections.append((title, f"<p><b>FAILED</b>:</p><pre>{_html.escape(str(e))}</pre>"))
+            summary.append(f"robot: FAILED: {e}")
+        else:
+            inner, lines = _robot_section(rb, page, anchor)
+            sections.append((title, page.doc(robot.__doc__) + inner))
+            summary += lines
+            if "rhs_skipped" in rb:
+                omissions.append(f"robot: the C++ RHS comparison skipped: {rb['rhs_skipped']}")
+        omissions.append("robot: the whole solve is compared with scipy + Pinocchio's Python binding; the C++ anchor "
+                         "has no integrator, so there is no C++ whole solve (its per-RHS time x progmo's RHS count is "
+                         "shown as the RHS share one would pay).")
+
     ts = None
     testset_why = "the testset part did not run (--only)"
     if "testset" in only:
@@ -391,6 +415,54 @@ def main(argv: list[str] | None = None) -> int:
     for f in failed:
         print(f"progmo bench: FAILED: {f}", file=sys.stderr)
     return 1 if failed else 0
+
+
+def _robot_section(rb: dict, page, anchor) -> tuple[str, list[str]]:
+    """The robot part's HTML (tables) and its key-number lines."""
+    us = lambda x: f"{x * 1e6:.2f}"  # noqa: E731
+    name, lines, inner = rb["scene"], [], ""
+    r = rb["rhs"]
+    if r is None:
+        inner += f"<p><b>C++ RHS comparison SKIPPED</b>: {_html.escape(rb['rhs_skipped'])}</p>"
+        lines.append(f"robot {name}: C++ RHS comparison SKIPPED: {rb['rhs_skipped']}")
+    else:
+        hdr = ["n, rows", "C++ ABA (us)", "C++ KKT forwardDynamics, J and gamma given (us)", "C++ same work, best (us)",
+               "progmo null_space (us)", "progmo kkt (us)", "progmo null_space / C++ same work",
+               "progmo kkt / C++ same work", "progmo null_space / C++ KKT",
+               "max rel. disagreement (tolerance, states)"]
+        inner += page.table(hdr, [[f"{rb['n']}, {rb['s']}", us(r["aba_s"]), us(r["kkt_s"]),
+                                   f"{us(r['same_best_s'])} ({r['same_best']})", us(r["progmo_null_space_s"]),
+                                   us(r["progmo_kkt_s"]), f"{r['ratio_null_space']:.2f}", f"{r['ratio_kkt']:.2f}",
+                                   f"{r['ratio_null_space_kkt']:.2f}",
+                                   f"{r['agreement']:.1e} ({r['agreement_tol']:.0e}, {r['agreement_states']})"]])
+        inner += ("<p>Every same-work variant (us per call):</p>"
+                  + page.table(list(anchor.SAME), [[us(r[f"{v}_s"]) for v in anchor.SAME]]))
+        lines.append(f"robot {name} RHS: progmo null_space {us(r['progmo_null_space_s'])} us, kkt {us(r['progmo_kkt_s'])} us; "
+                     f"C++ same work {us(r['same_best_s'])} us ({r['same_best']}), KKT (J, gamma given) {us(r['kkt_s'])} us, "
+                     f"ABA {us(r['aba_s'])} us; progmo/C++ same work {r['ratio_null_space']:.2f} (null_space); "
+                     f"agreement {r['agreement']:.1e} at {r['agreement_states']} states")
+    s = rb["solve"]
+    inner += page.table(
+        ["solver", "CPU (s)", "RHS evaluations", "final-state error vs reference"],
+        [[f"progmo {s['integrator']}, drift control {s['drift']}", page.num(s["progmo_cpu_s"]), s["progmo_rhs_evals"],
+          f"{s['progmo_error']:.1e}"],
+         ["scipy solve_ivp DOP853 + Pinocchio's Python binding", page.num(s["scipy_cpu_s"]), s["scipy_rhs_evals"],
+          f"{s['scipy_error']:.1e}"]])
+    inner += (f"<p>Whole solve at rtol {s['rtol']:.0e}, atol {s['atol']:.0e} (the scene's): CPU(scipy + Pinocchio) / "
+              f"CPU(progmo) = {s['ratio']:.1f}; reference floor {s['reference_floor']:.1e}; the C++ same-work RHS times "
+              f"progmo's RHS count: {page.num(s['cpp_rhs_share_s'])} s.</p>")
+    lines.append(f"robot {name} whole solve: progmo {s['progmo_cpu_s'] * 1e3:.1f} ms CPU (error {s['progmo_error']:.1e}), "
+                 f"scipy DOP853 + Pinocchio Python {s['scipy_cpu_s'] * 1e3:.1f} ms (error {s['scipy_error']:.1e}): "
+                 f"{s['ratio']:.1f}x")
+    ld = rb["load"]
+    inner += page.table(["URDF load", "best wall time (ms)"],
+                        [["progmo.load of a [model]-only scene (URDF import, tree)", f"{ld['progmo_load_s'] * 1e3:.3f}"],
+                         ["pin.buildModelFromUrdf", f"{ld['pin_urdf_s'] * 1e3:.3f}"],
+                         ["pin.buildModelFromUrdf + buildReducedModel", f"{ld['pin_urdf_reduced_s'] * 1e3:.3f}"]])
+    inner += "<p>Data: <a href='robot.csv'>robot.csv</a>.</p>"
+    lines.append(f"robot {name} URDF load: progmo {ld['progmo_load_s'] * 1e3:.3f} ms, pin.buildModelFromUrdf "
+                 f"{ld['pin_urdf_s'] * 1e3:.3f} ms (+ buildReducedModel {ld['pin_urdf_reduced_s'] * 1e3:.3f} ms)")
+    return inner, lines
 
 
 def _targets_text(targets) -> str:

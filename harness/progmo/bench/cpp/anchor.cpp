@@ -27,6 +27,11 @@
 //                 computeMinverse from the ABA factorization (O(n^2)) + dense Schur complement + u
 //   same_abaunit  forwardKinematics(q, v, 0) + aba for the free acceleration + s more ABA passes
 //                 (zero gravity, zero velocity, tau = J_k^T) for M^-1 J^T: O(n s) + Schur + u
+// Rows (model file, after the joints): "row joint K LAW AMP W" (coordinate K) or "row tip JOINT
+// PX PY PZ AXIS LAW AMP W": component AXIS of the frame at P on JOINT, LOCAL_WORLD_ALIGNED (0-2 the
+// origin's world position, 3-5 the world angular velocity: orientation rows held at acceleration
+// level, d/dt w = 0); consecutive rows of one frame share one frame Jacobian and drift. LAW:
+// one_minus_cos, sin, const, circle_cos, circle_sin (Row::fdd).
 // Every call alternates between q and q + 1e-9 (as progmo's Scene.rhs_benchmark does) so nothing
 // can be reused between calls.
 
@@ -63,15 +68,26 @@ namespace {
 }
 
 struct Row {
-  bool tip = false;   // tip: one axis of a point's world position; else a joint coordinate
-  JointIndex joint = 0;  // tip: the parent joint of the point
-  SE3 placement = SE3::Identity();  // tip: the point in the joint frame
-  int axis = 2;       // tip: world axis 0, 1, 2
+  bool tip = false;   // tip: one component of a frame's motion; else a joint coordinate
+  JointIndex joint = 0;  // tip: the parent joint of the frame
+  SE3 placement = SE3::Identity();  // tip: the frame's origin in the joint frame
+  int axis = 2;       // tip: 0, 1, 2 world position axis; 3, 4, 5 world angular axis
   int k = 0;          // joint row: velocity index
-  bool law_sin = false;  // law f(t) = c + amp (1 - cos w t) (false) or c + amp sin w t (true)
+  // time law's second derivative: f(t) = c + amp (1 - cos w t), c + amp sin w t, constant, or
+  // the circle laws r cos th(t), r sin th(t) with th = 2 pi t/T - sin(2 pi t/T) (amp = r, w = T)
+  enum Law { ONE_MINUS_COS, SIN, CONST, CIRCLE_COS, CIRCLE_SIN } law = ONE_MINUS_COS;
   double amp = 0.0, w = 0.0;
   double fdd(double t) const {
-    return law_sin ? -amp * w * w * std::sin(w * t) : amp * w * w * std::cos(w * t);
+    switch (law) {
+      case ONE_MINUS_COS: return amp * w * w * std::cos(w * t);
+      case SIN: return -amp * w * w * std::sin(w * t);
+      case CONST: return 0.0;
+      default: break;
+    }
+    const double W = 2.0 * M_PI / w, th = W * t - std::sin(W * t);
+    const double thd = W * (1.0 - std::cos(W * t)), thdd = W * W * std::sin(W * t);
+    return law == CIRCLE_COS ? -amp * (thd * thd * std::cos(th) + thdd * std::sin(th))
+                             : amp * (thdd * std::cos(th) - thd * thd * std::sin(th));
   }
 };
 
@@ -139,15 +155,19 @@ struct Anchor {
         r.tip = true;
         r.joint = JointIndex(joint);
         r.placement = SE3(Eigen::Matrix3d::Identity(), p);
-        if (joint < 1 || joint >= model.njoints || r.axis < 0 || r.axis > 2) fail("bad tip row");
+        if (joint < 1 || joint >= model.njoints || r.axis < 0 || r.axis > 5) fail("bad tip row");
       } else if (kind == "joint") {
         in >> r.k;
       } else {
         fail("unsupported row kind " + kind);
       }
       in >> law >> r.amp >> r.w;
-      if (law != "one_minus_cos" && law != "sin") fail("unsupported time law " + law);
-      r.law_sin = law == "sin";
+      if (law == "one_minus_cos") r.law = Row::ONE_MINUS_COS;
+      else if (law == "sin") r.law = Row::SIN;
+      else if (law == "const") r.law = Row::CONST;
+      else if (law == "circle_cos") r.law = Row::CIRCLE_COS;
+      else if (law == "circle_sin") r.law = Row::CIRCLE_SIN;
+      else fail("unsupported time law " + law);
       rows.push_back(r);
     }
     if (!in) fail("truncated row records");
@@ -175,15 +195,19 @@ struct Anchor {
   // J and gamma of the rows at (t, q, v) from data.oMi, data.v, data.a (a = 0 drift) and data.J:
   // the caller ran the kinematics (and joint Jacobians) first.
   void rows_from_kinematics(double t) {
+    const Row *last = nullptr;  // rows of one frame share its Jacobian and drift (one call each)
+    Motion acc = Motion::Zero();
     for (int i = 0; i < s; ++i) {
       const Row &r = rows[i];
       if (r.tip) {
-        Jf.setZero();
-        getFrameJacobian(model, data, r.joint, r.placement, LOCAL_WORLD_ALIGNED, Jf);
+        if (!last || last->joint != r.joint || !last->placement.isEqual(r.placement)) {
+          Jf.setZero();
+          getFrameJacobian(model, data, r.joint, r.placement, LOCAL_WORLD_ALIGNED, Jf);
+          acc = getFrameClassicalAcceleration(model, data, r.joint, r.placement, LOCAL_WORLD_ALIGNED);
+          last = &r;
+        }
         J.row(i) = Jf.row(r.axis);
-        const Motion acc =
-            getFrameClassicalAcceleration(model, data, r.joint, r.placement, LOCAL_WORLD_ALIGNED);
-        gamma[i] = acc.linear()[r.axis] - r.fdd(t);
+        gamma[i] = (r.axis < 3 ? acc.linear()[r.axis] : acc.angular()[r.axis - 3]) - r.fdd(t);
       } else {
         J.row(i).setZero();
         J(i, r.k) = 1.0;

@@ -1,0 +1,680 @@
+//! MJCF (MuJoCo XML) -> [`BodySpec`]s. One body per `<body>` of `<worldbody>`, named as the
+//! body; `pos` and the orientation (`quat`, `axisangle`, `euler`, `xyaxes` or `zaxis`, with
+//! `<compiler angle eulerseq>`: degrees and `xyz` by default, MuJoCo's XML reference "Frame
+//! orientations") place it in its parent; its joints act in sequence after that placement, as in
+//! MuJoCo and in [`crate::tree`]: hinge (axis through `pos`), slide, ball (centre `pos`), free.
+//! Joint attributes may come from `<default>` classes (`class`, a body's `childclass`, nested
+//! defaults inherit). Mass properties only from an explicit `<inertial>` (`pos`, orientation,
+//! `mass`, `diaginertia` or `fullinertia`): inertia from geoms is refused with a located error.
+//! Limits, damping, armature, friction loss, springs, equality constraints, tendons and actuators
+//! are not modelled and are reported in the notes; geoms, sites, cameras, lights and assets are not
+//! read. Errors are located in the MJCF file (line, column, element).
+
+use super::urdf::Robot;
+use crate::scene::{SceneError, Source};
+use crate::tree::{BodySpec, JointSpec, WORLD};
+use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
+use roxmltree::{Document, Node};
+use std::collections::HashMap;
+
+type R<T> = Result<T, SceneError>;
+
+fn err(src: &Source, n: Node, what: &str, msg: impl Into<String>) -> SceneError {
+    src.error(n.range(), what, msg)
+}
+
+fn elements<'a, 'i>(n: Node<'a, 'i>) -> impl Iterator<Item = Node<'a, 'i>> {
+    n.children().filter(|c| c.is_element())
+}
+
+/// A list of numbers (any count), `None` when `text` is absent.
+fn parse_list(src: &Source, n: Node, what: &str, attr: &str, text: &str) -> R<Vec<f64>> {
+    let vals: Vec<f64> = text
+        .split_whitespace()
+        .map(|s| s.parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| {
+            err(
+                src,
+                n,
+                what,
+                format!("`{attr}=\"{text}\"` is not a list of numbers"),
+            )
+        })?;
+    if vals.iter().any(|x| !x.is_finite()) {
+        return Err(err(
+            src,
+            n,
+            what,
+            format!("`{attr}=\"{text}\"` is not finite"),
+        ));
+    }
+    Ok(vals)
+}
+
+fn fixed<const K: usize>(src: &Source, n: Node, what: &str, attr: &str, text: &str) -> R<[f64; K]> {
+    parse_list(src, n, what, attr, text)?
+        .try_into()
+        .map_err(|_| {
+            err(
+                src,
+                n,
+                what,
+                format!("`{attr}=\"{text}\"`: expected {K} numbers"),
+            )
+        })
+}
+
+/// `n`'s attribute as K numbers (`default` when absent).
+fn attr_k<const K: usize>(
+    src: &Source,
+    n: Node,
+    what: &str,
+    attr: &str,
+    default: [f64; K],
+) -> R<[f64; K]> {
+    match n.attribute(attr) {
+        None => Ok(default),
+        Some(t) => fixed(src, n, what, attr, t),
+    }
+}
+
+/// `<compiler>` settings that change how numbers are read.
+struct Compiler {
+    /// Angles of euler/axisangle (and ranges) in degrees (MuJoCo's default).
+    degrees: bool,
+    /// Euler sequence: lower case axes rotate with the frame, upper case are fixed.
+    eulerseq: [u8; 3],
+    /// `inertiafromgeom`: "auto" (default), "true" or "false".
+    from_geom: String,
+}
+
+fn compiler(src: &Source, root: Node) -> R<Compiler> {
+    let mut c = Compiler {
+        degrees: true,
+        eulerseq: *b"xyz",
+        from_geom: "auto".into(),
+    };
+    for n in elements(root).filter(|n| n.has_tag_name("compiler")) {
+        if let Some(a) = n.attribute("angle") {
+            c.degrees = match a {
+                "degree" => true,
+                "radian" => false,
+                _ => {
+                    return Err(err(
+                        src,
+                        n,
+                        "compiler.angle",
+                        format!("`{a}`: expected degree or radian"),
+                    ))
+                }
+            };
+        }
+        if let Some(s) = n.attribute("eulerseq") {
+            let b = s.as_bytes();
+            if b.len() != 3 || !b.iter().all(|c| b"xyzXYZ".contains(c)) {
+                return Err(err(
+                    src,
+                    n,
+                    "compiler.eulerseq",
+                    format!("`{s}`: expected three of x, y, z, X, Y, Z"),
+                ));
+            }
+            c.eulerseq = [b[0], b[1], b[2]];
+        }
+        if let Some(s) = n.attribute("inertiafromgeom") {
+            if !["auto", "true", "false"].contains(&s) {
+                return Err(err(
+                    src,
+                    n,
+                    "compiler.inertiafromgeom",
+                    format!("`{s}`: expected auto, true or false"),
+                ));
+            }
+            c.from_geom = s.into();
+        }
+        // attributes that would change the mass properties the file states
+        for a in ["boundmass", "boundinertia", "settotalmass"] {
+            if let Some(v) = n.attribute(a) {
+                if v.trim()
+                    .parse::<f64>()
+                    .map_or(true, |x| x != 0.0 && !(a == "settotalmass" && x == -1.0))
+                {
+                    return Err(err(src, n, &format!("compiler.{a}"), format!("`{a}=\"{v}\"` (MuJoCo would change the stated mass properties) is not supported")));
+                }
+            }
+        }
+        if n.attribute("balanceinertia") == Some("true") {
+            return Err(err(src, n, "compiler.balanceinertia", "`balanceinertia=\"true\"` (MuJoCo would change the stated inertias) is not supported"));
+        }
+        if n.attribute("coordinate").is_some_and(|v| v != "local") {
+            return Err(err(
+                src,
+                n,
+                "compiler.coordinate",
+                "only local coordinates are supported",
+            ));
+        }
+    }
+    Ok(c)
+}
+
+fn quat_of(u: UnitQuaternion<f64>) -> [f64; 4] {
+    [u.w, u.i, u.j, u.k]
+}
+
+fn unit(src: &Source, n: Node, what: &str, v: [f64; 3], name: &str) -> R<Vector3<f64>> {
+    let v = Vector3::from(v);
+    let norm = v.norm();
+    if norm < 1e-12 {
+        return Err(err(src, n, what, format!("`{name}` is zero")));
+    }
+    Ok(v / norm)
+}
+
+/// The orientation of an element with a spatial frame (MuJoCo's "frame orientations": at most one
+/// of quat, axisangle, euler, xyaxes, zaxis); (w, x, y, z), identity when none is given.
+fn orientation(src: &Source, c: &Compiler, n: Node, what: &str) -> R<[f64; 4]> {
+    let given: Vec<&str> = ["quat", "axisangle", "euler", "xyaxes", "zaxis"]
+        .into_iter()
+        .filter(|a| n.attribute(*a).is_some())
+        .collect();
+    let angle = |a: f64| if c.degrees { a.to_radians() } else { a };
+    let q = match given.as_slice() {
+        [] => return Ok([1.0, 0.0, 0.0, 0.0]),
+        [_, _, ..] => {
+            return Err(err(
+                src,
+                n,
+                what,
+                format!("more than one orientation given ({})", given.join(", ")),
+            ))
+        }
+        ["quat"] => {
+            let q = attr_k::<4>(src, n, what, "quat", [1.0, 0.0, 0.0, 0.0])?;
+            let norm = q.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if norm < 1e-12 {
+                return Err(err(src, n, what, "`quat` is zero"));
+            }
+            return Ok(q.map(|x| x / norm));
+        }
+        ["axisangle"] => {
+            let [x, y, z, a] = attr_k::<4>(src, n, what, "axisangle", [0.0; 4])?;
+            let axis = unit(src, n, what, [x, y, z], "axisangle")?;
+            UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_unchecked(axis), angle(a))
+        }
+        ["euler"] => {
+            let e = attr_k::<3>(src, n, what, "euler", [0.0; 3])?;
+            let mut q = UnitQuaternion::identity();
+            for (k, &s) in c.eulerseq.iter().enumerate() {
+                let axis = match s.to_ascii_lowercase() {
+                    b'x' => Vector3::x_axis(),
+                    b'y' => Vector3::y_axis(),
+                    _ => Vector3::z_axis(),
+                };
+                let r = UnitQuaternion::from_axis_angle(&axis, angle(e[k]));
+                // lower case: about the moving frame's axis (post-multiply); upper case: fixed
+                q = if s.is_ascii_lowercase() { q * r } else { r * q };
+            }
+            q
+        }
+        ["xyaxes"] => {
+            let v = attr_k::<6>(src, n, what, "xyaxes", [0.0; 6])?;
+            let x = unit(src, n, what, [v[0], v[1], v[2]], "xyaxes")?;
+            let y = Vector3::new(v[3], v[4], v[5]);
+            let y = unit(src, n, what, (y - x * x.dot(&y)).into(), "xyaxes")?;
+            let m = Matrix3::from_columns(&[x, y, x.cross(&y)]);
+            UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(m))
+        }
+        _ => {
+            let z = unit(
+                src,
+                n,
+                what,
+                attr_k::<3>(src, n, what, "zaxis", [0.0; 3])?,
+                "zaxis",
+            )?;
+            UnitQuaternion::rotation_between(&Vector3::z(), &z).unwrap_or_else(|| {
+                UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+            })
+        }
+    };
+    Ok(quat_of(q))
+}
+
+/// `<default>` classes: class -> (parent class, its `<joint>` element).
+struct Defaults<'a, 'i> {
+    classes: HashMap<String, (Option<String>, Option<Node<'a, 'i>>)>,
+}
+
+const MAIN: &str = "main";
+
+impl<'a, 'i> Defaults<'a, 'i> {
+    fn read(src: &Source, root: Node<'a, 'i>) -> R<Self> {
+        let mut d = Defaults {
+            classes: HashMap::new(),
+        };
+        for n in elements(root).filter(|n| n.has_tag_name("default")) {
+            d.add(src, n, None)?;
+        }
+        Ok(d)
+    }
+
+    fn add(&mut self, src: &Source, n: Node<'a, 'i>, parent: Option<&str>) -> R<()> {
+        let name = n
+            .attribute("class")
+            .unwrap_or(if parent.is_none() { MAIN } else { "" });
+        if name.is_empty() {
+            return Err(err(src, n, "default", "a nested <default> needs a class"));
+        }
+        if self.classes.contains_key(name) {
+            return Err(err(
+                src,
+                n,
+                &format!("default[{name}]"),
+                format!("default class `{name}` is defined twice"),
+            ));
+        }
+        let joint = elements(n).find(|c| c.has_tag_name("joint"));
+        self.classes
+            .insert(name.to_string(), (parent.map(String::from), joint));
+        for c in elements(n).filter(|c| c.has_tag_name("default")) {
+            self.add(src, c, Some(name))?;
+        }
+        Ok(())
+    }
+
+    /// Attribute `attr` of joint `j` in class `class`: the element's own, else the class chain's.
+    fn joint_attr(&self, j: Node<'a, 'i>, class: &str, attr: &str) -> Option<&'a str> {
+        if let Some(v) = j.attribute(attr) {
+            return Some(v);
+        }
+        let mut c = Some(class.to_string());
+        while let Some(name) = c {
+            let (parent, node) = self.classes.get(&name)?;
+            if let Some(v) = node.and_then(|n| n.attribute(attr)) {
+                return Some(v);
+            }
+            c = parent.clone();
+        }
+        None
+    }
+}
+
+fn is_identifier(name: &str) -> bool {
+    let mut ch = name.chars();
+    matches!(ch.next(), Some(c) if c.is_ascii_alphabetic() || c == '_')
+        && ch.all(|c| c.is_ascii_alphanumeric() || c == '_')
+        && name != "t"
+        && name != "pi"
+}
+
+/// The mass properties of a body from its `<inertial>` (massless without one).
+fn inertial(src: &Source, c: &Compiler, body: Node, name: &str, parent: &str) -> R<BodySpec> {
+    let what = format!("body[{name}].inertial");
+    let Some(n) = elements(body).find(|e| e.has_tag_name("inertial")) else {
+        if c.from_geom != "false" {
+            if let Some(g) = elements(body).find(|e| e.has_tag_name("geom")) {
+                return Err(err(src, g, &format!("body[{name}].geom"), format!("body `{name}` has geoms and no <inertial>: inertia from geoms is not supported (give an explicit <inertial>, or <compiler inertiafromgeom=\"false\"/> for a massless body)")));
+            }
+        }
+        return Ok(BodySpec::massless(name, parent));
+    };
+    if c.from_geom == "true" && elements(body).any(|e| e.has_tag_name("geom")) {
+        return Err(err(src, n, &what, "inertiafromgeom=\"true\" replaces this <inertial> by the geoms' inertia: not supported"));
+    }
+    let mass = match n.attribute("mass") {
+        None => return Err(err(src, n, &what, "an <inertial> needs `mass`")),
+        Some(t) => fixed::<1>(src, n, &format!("{what}.mass"), "mass", t)?[0],
+    };
+    let pos = match n.attribute("pos") {
+        None => return Err(err(src, n, &what, "an <inertial> needs `pos`")),
+        Some(t) => fixed::<3>(src, n, &format!("{what}.pos"), "pos", t)?,
+    };
+    let local = match (n.attribute("diaginertia"), n.attribute("fullinertia")) {
+        (Some(t), None) => {
+            let d = fixed::<3>(src, n, &format!("{what}.diaginertia"), "diaginertia", t)?;
+            let q = orientation(src, c, n, &what)?;
+            let r = UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
+                .to_rotation_matrix();
+            r.matrix() * Matrix3::from_diagonal(&Vector3::from(d)) * r.matrix().transpose()
+        }
+        (None, Some(t)) => {
+            let i = fixed::<6>(src, n, &format!("{what}.fullinertia"), "fullinertia", t)?;
+            if orientation(src, c, n, &what)? != [1.0, 0.0, 0.0, 0.0] {
+                return Err(err(
+                    src,
+                    n,
+                    &what,
+                    "fullinertia with an orientation: MuJoCo refuses it",
+                ));
+            }
+            Matrix3::new(i[0], i[3], i[4], i[3], i[1], i[5], i[4], i[5], i[2])
+        }
+        (Some(_), Some(_)) => {
+            return Err(err(src, n, &what, "both diaginertia and fullinertia given"))
+        }
+        (None, None) => {
+            return Err(err(
+                src,
+                n,
+                &what,
+                "an <inertial> needs `diaginertia` or `fullinertia`",
+            ))
+        }
+    };
+    if mass == 0.0 && local.iter().all(|x| *x == 0.0) {
+        return Ok(BodySpec::massless(name, parent));
+    }
+    if mass <= 0.0 {
+        return Err(err(
+            src,
+            n,
+            &format!("{what}.mass"),
+            format!("mass must be positive (or 0 with zero inertia: a massless body), got {mass}"),
+        ));
+    }
+    if local.cholesky().is_none() {
+        return Err(err(
+            src,
+            n,
+            &format!("{what}.inertia"),
+            "the inertia tensor of a body with mass must be positive definite",
+        ));
+    }
+    let inertia = [0, 1, 2].map(|a| [0, 1, 2].map(|b| local[(a, b)]));
+    Ok(BodySpec::new(name, parent, mass, pos, inertia))
+}
+
+/// What the importer reads but does not model, by kind (one note line each).
+#[derive(Default)]
+struct Ignored {
+    limits: Vec<String>,
+    damping: Vec<String>,
+    armature: Vec<String>,
+    friction: Vec<String>,
+    springs: Vec<String>,
+}
+
+/// Read an MJCF document (`src` is the file and its text); `locked` joints are welded at q = 0.
+pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
+    let doc = Document::parse(&src.text).map_err(|e| {
+        let p = e.pos();
+        let offset = src
+            .text
+            .lines()
+            .take(p.row as usize - 1)
+            .map(|l| l.len() + 1)
+            .sum::<usize>()
+            + p.col as usize
+            - 1;
+        src.error(
+            offset..offset + 1,
+            "xml",
+            format!("not well-formed XML: {e}"),
+        )
+    })?;
+    let root = doc.root_element();
+    if !root.has_tag_name("mujoco") {
+        return Err(err(
+            src,
+            root,
+            "mujoco",
+            "the root element of an MJCF file must be <mujoco>",
+        ));
+    }
+    let c = compiler(src, root)?;
+    let defaults = Defaults::read(src, root)?;
+    let mut notes = vec![];
+    for n in elements(root) {
+        match n.tag_name().name() {
+            "include" | "replicate" | "frame" | "attach" => {
+                return Err(err(src, n, n.tag_name().name(), format!("<{}> is not supported (write the file out, e.g. with MuJoCo's mj_saveLastXML)", n.tag_name().name())))
+            }
+            "option" if n.attribute("gravity").is_some() => {
+                notes.push("<option gravity> not read: gravity comes from the scene's model.gravity".to_string());
+            }
+            "equality" | "tendon" | "actuator" | "contact" => notes.push(format!(
+                "<{}> not modelled (the programme's rows and the scene's forces are the only constraints and forces)",
+                n.tag_name().name()
+            )),
+            _ => {}
+        }
+    }
+    let worldbodies: Vec<Node> = elements(root)
+        .filter(|n| n.has_tag_name("worldbody"))
+        .collect();
+    let mut bodies = vec![];
+    let mut joints = vec![];
+    let mut used_locked = vec![false; locked.len()];
+    let mut ign = Ignored::default();
+    let mut names: HashMap<String, Node> = HashMap::new();
+    // depth-first, parents first: (element, parent body name, inherited childclass)
+    let mut stack: Vec<(Node, String, String)> = vec![];
+    for w in worldbodies.iter().rev() {
+        for b in elements(*w)
+            .filter(|b| b.has_tag_name("body"))
+            .collect::<Vec<_>>()
+            .into_iter()
+            .rev()
+        {
+            stack.push((b, WORLD.to_string(), MAIN.to_string()));
+        }
+        if let Some(f) =
+            elements(*w).find(|b| ["frame", "replicate", "attach"].contains(&b.tag_name().name()))
+        {
+            return Err(err(
+                src,
+                f,
+                f.tag_name().name(),
+                format!("<{}> is not supported", f.tag_name().name()),
+            ));
+        }
+    }
+    while let Some((b, parent, class)) = stack.pop() {
+        let k = bodies.len();
+        let name = b
+            .attribute("name")
+            .map(String::from)
+            .unwrap_or_else(|| format!("body{k}"));
+        let what = format!("body[{name}]");
+        if name == WORLD {
+            return Err(err(src, b, &what, "a body cannot be named `world`"));
+        }
+        if names.insert(name.clone(), b).is_some() {
+            return Err(err(
+                src,
+                b,
+                &what,
+                format!("body `{name}` is defined twice"),
+            ));
+        }
+        if b.attribute("mocap") == Some("true") {
+            return Err(err(src, b, &what, "mocap bodies are not supported"));
+        }
+        let class = b.attribute("childclass").unwrap_or(&class).to_string();
+        if !defaults.classes.contains_key(&class) && class != MAIN {
+            return Err(err(
+                src,
+                b,
+                &format!("{what}.childclass"),
+                format!("unknown default class `{class}`"),
+            ));
+        }
+        let pos = attr_k::<3>(src, b, &format!("{what}.pos"), "pos", [0.0; 3])?;
+        let quat = orientation(src, &c, b, &what)?;
+        let mut spec = inertial(src, &c, b, &name, &parent)?.at(pos).rotated(quat);
+        for e in elements(b) {
+            let tag = e.tag_name().name();
+            if tag == "frame" || tag == "replicate" || tag == "attach" || tag == "include" {
+                return Err(err(
+                    src,
+                    e,
+                    &format!("{what}.{tag}"),
+                    format!("<{tag}> is not supported"),
+                ));
+            }
+            if tag != "joint" && tag != "freejoint" {
+                continue;
+            }
+            let jclass = e.attribute("class").unwrap_or(&class);
+            if !defaults.classes.contains_key(jclass) && jclass != MAIN {
+                return Err(err(
+                    src,
+                    e,
+                    &format!("{what}.joint.class"),
+                    format!("unknown default class `{jclass}`"),
+                ));
+            }
+            let get = |a: &str| {
+                if tag == "freejoint" {
+                    e.attribute(a)
+                } else {
+                    defaults.joint_attr(e, jclass, a)
+                }
+            };
+            let Some(jname) = e.attribute("name") else {
+                return Err(err(
+                    src,
+                    e,
+                    &format!("{what}.{tag}"),
+                    "a joint needs a name: it names a coordinate",
+                ));
+            };
+            let jwhat = format!("joint[{jname}]");
+            if !is_identifier(jname) {
+                return Err(err(src, e, &jwhat, format!("joint name `{jname}` is not an identifier (letters, digits, _): it names a coordinate in rows")));
+            }
+            if joints.contains(&jname.to_string()) {
+                return Err(err(
+                    src,
+                    e,
+                    &jwhat,
+                    format!("joint `{jname}` is defined twice"),
+                ));
+            }
+            let kind = if tag == "freejoint" {
+                "free"
+            } else {
+                get("type").unwrap_or("hinge")
+            };
+            let num3 = |a: &str, d: [f64; 3]| -> R<[f64; 3]> {
+                match get(a) {
+                    None => Ok(d),
+                    Some(t) => fixed::<3>(src, e, &format!("{jwhat}.{a}"), a, t),
+                }
+            };
+            let anchor = num3("pos", [0.0; 3])?;
+            let axis = || -> R<[f64; 3]> {
+                Ok(unit(
+                    src,
+                    e,
+                    &format!("{jwhat}.axis"),
+                    num3("axis", [0.0, 0.0, 1.0])?,
+                    "axis",
+                )?
+                .into())
+            };
+            let js = match kind {
+                "hinge" => JointSpec::hinge(jname, axis()?).with_anchor(anchor),
+                "slide" => JointSpec::slide(jname, axis()?),
+                "ball" => JointSpec::ball(jname).with_anchor(anchor),
+                "free" if parent != WORLD => {
+                    return Err(err(
+                        src,
+                        e,
+                        &jwhat,
+                        "a free joint belongs to a top-level body (a child of <worldbody>), as MuJoCo requires",
+                    ))
+                }
+                "free" => JointSpec::free(jname),
+                other => {
+                    return Err(err(
+                        src,
+                        e,
+                        &format!("{jwhat}.type"),
+                        format!(
+                            "unknown joint type `{other}`: expected hinge, slide, ball or free"
+                        ),
+                    ))
+                }
+            };
+            if let Some(r) = get("ref") {
+                if r.trim().parse::<f64>() != Ok(0.0) {
+                    return Err(err(src, e, &format!("{jwhat}.ref"), format!("`ref=\"{r}\"` is not supported (q would be measured from another pose than MuJoCo's qpos)")));
+                }
+            }
+            let nonzero = |a: &str| {
+                get(a).is_some_and(|v| v.split_whitespace().any(|x| x.parse::<f64>() != Ok(0.0)))
+            };
+            let limited = match get("limited") {
+                Some("true") => true,
+                Some("false") => false,
+                _ => get("range").is_some(), // autolimits (MuJoCo's default)
+            };
+            if limited && kind != "free" {
+                ign.limits.push(jname.into());
+            }
+            if nonzero("damping") {
+                ign.damping.push(jname.into());
+            }
+            if nonzero("armature") {
+                ign.armature.push(jname.into());
+            }
+            if nonzero("frictionloss") {
+                ign.friction.push(jname.into());
+            }
+            if nonzero("stiffness") {
+                ign.springs.push(jname.into());
+            }
+            match locked.iter().position(|l| l == jname) {
+                Some(k) => used_locked[k] = true,
+                None => {
+                    spec = spec.joint(js);
+                    joints.push(jname.to_string());
+                }
+            }
+        }
+        bodies.push(spec);
+        for ch in elements(b)
+            .filter(|x| x.has_tag_name("body"))
+            .collect::<Vec<_>>()
+            .into_iter()
+            .rev()
+        {
+            stack.push((ch, name.clone(), class.clone()));
+        }
+    }
+    if worldbodies.is_empty() || bodies.is_empty() {
+        return Err(err(src, root, "worldbody", "no <body> in <worldbody>"));
+    }
+    if let Some(k) = used_locked.iter().position(|u| !u) {
+        return Err(src.error(
+            0..0,
+            "locked_joints",
+            format!("locked joint `{}` is not a joint of this file", locked[k]),
+        ));
+    }
+    for (list, text) in [
+        (
+            &ign.limits,
+            "joint limits not enforced (the programme decides the motion)",
+        ),
+        (&ign.damping, "joint damping ignored"),
+        (
+            &ign.armature,
+            "joint armature ignored (MuJoCo adds it to the mass matrix)",
+        ),
+        (&ign.friction, "joint friction loss ignored"),
+        (&ign.springs, "joint stiffness (springs) ignored"),
+    ] {
+        if !list.is_empty() {
+            notes.push(format!("{text}: {}", list.join(", ")));
+        }
+    }
+    Ok(Robot {
+        bodies,
+        joints,
+        notes,
+    })
+}

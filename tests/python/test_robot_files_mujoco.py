@@ -1,0 +1,269 @@
+"""Issue 13, items 1 and 3: robot description files against MuJoCo's own reading of them.
+
+- URDF: MuJoCo's URDF compiler loads each catalog robot's URDF (visuals and collisions stripped, so
+  no mesh file is needed; `<mujoco><compiler .../></mujoco>` keeps every body (fusestatic off) and
+  the stated inertials (no inertia from geoms, no balancing or bounds); armature is 0 in a URDF).
+  A (mj_fullM after mj_forward) and the bias forces (qfrc_bias) agree with progmo's import of the
+  same file (`model.kind = "urdf"`) at random states, relative 1e-12 (as test_urdf_import.py).
+  Joints the scene locks stay in MuJoCo's model at qpos = qvel = 0: the other dofs' block of A and
+  their bias forces are then those of the locked model.
+- MJCF: the same MuJoCo model written by MuJoCo (mj_saveLastXML: explicit inertials) is imported
+  with `model.kind = "mjcf"` and compared with MuJoCo's model of that written file; and a
+  hand-written MJCF using what the importer reads (degrees, euler with its sequence, axisangle,
+  xyaxes, zaxis, fullinertia, joint defaults with classes and childclass, hinge anchors, ball,
+  slide, free and several joints in one body).
+Negative controls: a 1 % heavier link on MuJoCo's side, and the hand-written file read in radians by
+MuJoCo, must fail the same comparison.
+"""
+
+import pathlib
+import tomllib
+import xml.etree.ElementTree as ET
+import zlib
+
+import numpy as np
+import pytest
+
+import progmo
+from progmo import data
+
+mujoco = pytest.importorskip("mujoco")
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+TOL = 1e-12
+ROBOTS = ("panda_circle", "ur5_tool_path", "xarm7_elbow_height")
+COMPILER = dict(angle="radian", discardvisual="true", fusestatic="false", inertiafromgeom="false",
+                balanceinertia="false", boundmass="0", boundinertia="0")
+
+
+def scene_model(name: str) -> tuple[pathlib.Path, dict]:
+    """The catalog scene's URDF (the package:// rule of progmo.data) and its [model] table."""
+    with open(ROOT / "references" / "scenes" / f"{name}.toml", "rb") as f:
+        m = tomllib.load(f)["model"]
+    rest = m["file"].removeprefix("package://")
+    return next(d / rest for d in data.robot_path() if (d / rest).is_file()), m
+
+
+def mujoco_urdf(urdf: pathlib.Path, heavier: str | None = None) -> str:
+    """The URDF as MuJoCo should read it (see the module doc); `heavier`: that link's mass x 1.01."""
+    root = ET.parse(urdf).getroot()
+    for link in root.iter("link"):
+        for tag in ("visual", "collision"):
+            for e in link.findall(tag):
+                link.remove(e)
+        if link.get("name") == heavier:
+            mass = link.find("inertial/mass")
+            mass.set("value", repr(float(mass.get("value")) * 1.01))
+    ET.SubElement(ET.SubElement(root, "mujoco"), "compiler", COMPILER)
+    return ET.tostring(root, encoding="unicode")
+
+
+def coordinates(scene, model) -> tuple[list[int], list[int]]:
+    """qpos and qvel addresses of MuJoCo's model for progmo's q and v entries (joints by name:
+    hinge/slide `name`, ball and free `name.*` in MuJoCo's own order of each joint's entries)."""
+    qa, va = [], []
+    for names, out, adr, width in ((scene.q_names, qa, "qposadr", {0: 7, 1: 4}),
+                                   (scene.v_names, va, "dofadr", {0: 6, 1: 3})):
+        seen = []
+        for n in names:
+            j = n.split(".")[0]
+            if j not in seen:
+                seen.append(j)
+                jt = model.joint(j)
+                start = int(getattr(jt, adr)[0])
+                out.extend(range(start, start + width.get(int(jt.type[0]), 1)))
+    return qa, va
+
+
+def random_state(scene, rng):
+    q = np.array(scene.q0) + rng.uniform(-0.5, 0.5, len(scene.q0))
+    for j in {n.split(".")[0] for n in scene.q_names if n.endswith(".qw")}:  # unit quaternions
+        k = scene.q_names.index(f"{j}.qw")
+        q[k:k + 4] /= np.linalg.norm(q[k:k + 4])
+    return q, rng.uniform(-1.0, 1.0, len(scene.v0))
+
+
+def worst(scene, model, seed: int) -> tuple[float, float]:
+    """Largest relative |dA| and |d(G + Q)| between progmo and MuJoCo over 10 random states."""
+    d = mujoco.MjData(model)
+    qa, va = coordinates(scene, model)
+    rng = np.random.default_rng(seed)
+    wa = wf = 0.0
+    M = np.zeros((model.nv, model.nv))
+    for _ in range(10):
+        q, v = random_state(scene, rng)
+        mujoco.mj_resetData(model, d)
+        d.qpos[qa], d.qvel[va] = q, v
+        mujoco.mj_forward(model, d)
+        mujoco.mj_fullM(model, d, M)
+        ours = scene.dynamics(0.0, q, v)
+        A, f = ours["mass"], ours["velocity_terms"] + ours["applied_forces"]
+        wa = max(wa, np.abs(M[np.ix_(va, va)] - A).max() / np.abs(A).max())
+        scale = max(np.abs(f).max(), np.abs(A).max() * np.abs(v).max() ** 2)
+        wf = max(wf, np.abs(-d.qfrc_bias[va] - f).max() / scale)
+    return wa, wf
+
+
+def last_link(urdf: pathlib.Path, scene) -> str:
+    """The child link of the scene's last coordinate's joint."""
+    root = ET.parse(urdf).getroot()
+    j = next(j for j in root.findall("joint") if j.get("name") == scene.q_names[-1])
+    return j.find("child").get("link")
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_urdf_read_by_mujoco_matches_the_imported_robot(name):
+    urdf, m = scene_model(name)
+    scene = progmo.load(str(ROOT / "references" / "scenes" / f"{name}.toml"))
+    model = mujoco.MjModel.from_xml_string(mujoco_urdf(urdf))
+    model.opt.gravity[:] = m.get("gravity", [0.0, 0.0, 0.0])
+    assert not model.dof_armature.any(), "a URDF has no armature"
+    wa, wf = worst(scene, model, zlib.crc32(name.encode()))
+    print(f"{name}: URDF in MuJoCo vs import: |dA| {wa:.2e}, |d(G + Q)| {wf:.2e}")
+    assert wa <= TOL and wf <= TOL, f"{name}: |dA| = {wa:.2e}, |d(G + Q)| = {wf:.2e}"
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_negative_control_heavier_link_in_mujocos_urdf_fails(name):
+    urdf, m = scene_model(name)
+    scene = progmo.load(str(ROOT / "references" / "scenes" / f"{name}.toml"))
+    model = mujoco.MjModel.from_xml_string(mujoco_urdf(urdf, heavier=last_link(urdf, scene)))
+    model.opt.gravity[:] = m.get("gravity", [0.0, 0.0, 0.0])
+    wa, wf = worst(scene, model, zlib.crc32(name.encode()))
+    assert wa > 1e3 * TOL and wf > 1e3 * TOL
+
+
+def mjcf_scene(tmp: pathlib.Path, xml: pathlib.Path, m: dict, extra: str = "") -> "progmo.Scene":
+    locked = ", ".join(f'"{j}"' for j in m.get("locked_joints", []))
+    p = tmp / "mjcf_scene.toml"
+    p.write_text(f'name = "mjcf_scene"\n[model]\nkind = "mjcf"\nfile = "{xml}"\nlocked_joints = [{locked}]\n'
+                 f"gravity = {list(m.get('gravity', [0.0, 0.0, 0.0]))}\n{extra}[initial]\n[time]\nt1 = 1.0\n")
+    return progmo.load(str(p))
+
+
+def saved_mjcf(name: str, tmp: pathlib.Path) -> tuple[pathlib.Path, dict]:
+    """MuJoCo's MJCF of the catalog robot: its URDF loaded by MuJoCo, written by mj_saveLastXML."""
+    urdf, m = scene_model(name)
+    model = mujoco.MjModel.from_xml_string(mujoco_urdf(urdf))
+    out = tmp / f"{name}.xml"
+    mujoco.mj_saveLastXML(str(out), model)
+    return out, m
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_mjcf_written_by_mujoco_imports_and_matches_mujoco(name, tmp_path):
+    xml, m = saved_mjcf(name, tmp_path)
+    scene = mjcf_scene(tmp_path, xml, m)
+    model = mujoco.MjModel.from_xml_path(str(xml))  # MuJoCo's own model of the written file
+    model.opt.gravity[:] = m.get("gravity", [0.0, 0.0, 0.0])
+    wa, wf = worst(scene, model, zlib.crc32(name.encode()) + 2)
+    print(f"{name}: MJCF written by MuJoCo vs import: |dA| {wa:.2e}, |d(G + Q)| {wf:.2e}")
+    assert wa <= TOL and wf <= TOL, f"{name}: |dA| = {wa:.2e}, |d(G + Q)| = {wf:.2e}"
+
+
+@pytest.mark.parametrize("name", ROBOTS)
+def test_negative_control_heavier_body_in_mujocos_mjcf_fails(name, tmp_path):
+    xml, m = saved_mjcf(name, tmp_path)
+    scene = mjcf_scene(tmp_path, xml, m)
+    root = ET.parse(xml).getroot()
+    body = next(b for b in root.iter("body") if b.find(f"joint[@name='{scene.q_names[-1]}']") is not None)
+    inertial = body.find("inertial")
+    inertial.set("mass", repr(float(inertial.get("mass")) * 1.01))
+    model = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
+    model.opt.gravity[:] = m.get("gravity", [0.0, 0.0, 0.0])
+    wa, wf = worst(scene, model, zlib.crc32(name.encode()) + 2)
+    assert wa > 1e3 * TOL and wf > 1e3 * TOL
+
+
+# A hand-written MJCF with every orientation form, defaults and joint kind the importer reads
+# (angles in degrees: MuJoCo's default). Principal moments satisfy the triangle inequality.
+HAND = """<mujoco model="hand">
+  <compiler eulerseq="zyX"/>
+  <default>
+    <joint axis="0 1 0" damping="0.5"/>
+    <default class="arm">
+      <joint axis="1 0 0" range="-90 90"/>
+      <default class="wrist"><joint type="ball" range="0 60"/></default>
+    </default>
+  </default>
+  <worldbody>
+    <geom type="plane" size="1 1 0.1"/>
+    <body name="base" pos="0.1 0.2 1.0" euler="10 -20 30">
+      <freejoint name="root"/>
+      <inertial pos="0.01 -0.02 0.03" quat="0.9 0.1 -0.2 0.3" mass="3" diaginertia="0.05 0.06 0.07"/>
+      <body name="upper" pos="0 0 -0.2" axisangle="1 1 0 35" childclass="arm">
+        <joint name="shoulder" pos="0 0 0.05"/>
+        <joint name="twist" axis="0 0 1" class="main"/>
+        <inertial pos="0 0 -0.15" mass="1.2" fullinertia="0.02 0.021 0.003 0.001 -0.0005 0.0002"/>
+        <body name="lower" pos="0 0 -0.3" xyaxes="0 1 0 -1 0.2 0">
+          <joint name="elbow" type="hinge" axis="0 1 1"/>
+          <joint name="extend" type="slide" axis="0 0 -1"/>
+          <inertial pos="0 0.01 -0.1" euler="5 15 -25" mass="0.8" diaginertia="0.01 0.012 0.004"/>
+          <body name="hand" pos="0 0 -0.25" zaxis="0.3 -0.2 1">
+            <joint name="wrist" class="wrist" pos="0.01 0 0.02"/>
+            <inertial pos="0.02 0 -0.03" mass="0.3" diaginertia="0.001 0.0012 0.0015"/>
+            <geom type="sphere" size="0.02"/>
+          </body>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+def test_hand_written_mjcf_matches_mujoco(tmp_path):
+    xml = tmp_path / "hand.xml"
+    xml.write_text(HAND)
+    # a body with geoms needs an explicit inertial; here each has one (the world's plane is no body)
+    scene = mjcf_scene(tmp_path, xml, dict(gravity=[0.0, 0.0, -9.81]))
+    assert scene.q_names[:7] == ["root.x", "root.y", "root.z", "root.qw", "root.qx", "root.qy", "root.qz"]
+    model = mujoco.MjModel.from_xml_path(str(xml))
+    assert model.njnt == 6 and int(model.jnt_type[model.joint("wrist").id]) == mujoco.mjtJoint.mjJNT_BALL
+    wa, wf = worst(scene, model, 7)
+    print(f"hand-written MJCF vs MuJoCo: |dA| {wa:.2e}, |d(G + Q)| {wf:.2e}")
+    assert wa <= TOL and wf <= TOL, f"|dA| = {wa:.2e}, |d(G + Q)| = {wf:.2e}"
+    # negative control: the same file read in radians by MuJoCo differs
+    radians = tmp_path / "hand_rad.xml"
+    radians.write_text(HAND.replace('<compiler eulerseq="zyX"/>', '<compiler eulerseq="zyX" angle="radian"/>'))
+    wa, wf = worst(scene, mujoco.MjModel.from_xml_path(str(radians)), 7)
+    assert wa > 1e3 * TOL and wf > 1e3 * TOL
+    # and with MuJoCo's default euler sequence
+    xyz = tmp_path / "hand_xyz.xml"
+    xyz.write_text(HAND.replace('<compiler eulerseq="zyX"/>', ""))
+    wa, wf = worst(scene, mujoco.MjModel.from_xml_path(str(xyz)), 7)
+    assert wa > 1e3 * TOL or wf > 1e3 * TOL
+
+
+def mjcf_catalog() -> list[pathlib.Path]:
+    out = []
+    for p in sorted((ROOT / "references" / "scenes").glob("*.toml")):
+        with open(p, "rb") as f:
+            if tomllib.load(f)["model"]["kind"] == "mjcf":
+                out.append(p)
+    return out
+
+
+def test_the_catalog_has_an_mjcf_robot():
+    assert [p.stem for p in mjcf_catalog()] == ["mjcf_arm"]
+
+
+@pytest.mark.parametrize("path", mjcf_catalog(), ids=lambda p: p.stem)
+def test_catalog_mjcf_robot_matches_mujocos_reading_of_its_file(path):
+    with open(path, "rb") as f:
+        m = tomllib.load(f)["model"]
+    xml = path.parent / m["file"]
+    scene = progmo.load(str(path))
+    model = mujoco.MjModel.from_xml_path(str(xml))
+    model.opt.gravity[:] = m["gravity"]
+    wa, wf = worst(scene, model, zlib.crc32(path.stem.encode()))
+    print(f"{path.stem}: MJCF in MuJoCo vs import: |dA| {wa:.2e}, |d(G + Q)| {wf:.2e}")
+    assert wa <= TOL and wf <= TOL, f"|dA| = {wa:.2e}, |d(G + Q)| = {wf:.2e}"
+    # negative control: the wrist's hinge moved 1 cm off its axis in MuJoCo's copy
+    root = ET.parse(xml).getroot()
+    j = next(j for j in root.iter("joint") if j.get("name") == scene.q_names[-1])
+    j.set("pos", "0.01 0 0.01")
+    wrong = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
+    wrong.opt.gravity[:] = m["gravity"]
+    wa, wf = worst(scene, wrong, zlib.crc32(path.stem.encode()))
+    assert wa > 1e3 * TOL and wf > 1e3 * TOL
