@@ -897,7 +897,7 @@ fn articulated_body_factorization_matches_crba() {
             assert!(off > 1e-3, "stale factorization went unnoticed: {off:e}");
         }
         // over Dual64 along dq: d(A x)/dq matches the CRBA's dual A; A^-1 (A x) = x keeps a zero
-        // derivative part
+        // derivative part (the factor 10 stands for the sums of up to nv = 15 terms of that size)
         let qd = seeded(&q, &dq);
         let xd: Vec<Dual64> = x.iter().map(|&v| Dual64::from_re(v)).collect();
         crba(&m, &mut dd, &qd, &mut mmd);
