@@ -225,6 +225,10 @@ impl Scene {
                     ),
                 )
             }
+            R::UnrealizableProgramme { rows, .. } => {
+                let first = rows.first().cloned().unwrap_or_default();
+                self.row_error(&first, format!("{code}"))
+            }
             code => self.source.general(
                 "initial",
                 format!("the initial state cannot be used: {code}"),
@@ -244,6 +248,23 @@ impl Scene {
         let zero = vec![0.0; v.len()];
         rows.eval(&mut ws, t, q, v, &zero, &mut g);
         rows.rows().iter().map(|r| r.name.clone()).zip(g).collect()
+    }
+
+    /// With `[[actuators]]`: the servo analysis at the initial state (relative degrees, index,
+    /// realization), or the return code of a programme the actuators cannot realize there. None
+    /// without actuators (the ideal realization).
+    pub fn servo_analysis(&self) -> Option<Result<crate::servo::Analysis, solve::ReturnCode>> {
+        use crate::programme::Constraints;
+        let SceneSystem::Tree(p) = &self.system else {
+            return None;
+        };
+        let act = p.constraints.actuation()?;
+        let servo = crate::servo::Servo::new(&p.model, &p.constraints, act);
+        Some(
+            servo
+                .analyse(p.t0, &p.q0, &p.v0, self.settings.rank_dependent)
+                .map_err(|e| solve::unrealizable(&p.constraints, act, p.t0, e)),
+        )
     }
 
     /// A tolerance by name.
