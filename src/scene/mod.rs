@@ -198,6 +198,15 @@ impl Scene {
         match code {
             R::InconsistentInitialState { row, residual } => {
                 let name = row.split(' ').next().unwrap_or(row);
+                // A servo programme's hidden constraint: `row (d^k/dt^k, hidden constraint)`.
+                let what = match row.find("(d^") {
+                    Some(i) => format!(
+                        "the derivative {} of this row (a hidden constraint of the servo \
+                         programme: it must vanish for the actuators to hold the row)",
+                        row[i + 1..].split(',').next().unwrap_or("")
+                    ),
+                    None => "this row".to_string(),
+                };
                 let how = if row.ends_with("(assembly failed)") {
                     "assembling the initial state (`assemble = true`) did not bring this row within"
                         .to_string()
@@ -209,7 +218,7 @@ impl Scene {
                 self.row_error(
                     name,
                     format!(
-                        "the initial state violates this row by {residual:.3e} ({how} {:.1e})",
+                        "the initial state violates {what} by {residual:.3e} ({how} {:.1e})",
                         settings.consistency_tol
                     ),
                 )
