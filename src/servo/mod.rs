@@ -83,6 +83,9 @@ pub struct Analysis {
     pub realization: Realization,
     /// Pivot-ratio estimate of the decoupling matrix b.
     pub rcond: f64,
+    /// |b_i| (largest entry) of each row at the state: the reference of the vanishing-row test
+    /// along the motion ([`Servo::decoupling`]).
+    pub b_norms: Vec<f64>,
 }
 
 /// Why the actuators cannot realize the programme.
@@ -283,9 +286,10 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         if !missing.is_empty() {
             return Err(Unrealizable::NotReached { rows: missing });
         }
+        let b_norms: Vec<f64> = (0..s).map(|i| norm(&bk[degrees[i]], i)).collect();
         let rcond = self
-            .decoupling(t, q, v, &degrees, rank_tol)
-            .map(|(_, r)| r)
+            .decoupling(t, q, v, &degrees, &b_norms, rank_tol)
+            .map(|d| d.rcond)
             .map_err(|e| Unrealizable::Singular { rcond: e.rcond })?;
         let index = degrees.iter().copied().max().unwrap_or(0) + 1;
         Ok(Analysis {
@@ -293,18 +297,22 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
             index,
             realization: self.realization(t, q, v),
             rcond,
+            b_norms,
         })
     }
 
-    /// tau = -b^-1 a at (t, q, v) for the given relative degrees, and its pivot ratio.
+    /// tau = -b^-1 a at (t, q, v) for the given relative degrees. A row of b whose largest entry
+    /// falls below `rank_tol` times its reference `b_norms` (its t0 value), or an LU pivot ratio
+    /// below `rank_tol`, is singular.
     pub fn decoupling<T: Scalar>(
         &self,
         t: T,
         q: &[T],
         v: &[T],
         degrees: &[usize],
+        b_norms: &[f64],
         rank_tol: f64,
-    ) -> Result<(Vec<T>, f64), linalg::Singular> {
+    ) -> Result<Decoupled<T>, linalg::Singular> {
         let (s, m) = self.dims();
         debug_assert_eq!(s, m);
         let zero = vec![T::zero(); m];
@@ -324,27 +332,48 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
                 }
             }
         }
+        let (mut ratio, mut row) = (1.0f64, 0);
+        for i in 0..s {
+            let r = (0..m).map(|j| re(b[(i, j)]).abs()).fold(0.0, f64::max)
+                / b_norms[i].max(f64::MIN_POSITIVE);
+            if r < ratio || r.is_nan() {
+                (ratio, row) = (r, i);
+            }
+        }
+        if !(ratio >= rank_tol) {
+            return Err(linalg::Singular {
+                column: row,
+                rcond: ratio,
+            });
+        }
         let mut piv = vec![0; s];
         let rcond = linalg::lu_factor(&mut b, s, &mut piv, rank_tol)?;
         linalg::lu_solve(&b, s, &piv, &mut rhs);
-        Ok((rhs, rcond))
+        Ok(Decoupled {
+            tau: rhs,
+            rcond,
+            row_ratio: ratio,
+            row,
+        })
     }
 
     /// tau and dv/dt = A^-1 (F + H tau) of the index-reduced system at (t, q, v).
+    #[allow(clippy::too_many_arguments)]
     pub fn solve<T: Scalar>(
         &self,
         t: T,
         q: &[T],
         v: &[T],
         degrees: &[usize],
+        b_norms: &[f64],
         rank_tol: f64,
         tau: &mut [T],
         acc: &mut [T],
-    ) -> Result<f64, linalg::Singular> {
-        let (x, rcond) = self.decoupling(t, q, v, degrees, rank_tol)?;
-        tau.copy_from_slice(&x);
+    ) -> Result<Decoupled<T>, linalg::Singular> {
+        let d = self.decoupling(t, q, v, degrees, b_norms, rank_tol)?;
+        tau.copy_from_slice(&d.tau);
         self.accel(t, q, v, tau, acc)?;
-        Ok(rcond)
+        Ok(d)
     }
 
     /// Realization at (t, q, v): B = dg/dv of the programme rows against H (module docs).
@@ -515,6 +544,18 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
             .fold(0.0, f64::max);
         out
     }
+}
+
+/// The decoupling solved ([`Servo::decoupling`]).
+#[derive(Clone, Debug)]
+pub struct Decoupled<T> {
+    /// tau = -b^-1 a.
+    pub tau: Vec<T>,
+    /// LU pivot ratio of b.
+    pub rcond: f64,
+    /// Smallest |b_i| / reference over the rows, and its row.
+    pub row_ratio: f64,
+    pub row: usize,
 }
 
 /// What [`Servo::project`] did.

@@ -43,6 +43,8 @@ pub struct Evaluator<'a, M: Model, C: Constraints, S: Scalar> {
     /// With actuators: the rows' relative degrees found at t0 ([`crate::servo::Servo::analyse`]);
     /// dv/dt then comes from the index-reduced servo system and `lambda` holds tau.
     servo_degrees: Option<Vec<usize>>,
+    /// With actuators: each decoupling row's norm at t0 (reference of the vanishing-row test).
+    servo_b_norms: Vec<f64>,
 }
 
 impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
@@ -64,12 +66,15 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
             diag: Diagnostics::default(),
             row_scale: vec![1.0; s],
             servo_degrees: None,
+            servo_b_norms: vec![],
         }
     }
 
-    /// Solve the servo system with these relative degrees (the constraints carry actuators).
-    pub fn set_servo(&mut self, degrees: Vec<usize>) {
+    /// Solve the servo system with these relative degrees and t0 decoupling row norms
+    /// ([`crate::servo::Analysis`]; the constraints carry actuators).
+    pub fn set_servo(&mut self, degrees: Vec<usize>, b_norms: Vec<f64>) {
         self.servo_degrees = Some(degrees);
+        self.servo_b_norms = b_norms;
     }
 
     /// Take the reference row norms of the vanishing-row test (|B_i| at (t, q, v)); a solve takes
@@ -151,12 +156,13 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
         v: &[S],
     ) -> Result<(), FormulationError> {
         let servo = crate::servo::Servo::new(self.model, self.cons, act);
-        let rcond = servo
+        let dec = servo
             .solve(
                 t,
                 q,
                 v,
                 degrees,
+                &self.servo_b_norms,
                 tol.dependent,
                 &mut self.lambda,
                 &mut self.acc,
@@ -174,11 +180,12 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
         let f_norm = self.force.iter().fold(0.0f64, |m, x| m.max(re(*x).abs()));
         self.diag = Diagnostics {
             b_rcond: 1.0,
-            system_rcond: rcond,
+            system_rcond: dec.rcond,
             du: 0.0,
             factorizations: 1,
-            row_ratio: 1.0,
-            row_ratio_row: 0,
+            // The decoupling row's collapse feeds the conditioning monitor's row-gradient test.
+            row_ratio: dec.row_ratio,
+            row_ratio_row: dec.row,
             u_norm,
             u_terms: u_norm.max(f_norm),
         };

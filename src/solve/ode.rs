@@ -123,8 +123,8 @@ pub(crate) struct MotionOde<'a, M: Model, C: Constraints> {
     acc_v: Vec<f64>,
     last_sample_t: f64,
     budget: StepBudget,
-    /// Relative degrees of a servo programme (actuators), else None.
-    servo_degrees: Option<Vec<usize>>,
+    /// Relative degrees and t0 decoupling row norms of a servo programme (actuators), else None.
+    servo_degrees: Option<(Vec<usize>, Vec<f64>)>,
 }
 
 impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
@@ -164,12 +164,12 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
             Some(act) => {
                 let servo = crate::servo::Servo::new(m, c, act);
                 match servo.analyse(t0, &q, &v, settings.rank_dependent) {
-                    Ok(an) => Some(an.degrees),
+                    Ok(an) => Some((an.degrees, an.b_norms)),
                     Err(e) => return Err(super::unrealizable(c, act, t0, e)),
                 }
             }
         };
-        if let Some(d) = &servo_degrees {
+        if let Some((d, _)) = &servo_degrees {
             proj.set_servo(d.clone());
         }
 
@@ -222,7 +222,7 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
         }
 
         // The hidden constraints of a servo programme (y^(k), k < r) must hold at t0 too.
-        if let (Some(d), Some(act)) = (&servo_degrees, c.actuation()) {
+        if let (Some((d, _)), Some(act)) = (&servo_degrees, c.actuation()) {
             let servo = crate::servo::Servo::new(m, c, act);
             let hidden_worst = |q: &[f64], v: &[f64]| -> (f64, usize) {
                 let mut h = vec![];
@@ -262,8 +262,8 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
         }
 
         let mut ev = Evaluator::new(m, c);
-        if let Some(d) = &servo_degrees {
-            ev.set_servo(d.clone());
+        if let Some((d, b)) = &servo_degrees {
+            ev.set_servo(d.clone(), b.clone());
         }
         // Reference row norms for the vanishing-row test.
         ev.set_row_scale_at(t0, &q, &v);
@@ -652,8 +652,8 @@ impl<'a, M: Model, C: Constraints> OdeProblem for MotionOde<'a, M, C> {
         if self.evd.is_none() {
             let mut e = Evaluator::new(&self.problem.model, &self.problem.constraints);
             e.row_scale = self.ev.row_scale.clone();
-            if let Some(d) = &self.servo_degrees {
-                e.set_servo(d.clone());
+            if let Some((d, b)) = &self.servo_degrees {
+                e.set_servo(d.clone(), b.clone());
             }
             self.evd = Some(e);
         }
