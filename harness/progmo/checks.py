@@ -412,7 +412,8 @@ def _parity(c: _Check) -> None:
         drt.append(float(np.abs(rs - rhs).max()))
         sM, sR = max(sM, float(np.abs(A).max())), max(sR, float(np.abs(rhs).max()))
         B = np.asarray(dyn["B"])
-        us = be.instant_u(tk, qk, vk, ak, B, np.asarray(dyn["gamma"]), programme)
+        us = be.instant_u(tk, qk, vk, ak, B, np.asarray(dyn["gamma"]), programme,
+                          actuated=bool(scene.actuators))
         dU.append(float(np.abs(us - ref.u[k]).max()))
         if closures:
             Jsim = be.closure_jacobian(tk, qk, vk)
