@@ -315,3 +315,75 @@ fn a_vector_relative_degree_4_2_matches_its_flat_inverse() {
     assert!(ex < 20.0 * s.settings.rtol, "q error {ex:.2e}");
     assert!(eu < 20.0 * s.settings.rtol, "u error {eu:.2e}");
 }
+
+/// A hinge turning an arm of length 1 in the horizontal plane (A = 1); the tip's y is programmed
+/// to rise at 0.5 m/s: y = sin q, so q = asin(t/2) and the decoupling b = dy''/dtau = cos q
+/// vanishes at t = 2 (the arm stretched along y), where tau = tan(q) q'^2 grows without bound.
+const REACH: &str = r#"
+name = "reach"
+
+[model]
+kind = "tree"
+
+[[model.bodies]]
+name = "arm"
+mass = 1.0
+com = [1.0, 0.0, 0.0]
+joints = [{ name = "q", type = "hinge", axis = [0.0, 0.0, 1.0] }]
+
+[[model.sites]]
+name = "tip"
+body = "arm"
+pos = [1.0, 0.0, 0.0]
+
+[[programme]]
+name = "path"
+expr = "tip.y - 0.5*t"
+
+[[actuators]]
+joint = "q"
+name = "motor"
+
+[initial]
+v = { q = 0.5 }
+
+[time]
+t1 = 3.0
+
+[solver]
+strict = true
+"#;
+
+#[test]
+fn a_decoupling_that_vanishes_later_stops_the_solve_naming_the_row() {
+    // The conditioning monitor watches |b_i| against its t0 value (threshold 1e-3): b = cos q
+    // crosses it where sin q = sqrt(1 - 1e-6), t = 2 sqrt(1 - 1e-6); strict mode stops there with
+    // the results up to that time (exit 1).
+    let s = Scene::from_text(&root().join("reach.toml"), REACH).unwrap_or_else(|e| panic!("{e}"));
+    let an = s
+        .servo_analysis()
+        .expect("actuated")
+        .expect("realizable at t0");
+    assert_eq!(
+        (an.degrees.clone(), an.realization),
+        (vec![2], Realization::Orthogonal)
+    );
+    let sol = s.solve(&s.settings);
+    match &sol.code {
+        ReturnCode::IllConditioned { t, warning } => {
+            let t_cross = 2.0 * (1.0f64 - 1e-6).sqrt();
+            assert!(
+                (t - t_cross).abs() < 1e-3,
+                "stopped at t = {t}, crossing at {t_cross}"
+            );
+            assert_eq!(warning.rows, vec!["path".to_string()]);
+            // Results are kept up to the stop, and follow q = asin(t/2) there.
+            let tr = &sol.trajectory;
+            let k = tr.len() - 1;
+            assert!((tr.t[k] - t).abs() < 1e-12);
+            let q = (tr.t[k] / 2.0).asin();
+            assert!((tr.q_at(k)[0] - q).abs() < 1e-6, "{} vs {q}", tr.q_at(k)[0]);
+        }
+        other => panic!("{other}"),
+    }
+}

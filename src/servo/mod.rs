@@ -222,6 +222,7 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
     }
 
     /// y^(k) and d y^(k) / d tau at (t, q, v, tau): value into `val`, s x m derivative into `db`.
+    #[allow(clippy::too_many_arguments)]
     pub fn lie_tau<T: Scalar>(
         &self,
         k: usize,
