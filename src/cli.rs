@@ -624,6 +624,7 @@ fn validate(scenes: &[PathBuf], json: bool) -> ExitCode {
                     })).collect::<Vec<_>>(),
                     "initial_correction": corr.map(|c| serde_json::json!({"position": c.position, "velocity": c.velocity})),
                     "set_aside": scene.set_aside.as_ref().map(|s| &s.0),
+                    "servo": scene.servo_analysis().and_then(Result::ok),
                 }));
             }
             Ok((traj, corr)) => {
@@ -657,6 +658,16 @@ fn validate(scenes: &[PathBuf], json: bool) -> ExitCode {
                 }
                 for n in &scene.import_notes {
                     say!("  note: {n}");
+                }
+                if let Some(Ok(an)) = scene.servo_analysis() {
+                    say!(
+                        "  servo-constraints: {} realization at t0, relative degrees {:?}, index {} \
+                         (decoupling pivot ratio {:.2e})",
+                        an.realization.name(),
+                        an.degrees,
+                        an.index,
+                        an.rcond
+                    );
                 }
             }
             Err(e) => {

@@ -41,5 +41,6 @@ pub mod problems;
 pub mod programme;
 pub mod scalar;
 pub mod scene;
+pub mod servo;
 pub mod solve;
 pub mod tree;

@@ -487,3 +487,38 @@ fn bundled_names_from_any_directory_and_json_on_stdout() {
     assert_eq!(v[0]["name"], "heavy_top");
     assert_eq!(v[0]["ok"], true);
 }
+
+#[test]
+fn validate_reports_the_servo_realization_and_index() {
+    let p = scene("two_car_chain");
+    let o = progmo()
+        .args(["validate", p.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains(
+            "servo-constraints: tangential realization at t0, relative degrees [4], index 5"
+        ),
+        "{out}"
+    );
+    let o = progmo()
+        .args(["validate", "--json", p.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v[0]["servo"]["index"], 5);
+    assert_eq!(v[0]["servo"]["realization"], "tangential");
+    // Without actuators: no servo report.
+    let o = progmo()
+        .args([
+            "validate",
+            "--json",
+            scene("double_pendulum").to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(v[0]["servo"].is_null());
+}

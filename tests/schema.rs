@@ -272,6 +272,8 @@ fn the_maximal_examples_load_match_the_schema_and_use_every_key() {
         &maximal_closure(WELD),
         &maximal_closure(DISTANCE),
         &maximal_closure(LINE),
+        // `[[actuators]]` with every key (servo-constraints).
+        include_str!("../references/scenes/two_car_chain.toml"),
     ];
     for text in examples {
         Scene::from_text(Path::new("maximal"), text).unwrap_or_else(|e| panic!("{e}"));

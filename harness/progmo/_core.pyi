@@ -189,6 +189,9 @@ class Scene:
         """Raises SceneError with the located message `progmo solve` gives when the solver refuses
         the initial state."""
     @property
+    def actuators(self) -> list[tuple[str, int]]:
+        """[[actuators]] of the scene: (name, index into v) each; empty: the ideal realization."""
+    @property
     def expected_not_checked(self) -> list[tuple[str, str]]:
         """[checks] not_checked of the scene: (simulator, reason)."""
     @property

@@ -27,7 +27,9 @@ A check is a sequence of small steps over a typed back-end (``simulators.Backend
    be blamed on the dynamics.
 6. **Open-loop replay** of the solver's u(t): ``replay_residual`` (max |row| of the core's own
    evaluator on the replayed states) and ``replay_deviation`` (max |dq|, |dv| against the solver,
-   quaternions up to sign); the growth rate of the deviation is ``info``, not judged.
+   quaternions up to sign); the growth rate of the deviation is ``info``, not judged. With
+   ``[[actuators]]`` also ``replay_unactuated``: the replayed force on joints no actuator drives,
+   relative to max |u| (:func:`unactuated_force`).
 
 A scene no simulator document describes (a lagrangian model) is checked ``solver_only``
 (``run_check(path, "solver_only")``): the scene (step 1), then :func:`_solver_only`: the solve with
@@ -59,6 +61,8 @@ BUDGETED = ("solver_residual", "parity_mass", "parity_bias", "instant_u", "repla
             "replay_deviation")
 #: metrics of scenes with loop closures (``[[model.closures]]``), budgeted in addition
 CLOSURE_BUDGETED = ("parity_closure", "reaction_closure")
+#: metrics of scenes with ``[[actuators]]`` (servo-constraints), budgeted in addition
+ACTUATOR_BUDGETED = ("replay_unactuated",)
 #: metrics of the solver_only check (``reference_error`` only where the scene gives references)
 SOLVER_ONLY_BUDGETED = ("solver_residual", "formulation_deviation", "formulation_force_deviation",
                         "reference_error")
@@ -107,6 +111,8 @@ def default_budgets(settings: dict[str, Any]) -> dict[str, tuple[float, str]]:
                                    "generalized reaction J^T f from the simulator's own multipliers under "
                                    "the solver's u vs ours B_c^T lambda_c, relative to its max (Pinocchio "
                                    "catalog <= 1e-13; MuJoCo's soft equalities need a scene budget)"),
+        "replay_unactuated": (1e-14, "default (algebraic identity): the replayed force on joints no "
+                                     "actuator drives, relative to max|u|: u = H tau has exact zeros there"),
         "formulation_deviation": (1e-8, f"default (integrated): max |dq|, |dv| between two formulations "
                                         f"solved at rtol {REF_RTOL:g}: both carry the integration error "
                                         "(about 1e4 x rtol for non-stiff scenes) and the conditioning of B"),
@@ -285,8 +291,9 @@ def _budgets(c: _Check) -> None:
     """Every metric's budget and the replayed span."""
     c.tol = {k: (float(v[0]), str(v[1])) for k, v in dict(c.scene.tolerances).items()}
     closures = bool(c.backend.report.get("closures"))
-    c.res.budgets = budgets_for(c.tol, dict(c.scene.settings), c.simulator,
-                                BUDGETED + CLOSURE_BUDGETED if closures else BUDGETED)
+    metrics = BUDGETED + (CLOSURE_BUDGETED if closures else ()) + (
+        ACTUATOR_BUDGETED if c.scene.actuators else ())
+    c.res.budgets = budgets_for(c.tol, dict(c.scene.settings), c.simulator, metrics)
     full = c.scene.t1 - c.scene.t0
     horizon = c.options.horizon or (c.tol["replay_horizon"][0] if "replay_horizon" in c.tol else full)
     c.horizon = min(horizon, full)
@@ -405,7 +412,8 @@ def _parity(c: _Check) -> None:
         drt.append(float(np.abs(rs - rhs).max()))
         sM, sR = max(sM, float(np.abs(A).max())), max(sR, float(np.abs(rhs).max()))
         B = np.asarray(dyn["B"])
-        us = be.instant_u(tk, qk, vk, ak, B, np.asarray(dyn["gamma"]), programme)
+        us = be.instant_u(tk, qk, vk, ak, B, np.asarray(dyn["gamma"]), programme,
+                          actuated=bool(scene.actuators))
         dU.append(float(np.abs(us - ref.u[k]).max()))
         if closures:
             Jsim = be.closure_jacobian(tk, qk, vk)
@@ -511,6 +519,8 @@ def _replay(c: _Check) -> None:
         ci = [names.index(r) for cl in closures for r in cl["rows"] if r not in cl["set_aside"]]
         res.info["replay_closure_residual"] = float(np.abs(R[:, ci]).max())
     res.metrics["replay_deviation"] = float(dev.max())
+    if scene.actuators:  # servo-constraints: the force fed to the simulator acts on actuated joints only
+        res.metrics["replay_unactuated"] = unactuated_force(ref.u, [d for _, d in scene.actuators])
     g = growth_rate(rp.t, dev)
     res.info["replay_growth_rate"] = g
     if math.isfinite(g) and g * c.horizon > math.log(100):
@@ -549,6 +559,16 @@ def _replay(c: _Check) -> None:
              f"{b.metric} {b.value:.3g} > {b.budget:.3g}"
              + (f" first at t = {b.first_time:.6g}" if b.first_time is not None else ""))
             for b in res.breaches)
+
+
+def unactuated_force(u: np.ndarray, actuated: list[int]) -> float:
+    """max |u_j| over the joints j no actuator drives, relative to max |u| (0 when u = 0)."""
+    u = np.asarray(u)
+    free = [j for j in range(u.shape[1]) if j not in actuated]
+    scale = float(np.abs(u).max()) if u.size else 0.0
+    if not free or scale == 0.0:
+        return 0.0
+    return float(np.abs(u[:, free]).max()) / scale
 
 
 def _first_times(first: dict, bval: dict) -> dict:

@@ -166,6 +166,9 @@ pub enum FormulationError {
     SingularSystem { rcond: f64 },
     /// B, gamma, A or F contain NaN or infinity.
     NonFinite,
+    /// With actuators ([`crate::servo`]): the decoupling matrix d y^(r) / d tau is singular (pivot
+    /// ratio `rcond`): the actuators cannot realize the programme here.
+    Unrealizable { rcond: f64 },
 }
 
 impl std::fmt::Display for FormulationError {
@@ -184,6 +187,11 @@ impl std::fmt::Display for FormulationError {
             FormulationError::NonFinite => {
                 f.write_str("A, G + Q, the programme Jacobian or gamma is not finite")
             }
+            FormulationError::Unrealizable { rcond } => write!(
+                f,
+                "the actuators cannot realize the programme: the decoupling matrix is singular \
+                 (pivot ratio {rcond:.2e})"
+            ),
         }
     }
 }

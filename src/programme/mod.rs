@@ -102,6 +102,12 @@ pub trait Constraints: Send + Sync {
     ) -> bool {
         false
     }
+
+    /// The actuators that must realize the programme (servo-constraints, [`crate::servo`]), or
+    /// `None` (the default) for the ideal realization of (2.7).
+    fn actuation(&self) -> Option<&crate::servo::Actuation> {
+        None
+    }
 }
 
 /// No constraints at all (the natural system).

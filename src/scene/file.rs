@@ -148,6 +148,12 @@ pub struct SceneFile {
     /// (constrained) free motion, u = 0.
     #[serde(default)]
     pub programme: Vec<RowFile>,
+    /// Actuators realizing the programme (tree and urdf scenes): with them the control force is
+    /// u = H tau on the listed joints only and the programme rows are servo-constraints
+    /// (FORMAT.md, "Actuators"); as many actuators as programme rows. Absent: the ideal
+    /// realization, u in the row space of the programme Jacobian.
+    #[serde(default)]
+    pub actuators: Vec<ActuatorFile>,
     #[schemars(with = "InitialFile")]
     pub initial: Spanned<InitialFile>,
     #[schemars(with = "TimeFile")]
@@ -560,6 +566,20 @@ pub struct RowFile {
     /// The row's left-hand side: the row is expr = 0.
     #[schemars(with = "Expression")]
     pub expr: Spanned<String>,
+}
+
+/// One actuator: a generalized force on one hinge or slide joint.
+#[derive(Clone, Debug, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+#[schemars(rename = "actuator")]
+pub struct ActuatorFile {
+    /// The actuated joint: a hinge or slide joint of the model (its velocity's name).
+    #[schemars(with = "Identifier")]
+    pub joint: Spanned<String>,
+    /// Name in messages and outputs (an identifier, unique among actuators); default: the joint's.
+    #[serde(default)]
+    #[schemars(with = "Option<Identifier>")]
+    pub name: Option<Spanned<String>>,
 }
 
 /// The initial state; it must satisfy every row (and the position rows' first derivatives)

@@ -87,6 +87,14 @@ pub(super) fn load(src: Source) -> R<Scene> {
     let mut extra: (Vec<Closure>, SetAsideRows) = (vec![], None);
     let (system, spans) = match kind {
         "lagrangian" => {
+            if let Some(a) = file.actuators.first() {
+                return Err(src.error(
+                    a.joint.span(),
+                    "actuators[0].joint",
+                    "actuators need a tree or urdf model (they act on its joints); a lagrangian \
+                     scene realizes its programme ideally",
+                ));
+            }
             let (m, mut sym) = lagrangian(&src, model, &params)?;
             let (c, spans) = rows(&src, &file, &mut sym, &[])?;
             let (q0, v0) = initial(&src, &file, &params, &m.q_names(), &m.v_names(), None)?;
@@ -135,6 +143,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
                 closure_rows.len(),
                 &settings,
             )?;
+            actuators(&src, &file, &mut p, !closures.is_empty())?;
             extra = (closures, set_aside);
             (SceneSystem::Tree(p), spans)
         }
@@ -180,6 +189,101 @@ pub(super) fn load(src: Source) -> R<Scene> {
 }
 
 type SetAsideRows = Option<(Vec<SetAside>, ExprConstraints)>;
+
+/// `[[actuators]]`: the joints whose generalized forces realize the programme (servo-constraints,
+/// [`crate::servo`]). Hinge and slide joints of a model with Euclidean coordinates only, each once,
+/// as many as programme rows, no system constraints.
+fn actuators<M: Model>(
+    src: &Source,
+    file: &SceneFile,
+    p: &mut Problem<M, ExprConstraints>,
+    has_closures: bool,
+) -> R<()> {
+    if file.actuators.is_empty() {
+        return Ok(());
+    }
+    let v_names = p.model.v_names();
+    let first = &file.actuators[0];
+    if has_closures || !file.constraints.is_empty() {
+        return Err(src.error(
+            first.joint.span(),
+            "actuators[0].joint",
+            "actuators with system constraints or loop closures are not supported yet: their \
+             reactions would join tau in the index reduction",
+        ));
+    }
+    if let Some(j) = v_names.iter().find(|n| n.contains('.')) {
+        let joint = j.split('.').next().unwrap_or(j);
+        return Err(src.error(
+            first.joint.span(),
+            "actuators[0].joint",
+            format!(
+                "actuators need a model of hinge and slide joints only; joint `{joint}` is a ball \
+                 or free joint (its quaternion coordinates are not supported by the servo solver yet)"
+            ),
+        ));
+    }
+    let mut names: Vec<String> = vec![];
+    let mut dofs: Vec<usize> = vec![];
+    for (i, a) in file.actuators.iter().enumerate() {
+        let joint = a.joint.get_ref();
+        let field = format!("actuators[{i}].joint");
+        let Some(d) = v_names.iter().position(|n| n == joint) else {
+            return Err(src.error(
+                a.joint.span(),
+                &field,
+                format!(
+                    "unknown joint `{joint}`: the actuated joints are among {}",
+                    and_list(&v_names.iter().map(String::as_str).collect::<Vec<_>>())
+                ),
+            ));
+        };
+        if dofs.contains(&d) {
+            return Err(src.error(
+                a.joint.span(),
+                &field,
+                format!("joint `{joint}` is actuated twice"),
+            ));
+        }
+        let name = match &a.name {
+            Some(n) => {
+                if !is_identifier(n.get_ref()) {
+                    return Err(src.error(
+                        n.span(),
+                        &format!("actuators[{i}].name"),
+                        "an actuator name must be an identifier",
+                    ));
+                }
+                if names.contains(n.get_ref()) {
+                    return Err(src.error(
+                        n.span(),
+                        &format!("actuators[{i}].name"),
+                        format!("actuator name `{}` is used twice", n.get_ref()),
+                    ));
+                }
+                n.get_ref().clone()
+            }
+            None => joint.clone(),
+        };
+        names.push(name);
+        dofs.push(d);
+    }
+    let (m, s, n) = (dofs.len(), file.programme.len(), v_names.len());
+    if m != s {
+        let at = &file.actuators[m.min(s).min(m - 1)];
+        return Err(src.error(
+            at.joint.span(),
+            &format!("actuators[{}].joint", m.min(s).min(m - 1)),
+            format!(
+                "{m} actuator(s) for {s} programme row(s) ({n} degrees of freedom): the servo \
+                 solver needs as many actuators as programme rows (a square decoupling matrix)"
+            ),
+        ));
+    }
+    p.constraints
+        .set_actuation(crate::servo::Actuation { names, dofs });
+    Ok(())
+}
 
 /// Set aside the closure rows dependent at t0 ([`super::closures::set_aside_dependent`]), then
 /// check the number of rows left. The set-aside rows must hold at t0 too; they stay available

@@ -198,6 +198,15 @@ impl Scene {
         match code {
             R::InconsistentInitialState { row, residual } => {
                 let name = row.split(' ').next().unwrap_or(row);
+                // A servo programme's hidden constraint: `row (d^k/dt^k, hidden constraint)`.
+                let what = match row.find("(d^") {
+                    Some(i) => format!(
+                        "the derivative {} of this row (a hidden constraint of the servo \
+                         programme: it must vanish for the actuators to hold the row)",
+                        row[i + 1..].split(',').next().unwrap_or("")
+                    ),
+                    None => "this row".to_string(),
+                };
                 let how = if row.ends_with("(assembly failed)") {
                     "assembling the initial state (`assemble = true`) did not bring this row within"
                         .to_string()
@@ -209,7 +218,7 @@ impl Scene {
                 self.row_error(
                     name,
                     format!(
-                        "the initial state violates this row by {residual:.3e} ({how} {:.1e})",
+                        "the initial state violates {what} by {residual:.3e} ({how} {:.1e})",
                         settings.consistency_tol
                     ),
                 )
@@ -224,6 +233,10 @@ impl Scene {
                         solve::quoted(rows)
                     ),
                 )
+            }
+            R::UnrealizableProgramme { rows, .. } => {
+                let first = rows.first().cloned().unwrap_or_default();
+                self.row_error(&first, format!("{code}"))
             }
             code => self.source.general(
                 "initial",
@@ -244,6 +257,23 @@ impl Scene {
         let zero = vec![0.0; v.len()];
         rows.eval(&mut ws, t, q, v, &zero, &mut g);
         rows.rows().iter().map(|r| r.name.clone()).zip(g).collect()
+    }
+
+    /// With `[[actuators]]`: the servo analysis at the initial state (relative degrees, index,
+    /// realization), or the return code of a programme the actuators cannot realize there. None
+    /// without actuators (the ideal realization).
+    pub fn servo_analysis(&self) -> Option<Result<crate::servo::Analysis, solve::ReturnCode>> {
+        use crate::programme::Constraints;
+        let SceneSystem::Tree(p) = &self.system else {
+            return None;
+        };
+        let act = p.constraints.actuation()?;
+        let servo = crate::servo::Servo::new(&p.model, &p.constraints, act);
+        Some(
+            servo
+                .analyse(p.t0, &p.q0, &p.v0, self.settings.rank_dependent)
+                .map_err(|e| solve::unrealizable(&p.constraints, act, p.t0, e)),
+        )
     }
 
     /// A tolerance by name.

@@ -39,6 +39,8 @@ pub struct ExprConstraints {
     signal_needs: Vec<bool>,
     /// Rows per level: position, velocity, acceleration.
     by_level: [Vec<usize>; 3],
+    /// `[[actuators]]`: the programme is realized by these (servo-constraints), else ideally.
+    actuation: Option<crate::servo::Actuation>,
 }
 
 /// Scratch of an [`ExprConstraints`] evaluation.
@@ -106,7 +108,13 @@ impl ExprConstraints {
             seeds,
             signal_needs,
             by_level,
+            actuation: None,
         }
+    }
+
+    /// Realize the programme by these actuators ([`crate::servo`]).
+    pub fn set_actuation(&mut self, actuation: crate::servo::Actuation) {
+        self.actuation = Some(actuation);
     }
 
     /// Two row sets from this one: the rows `keep` and the rows `other` (each in the given order).
@@ -119,7 +127,9 @@ impl ExprConstraints {
                 self.signals.clone(),
             )
         };
-        (part(keep), part(other))
+        let mut kept = part(keep);
+        kept.actuation = self.actuation.clone();
+        (kept, part(other))
     }
 
     /// The expressions, in row order.
@@ -130,6 +140,10 @@ impl ExprConstraints {
 
 impl Constraints for ExprConstraints {
     type Workspace<S: Scalar> = RowsWork<S>;
+
+    fn actuation(&self) -> Option<&crate::servo::Actuation> {
+        self.actuation.as_ref()
+    }
 
     fn workspace<S: Scalar>(&self) -> RowsWork<S> {
         let n = self.layout.slots + self.signals.len();

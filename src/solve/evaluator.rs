@@ -43,6 +43,11 @@ pub struct Evaluator<'a, M: Model, C: Constraints, S: Scalar> {
     pub diag: Diagnostics,
     /// Reference norm of each row of B (its norm at the initial state) for the vanishing test.
     pub row_scale: Vec<f64>,
+    /// With actuators: the rows' relative degrees found at t0 ([`crate::servo::Servo::analyse`]);
+    /// dv/dt then comes from the index-reduced servo system and `lambda` holds tau.
+    servo_degrees: Option<Vec<usize>>,
+    /// With actuators: each decoupling row's norm at t0 (reference of the vanishing-row test).
+    servo_b_norms: Vec<f64>,
 }
 
 impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
@@ -63,7 +68,16 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
             lambda: vec![z; s],
             diag: Diagnostics::default(),
             row_scale: vec![1.0; s],
+            servo_degrees: None,
+            servo_b_norms: vec![],
         }
+    }
+
+    /// Solve the servo system with these relative degrees and t0 decoupling row norms
+    /// ([`crate::servo::Analysis`]; the constraints carry actuators).
+    pub fn set_servo(&mut self, degrees: Vec<usize>, b_norms: Vec<f64>) {
+        self.servo_degrees = Some(degrees);
+        self.servo_b_norms = b_norms;
     }
 
     /// Take the reference row norms of the vanishing-row test (|B_i| at (t, q, v)); a solve takes
@@ -103,6 +117,12 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
         q: &[S],
         v: &[S],
     ) -> Result<(), FormulationError> {
+        let cons = self.cons;
+        if let (Some(act), Some(deg)) = (cons.actuation(), self.servo_degrees.clone()) {
+            // the servo system (actuators) solves its own equations on the prepared state
+            self.prepare(t, q, v);
+            return self.evaluate_servo(act, &deg, tol, t, q, v);
+        }
         let factored = self.model.has_mass_factor();
         let formulation = formulation.resolve(self.model.nv(), factored);
         // the articulated-body formulation on a tree: A is never formed
@@ -159,10 +179,66 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
         Ok(())
     }
 
+    /// dv/dt and tau (into `lambda`) of the index-reduced servo system at the prepared state.
+    fn evaluate_servo(
+        &mut self,
+        act: &crate::servo::Actuation,
+        degrees: &[usize],
+        tol: &RankTolerances,
+        t: S,
+        q: &[S],
+        v: &[S],
+    ) -> Result<(), FormulationError> {
+        let servo = crate::servo::Servo::new(self.model, self.cons, act);
+        let dec = servo
+            .solve(
+                t,
+                q,
+                v,
+                degrees,
+                &self.servo_b_norms,
+                tol.dependent,
+                &mut self.lambda,
+                &mut self.acc,
+            )
+            .map_err(|e| FormulationError::Unrealizable { rcond: e.rcond })?;
+        if !self
+            .acc
+            .iter()
+            .chain(&self.lambda)
+            .all(|x| re(*x).is_finite())
+        {
+            return Err(FormulationError::NonFinite);
+        }
+        let u_norm = self.lambda.iter().fold(0.0f64, |m, x| m.max(re(*x).abs()));
+        let f_norm = self.force.iter().fold(0.0f64, |m, x| m.max(re(*x).abs()));
+        self.diag = Diagnostics {
+            b_rcond: 1.0,
+            system_rcond: dec.rcond,
+            du: 0.0,
+            factorizations: 1,
+            // The decoupling row's collapse feeds the conditioning monitor's row-gradient test.
+            row_ratio: dec.row_ratio,
+            row_ratio_row: dec.row,
+            u_norm,
+            u_terms: u_norm.max(f_norm),
+        };
+        Ok(())
+    }
+
     /// Reaction of the rows with role `role`: sum over those rows of B_i^T lambda_i (2.12).
     pub fn reaction(&self, role: Role, out: &mut [S]) {
         for x in out.iter_mut() {
             *x = S::zero();
+        }
+        if let (Some(act), Some(_)) = (self.cons.actuation(), &self.servo_degrees) {
+            // u = H tau (the actuators' generalized forces); no system rows with actuators.
+            if role == Role::Programme {
+                for (j, &d) in act.dofs.iter().enumerate() {
+                    out[d] += self.lambda[j];
+                }
+            }
+            return;
         }
         for (i, spec) in self.cons.rows().iter().enumerate() {
             if spec.role == role {

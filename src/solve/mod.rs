@@ -316,6 +316,16 @@ pub enum ReturnCode {
     IllConditioned { t: f64, warning: Box<Warning> },
     /// The sink asked to stop ([`SampleSink::interrupted`]: Ctrl-C or SIGTERM in `progmo solve`).
     Interrupted { t: f64 },
+    /// With actuators (servo-constraints, [`crate::servo`]): the actuators cannot realize the
+    /// programme rows `rows`: no actuator reaches them within the highest relative degree searched
+    /// (`reached` false), or the decoupling matrix d y^(r) / d tau is singular (pivot ratio `rcond`).
+    UnrealizableProgramme {
+        t: f64,
+        rows: Vec<String>,
+        actuators: Vec<String>,
+        reached: bool,
+        rcond: f64,
+    },
     /// At the recent step rate the span needs about `needed` steps, over 10 times `max_steps`:
     /// stopped early rather than after minutes of steps into the limit.
     TooManySteps {
@@ -373,6 +383,33 @@ impl std::fmt::Display for ReturnCode {
                 f,
                 "the solve was interrupted at t = {t:.6} (Ctrl-C or a termination signal)"
             ),
+            ReturnCode::UnrealizableProgramme {
+                t,
+                rows,
+                actuators,
+                reached: false,
+                ..
+            } => write!(
+                f,
+                "the actuators {} do not reach programme row(s) {} at t = {t:.6}: tau appears in \
+                 none of their first {} time derivatives",
+                quoted(actuators),
+                quoted(rows),
+                crate::servo::MAX_RELATIVE_DEGREE + 1
+            ),
+            ReturnCode::UnrealizableProgramme {
+                t,
+                rows,
+                actuators,
+                rcond,
+                ..
+            } => write!(
+                f,
+                "the actuators {} cannot realize programme row(s) {} at t = {t:.6}: the decoupling \
+                 matrix d y^(r)/d tau is singular (pivot ratio {rcond:.2e})",
+                quoted(actuators),
+                quoted(rows)
+            ),
             ReturnCode::TooManySteps {
                 t,
                 needed,
@@ -407,6 +444,7 @@ impl ReturnCode {
             ReturnCode::IllConditioned { .. } => "ill_conditioned",
             ReturnCode::Interrupted { .. } => "interrupted",
             ReturnCode::TooManySteps { .. } => "too_many_steps",
+            ReturnCode::UnrealizableProgramme { .. } => "unrealizable_programme",
         }
     }
 
@@ -435,7 +473,8 @@ impl ReturnCode {
             | ReturnCode::ProjectionFailed { t, .. }
             | ReturnCode::IllConditioned { t, .. }
             | ReturnCode::Interrupted { t }
-            | ReturnCode::TooManySteps { t, .. } => Some(t),
+            | ReturnCode::TooManySteps { t, .. }
+            | ReturnCode::UnrealizableProgramme { t, .. } => Some(t),
         }
     }
 }
@@ -724,6 +763,29 @@ pub fn check_initial<M: Model, C: Constraints>(
         ode.initial_correction.clone()
     };
     Ok((traj, corr))
+}
+
+/// The return code of a programme the actuators cannot realize at time t.
+pub fn unrealizable<C: Constraints>(
+    c: &C,
+    act: &crate::servo::Actuation,
+    t: f64,
+    e: crate::servo::Unrealizable,
+) -> ReturnCode {
+    use crate::servo::Unrealizable as U;
+    let all: Vec<String> = c.rows().iter().map(|r| r.name.clone()).collect();
+    let (rows, reached, rcond) = match e {
+        U::NotReached { rows } => (rows.iter().map(|&i| all[i].clone()).collect(), false, 0.0),
+        U::Singular { rcond } => (all, true, rcond),
+        U::Model => return ReturnCode::NonFinite { t },
+    };
+    ReturnCode::UnrealizableProgramme {
+        t,
+        rows,
+        actuators: act.names.clone(),
+        reached,
+        rcond,
+    }
 }
 
 /// Is row i one whose residual the state itself must satisfy (position or velocity level)?

@@ -123,6 +123,8 @@ pub(crate) struct MotionOde<'a, M: Model, C: Constraints> {
     acc_v: Vec<f64>,
     last_sample_t: f64,
     budget: StepBudget,
+    /// Relative degrees and t0 decoupling row norms of a servo programme (actuators), else None.
+    servo_degrees: Option<(Vec<usize>, Vec<f64>)>,
 }
 
 impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
@@ -156,6 +158,20 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
         let names: Vec<String> = c.rows().iter().map(|r| r.name.clone()).collect();
         let mut proj = Projector::new(m, c);
         let t0 = problem.t0;
+        // Servo-constraints: relative degrees at t0 (the index-reduced system's structure).
+        let servo_degrees = match c.actuation() {
+            None => None,
+            Some(act) => {
+                let servo = crate::servo::Servo::new(m, c, act);
+                match servo.analyse(t0, &q, &v, settings.rank_dependent) {
+                    Ok(an) => Some((an.degrees, an.b_norms)),
+                    Err(e) => return Err(super::unrealizable(c, act, t0, e)),
+                }
+            }
+        };
+        if let Some((d, _)) = &servo_degrees {
+            proj.set_servo(d.clone());
+        }
 
         // Consistency of the initial state (2.5).
         let mut res = vec![0.0; s];
@@ -205,7 +221,50 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
             });
         }
 
+        // The hidden constraints of a servo programme (y^(k), k < r) must hold at t0 too.
+        if let (Some((d, _)), Some(act)) = (&servo_degrees, c.actuation()) {
+            let servo = crate::servo::Servo::new(m, c, act);
+            let hidden_worst = |q: &[f64], v: &[f64]| -> (f64, usize) {
+                let mut h = vec![];
+                if servo.hidden(t0, q, v, d, &mut h).is_err() {
+                    return (f64::NAN, 0);
+                }
+                h.iter().enumerate().fold((0.0f64, 0), |w, (k, x)| {
+                    if x.abs() > w.0 || x.is_nan() {
+                        (x.abs(), k)
+                    } else {
+                        w
+                    }
+                })
+            };
+            let names = servo.hidden_names(d);
+            let (r0, k0) = hidden_worst(&q, &v);
+            if r0 > settings.consistency_tol || r0.is_nan() {
+                if !settings.assemble {
+                    return Err(ReturnCode::InconsistentInitialState {
+                        row: names[k0].1.clone(),
+                        residual: r0,
+                    });
+                }
+                let rep = proj.project(t0, &mut q, &mut v, settings.consistency_tol * 1e-3, 50);
+                let (r1, k1) = hidden_worst(&q, &v);
+                if r1 > settings.consistency_tol || r1.is_nan() {
+                    return Err(ReturnCode::InconsistentInitialState {
+                        row: format!("{} (assembly failed)", names[k1].1),
+                        residual: r1,
+                    });
+                }
+                initial_correction = Some(InitialCorrection {
+                    position: rep.dq,
+                    velocity: rep.dv,
+                });
+            }
+        }
+
         let mut ev = Evaluator::new(m, c);
+        if let Some((d, b)) = &servo_degrees {
+            ev.set_servo(d.clone(), b.clone());
+        }
         // Reference row norms for the vanishing-row test.
         ev.set_row_scale_at(t0, &q, &v);
         let baumgarte = match settings.drift {
@@ -253,6 +312,7 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
             acc_v: vec![],
             last_sample_t: f64::NEG_INFINITY,
             budget: StepBudget::new(t0),
+            servo_degrees,
         };
         me.acc_q = me.q.clone();
         me.acc_v = me.v.clone();
@@ -508,6 +568,16 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
                 ReturnCode::SingularSystem { t, rcond }
             }
             Stop::Formulation(FormulationError::NonFinite) => ReturnCode::NonFinite { t },
+            Stop::Formulation(FormulationError::Unrealizable { rcond }) => {
+                let c = &self.problem.constraints;
+                ReturnCode::UnrealizableProgramme {
+                    t,
+                    rows: c.rows().iter().map(|r| r.name.clone()).collect(),
+                    actuators: c.actuation().map(|a| a.names.clone()).unwrap_or_default(),
+                    reached: true,
+                    rcond,
+                }
+            }
             Stop::NonFinite => ReturnCode::NonFinite { t },
             Stop::Drift { row, residual } => ReturnCode::DriftExceeded {
                 t,
@@ -582,6 +652,9 @@ impl<'a, M: Model, C: Constraints> OdeProblem for MotionOde<'a, M, C> {
         if self.evd.is_none() {
             let mut e = Evaluator::new(&self.problem.model, &self.problem.constraints);
             e.row_scale = self.ev.row_scale.clone();
+            if let Some((d, b)) = &self.servo_degrees {
+                e.set_servo(d.clone(), b.clone());
+            }
             self.evd = Some(e);
         }
         let evd = self.evd.as_mut().expect("created above");

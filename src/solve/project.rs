@@ -42,6 +42,10 @@ pub struct Projector<'a, M: Model, C: Constraints> {
     qtmp: Vec<f64>,
     sel: Vec<usize>,
     nv: usize,
+    model: &'a M,
+    cons: &'a C,
+    /// Relative degrees of a servo programme: project onto its hidden constraints instead.
+    servo: Option<Vec<usize>>,
 }
 
 impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
@@ -58,7 +62,16 @@ impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
             qtmp: vec![0.0; model.nq()],
             sel: Vec::with_capacity(s),
             nv,
+            model,
+            cons,
+            servo: None,
         }
+    }
+
+    /// Project onto the hidden constraints y^(k) = 0, k < r_i, of a servo programme with these
+    /// relative degrees ([`crate::servo::Servo::project`]) instead of the rows and their rates.
+    pub fn set_servo(&mut self, degrees: Vec<usize>) {
+        self.servo = Some(degrees);
     }
 
     /// Residuals at (t, q, v) of the state rows: g for position rows (and dg/dt into `rate`),
@@ -84,6 +97,19 @@ impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
         tol: f64,
         max_iter: usize,
     ) -> ProjectionReport {
+        if let (Some(act), Some(deg)) = (self.cons.actuation(), &self.servo) {
+            let servo = crate::servo::Servo::new(self.model, self.cons, act);
+            let out = servo.project(t, q, v, deg, tol, max_iter);
+            let row = servo.hidden_names(deg).get(out.row).map_or(0, |(i, _)| *i);
+            return ProjectionReport {
+                iterations: out.iterations,
+                dq: out.dq,
+                dv: out.dv,
+                residual: out.residual,
+                row,
+                converged: out.converged,
+            };
+        }
         let mut rep = ProjectionReport {
             converged: true,
             ..Default::default()

@@ -447,6 +447,27 @@ impl PyScene {
             .map_err(scene_error)
     }
 
+    /// `[[actuators]]` of the scene: (name, index into v) of each actuator, in file order; empty
+    /// for the ideal realization (u in the row space of the programme Jacobian).
+    #[getter]
+    fn actuators(&self) -> Vec<(String, usize)> {
+        use progmo::programme::Constraints;
+        match &self.scene.system {
+            SceneSystem::Tree(p) => p
+                .constraints
+                .actuation()
+                .map(|a| {
+                    a.names
+                        .iter()
+                        .cloned()
+                        .zip(a.dofs.iter().copied())
+                        .collect()
+                })
+                .unwrap_or_default(),
+            SceneSystem::Lagrangian(_) => vec![],
+        }
+    }
+
     /// `[checks] not_checked` of the scene: {simulator: reason}.
     #[getter]
     fn expected_not_checked(&self) -> Vec<(String, String)> {

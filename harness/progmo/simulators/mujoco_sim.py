@@ -160,8 +160,9 @@ class MujocoBackend:
         mujoco.mj_forward(m, d)
         return np.asarray(d.efc_force)[: d.nefc][self._equality_rows()].copy()
 
-    def instant_u(self, t, q, v, a, B, gamma, programme=None):
-        """u from MuJoCo's inverse dynamics (mj_inverse, equality off: M a + bias - passive). With
+    def instant_u(self, t, q, v, a, B, gamma, programme=None, actuated=False):
+        """u from MuJoCo's inverse dynamics (mj_inverse, equality off: M a + bias - passive), also
+        with actuators (``actuated``: servo-constraints, u = H tau). With
         closures (``programme``: the programme rows' indices in B) that force is split over MuJoCo's
         own closure Jacobian (efc_J) and our programme rows (least squares), u = B_p^T lambda_p."""
         m, d, cm = self.m, self.d, self.cm

@@ -236,18 +236,21 @@ class PinocchioBackend:
         return np.concatenate([np.asarray(d.contact_force.vector if k == 6 else d.contact_force.linear)
                                for d, (_, k) in zip(self.cdatas, self.closure_rows)])
 
-    def instant_u(self, t, q, v, a, B, gamma, programme=None):
+    def instant_u(self, t, q, v, a, B, gamma, programme=None, actuated=False):
         """Ideal reaction of the programme rows (B a = gamma in our coordinates) by Pinocchio's
         constrained dynamics: J a_sim + gamma_pin = 0 with J = B P^T, gamma_pin = -(gamma + J Pdv).
         With closures (``programme``: the programme rows' indices in B): the force Pinocchio's
         inverse dynamics needs for a (rnea) split over Pinocchio's own closure Jacobian and our
-        programme rows (least squares), u = B_p^T lambda_p."""
+        programme rows (least squares), u = B_p^T lambda_p. With actuators (``actuated``, servo-
+        constraints: u = H tau is not a reaction of the rows): the inverse-dynamics force itself."""
         model, data, cm = self.model, self.data, self.cm
-        if len(self.cmodels):
+        if len(self.cmodels) or actuated:
             qs, vs = cm.q_to_sim(q), cm.v_to_sim(q, v)
             f = pin.rnea(model, data, qs, vs, cm.a_to_sim(q, v, a)) - self.harness(qs, vs) \
                 - self._external(t, qs, vs)
             total = cm.f_from_sim(q, f)
+            if not len(self.cmodels):
+                return total
             Bp = B[programme] if programme is not None else B[:0]
             Jc = self.closure_jacobian(t, q, v)
             lam = np.linalg.lstsq(np.vstack([Jc, Bp]).T, total, rcond=None)[0]
