@@ -337,7 +337,8 @@ fn inertial(src: &Source, c: &Compiler, body: Node, name: &str, parent: &str) ->
             let q = orientation(src, c, n, &what)?;
             let r = UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
                 .to_rotation_matrix();
-            r.matrix() * Matrix3::from_diagonal(&Vector3::from(d)) * r.matrix().transpose()
+            let i = super::rotate_inertia(r.matrix(), &Matrix3::from_diagonal(&Vector3::from(d)));
+            Matrix3::from_row_slice(&i.concat())
         }
         (None, Some(t)) => {
             let i = fixed::<6>(src, n, &format!("{what}.fullinertia"), "fullinertia", t)?;

@@ -14,6 +14,7 @@
 pub mod mjcf;
 pub mod urdf;
 
+use nalgebra::Matrix3;
 use std::path::{Path, PathBuf};
 
 /// Environment variable: search path (`:`-separated directories) for `package://PKG/rest`: the
@@ -87,4 +88,12 @@ pub fn ensure_robot_path_for_tests() {
         });
         std::env::set_var("PROGMO_ROBOT_PATH", share);
     });
+}
+
+/// An inertia tensor given in a rotated frame, in the body frame: R I R^T, made exactly
+/// symmetric (the product is symmetric only up to round-off, and the tree model and the
+/// exporters read the upper triangle).
+pub(crate) fn rotate_inertia(r: &Matrix3<f64>, local: &Matrix3<f64>) -> [[f64; 3]; 3] {
+    let m = r * local * r.transpose();
+    [0, 1, 2].map(|a| [0, 1, 2].map(|b| 0.5 * (m[(a, b)] + m[(b, a)])))
 }

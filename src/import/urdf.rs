@@ -147,8 +147,7 @@ fn link_body(src: &Source, link: Node, name: &str, parent: &str) -> R<BodySpec> 
     let (com, rpy) = origin(src, inertial)?;
     // Inertia about the CoM in the link frame: R I R^T with R the inertial origin's rotation.
     let r = rpy_matrix(rpy);
-    let rot = r * local * r.transpose();
-    let inertia = [0, 1, 2].map(|a| [0, 1, 2].map(|b| rot[(a, b)]));
+    let inertia = super::rotate_inertia(&r, &local);
     Ok(BodySpec::new(name, parent, mass, com, inertia))
 }
 
