@@ -14,7 +14,7 @@ use super::urdf::Robot;
 use crate::scene::{SceneError, Source};
 use crate::tree::{BodySpec, JointSpec, WORLD};
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
-use roxmltree::{Document, Node};
+use roxmltree::Node;
 use std::collections::HashMap;
 
 type R<T> = Result<T, SceneError>;
@@ -399,22 +399,7 @@ struct Ignored {
 
 /// Read an MJCF document (`src` is the file and its text); `locked` joints are welded at q = 0.
 pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
-    let doc = Document::parse(&src.text).map_err(|e| {
-        let p = e.pos();
-        let offset = src
-            .text
-            .lines()
-            .take(p.row as usize - 1)
-            .map(|l| l.len() + 1)
-            .sum::<usize>()
-            + p.col as usize
-            - 1;
-        src.error(
-            offset..offset + 1,
-            "xml",
-            format!("not well-formed XML: {e}"),
-        )
-    })?;
+    let doc = super::parse_xml(src)?;
     let root = doc.root_element();
     if !root.has_tag_name("mujoco") {
         return Err(err(

@@ -97,3 +97,26 @@ pub(crate) fn rotate_inertia(r: &Matrix3<f64>, local: &Matrix3<f64>) -> [[f64; 3
     let m = r * local * r.transpose();
     [0, 1, 2].map(|a| [0, 1, 2].map(|b| 0.5 * (m[(a, b)] + m[(b, a)])))
 }
+
+/// Parse a robot description file as XML; a malformed document is a located error (the parser's
+/// row and column turned into a byte offset of `src`).
+pub(crate) fn parse_xml(
+    src: &crate::scene::Source,
+) -> Result<roxmltree::Document<'_>, crate::scene::SceneError> {
+    roxmltree::Document::parse(&src.text).map_err(|e| {
+        let p = e.pos();
+        let offset = src
+            .text
+            .lines()
+            .take(p.row as usize - 1)
+            .map(|l| l.len() + 1)
+            .sum::<usize>()
+            + p.col as usize
+            - 1;
+        src.error(
+            offset..offset + 1,
+            "xml",
+            format!("not well-formed XML: {e}"),
+        )
+    })
+}

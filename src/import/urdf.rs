@@ -9,7 +9,7 @@
 
 use crate::scene::{SceneError, Source};
 use crate::tree::{BodySpec, JointSpec, WORLD};
-use roxmltree::{Document, Node};
+use roxmltree::Node;
 use std::collections::{HashMap, VecDeque};
 
 /// An imported robot.
@@ -153,22 +153,7 @@ fn link_body(src: &Source, link: Node, name: &str, parent: &str) -> R<BodySpec> 
 
 /// Read a URDF document (`src` is the file and its text).
 pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot> {
-    let doc = Document::parse(&src.text).map_err(|e| {
-        let p = e.pos();
-        let offset = src
-            .text
-            .lines()
-            .take(p.row as usize - 1)
-            .map(|l| l.len() + 1)
-            .sum::<usize>()
-            + p.col as usize
-            - 1;
-        src.error(
-            offset..offset + 1,
-            "xml",
-            format!("not well-formed XML: {e}"),
-        )
-    })?;
+    let doc = super::parse_xml(src)?;
     let robot = doc.root_element();
     if !robot.has_tag_name("robot") {
         return Err(err(
