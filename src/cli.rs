@@ -661,13 +661,26 @@ fn validate(scenes: &[PathBuf], json: bool) -> ExitCode {
                 }
                 if let Some(Ok(an)) = scene.servo_analysis() {
                     say!(
-                        "  servo-constraints: {} realization at t0, relative degrees {:?}, index {} \
-                         (decoupling pivot ratio {:.2e})",
+                        "  servo-constraints: {} realization at t0, derivatives until tau appears \
+                         {:?}, index {} (decoupling pivot ratio {:.2e})",
                         an.realization.name(),
-                        an.degrees,
+                        an.differentiations,
                         an.index,
                         an.rcond
                     );
+                    if let Some(r) = &an.reduction {
+                        let names = |ix: &[usize]| -> Vec<&str> {
+                            ix.iter().map(|&i| rows[i].name.as_str()).collect()
+                        };
+                        say!(
+                            "  rank-deficient decoupling: kept {:?} at degree {:?}, replaced {:?} by \
+                             their tau-free combinations with the kept rows (degrees {:?} more)",
+                            names(&r.kept),
+                            r.kept.iter().map(|&i| an.degrees[i]).collect::<Vec<_>>(),
+                            names(&r.eliminated),
+                            r.eliminated.iter().map(|&i| an.degrees[i]).collect::<Vec<_>>()
+                        );
+                    }
                 }
             }
             Err(e) => {

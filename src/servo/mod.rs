@@ -34,6 +34,17 @@ use num_dual::Dual64;
 /// Highest relative degree searched (index 6).
 pub const MAX_RELATIVE_DEGREE: usize = 5;
 
+/// Highest relative degree of the rows a [`Reduction`] combines (the nesting of dual numbers grows
+/// with both this and [`MAX_REDUCED_DEGREE`]; the cranes need 2).
+pub const MAX_ELIMINATED_DEGREE: usize = 2;
+
+/// Highest number of further derivatives of a combination z_r before tau appears in it.
+pub const MAX_REDUCED_DEGREE: usize = 3;
+
+/// A row whose largest b_k (k <= [`MAX_RELATIVE_DEGREE`]) is below this fraction of the largest
+/// over all rows counts as not reached: its entries are round-off.
+pub const ROUNDOFF: f64 = 1e-12;
+
 /// A row's derivative b_i (at the order it first appears) counts as reaching tau when its largest
 /// entry exceeds this fraction of the largest such entry over all orders k <= MAX_RELATIVE_DEGREE:
 /// terms that cancel analytically (tau entering two coordinates whose sum the row reads) leave
@@ -86,6 +97,33 @@ pub struct Analysis {
     /// |b_i| (largest entry) of each row at the state: the reference of the vanishing-row test
     /// along the motion ([`Servo::decoupling`]).
     pub b_norms: Vec<f64>,
+    /// Set when the rows' decoupling matrix was rank-deficient (e.g. an overhead crane: only the
+    /// hoist reaches the load's acceleration): `degrees` are then those of the effective rows
+    /// (the kept rows and the combinations z_r in the eliminated rows' slots).
+    pub reduction: Option<Reduction>,
+    /// Derivatives of each programme row until tau appears (with a reduction: r_r + the degree
+    /// of z_r for an eliminated row); the index is their maximum + 1.
+    pub differentiations: Vec<usize>,
+}
+
+/// One step of the structure algorithm (Silverman, IEEE Trans. Autom. Control 14 (1969) 270-276;
+/// Isidori 1995, Sec. 5.4): when the decoupling matrix b (rows at their relative degrees r_i) has
+/// rank rho < s, rows I (rho of them, pivot columns J of b) keep their degree and every other row r
+/// is replaced by the tau-free combination
+///   z_r = y_r^(r_r) - c_r^T y_I^(r_I),   c_r^T = b[r, J] b[I, J]^-1,
+/// differentiated further until tau appears. Then y_r^(r_r) = c_r^T y_I^(r_I) + z_r = 0 holds
+/// once the kept rows are solved and z_r, z_r', ... are kept at zero: the hidden constraints are
+/// y_i^(k), k < r_i, of every row plus z_r^(k) below z_r's degree.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Reduction {
+    /// Rows I that keep their relative degree.
+    pub kept: Vec<usize>,
+    /// Pivot columns J (actuators) of b[I, J].
+    pub cols: Vec<usize>,
+    /// Rows replaced by their combinations z_r.
+    pub eliminated: Vec<usize>,
+    /// Relative degree r_i of every original row (the level where b lost rank).
+    pub row_degrees: Vec<usize>,
 }
 
 /// Why the actuators cannot realize the programme.
@@ -105,6 +143,8 @@ pub struct Servo<'a, M: Model, C: Constraints> {
     cons: &'a C,
     act: &'a Actuation,
     has_acc_rows: bool,
+    /// The structure algorithm's step when b was rank-deficient at t0 ([`Reduction`]).
+    red: Option<&'a Reduction>,
 }
 
 type LieFn<M, C, T> =
@@ -125,7 +165,25 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
                 .rows()
                 .iter()
                 .any(|r| r.level == crate::programme::Level::Acceleration),
+            red: None,
         }
+    }
+
+    /// The same servo with the rows of a [`Reduction`] (from [`Analysis::reduction`]): the
+    /// eliminated rows' slots then hold their tau-free combinations z_r.
+    pub fn reduced(mut self, red: Option<&'a Reduction>) -> Self {
+        self.red = red;
+        self
+    }
+
+    /// Is effective row i a combination z_i of the reduction?
+    fn is_z(&self, i: usize) -> bool {
+        self.red.is_some_and(|r| r.eliminated.contains(&i))
+    }
+
+    /// Relative degree of original row i (the level where tau first reaches it).
+    fn row_degree(&self, degrees: &[usize], i: usize) -> usize {
+        self.red.map_or(degrees[i], |r| r.row_degrees[i])
     }
 
     /// Number of rows s and actuators m.
@@ -233,18 +291,57 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         val: &mut [T],
         db: &mut DMatrix<T>,
     ) -> Result<(), linalg::Singular> {
+        self.tau_columns(t, q, v, tau, val, db, |td, qd, vd, taud, o| {
+            self.lie(k, td, qd, vd, taud, o)
+        })
+    }
+
+    /// [`Servo::lie_tau`] of the combinations z_r of the reduction (k <= [`MAX_REDUCED_DEGREE`]);
+    /// the other slots of `val` and `db` are zero.
+    #[allow(clippy::too_many_arguments)]
+    pub fn z_tau<T: Scalar>(
+        &self,
+        k: usize,
+        t: T,
+        q: &[T],
+        v: &[T],
+        tau: &[T],
+        val: &mut [T],
+        db: &mut DMatrix<T>,
+    ) -> Result<(), linalg::Singular> {
+        self.tau_columns(t, q, v, tau, val, db, |td, qd, vd, taud, o| {
+            self.zlie(k, td, qd, vd, taud, o)
+        })
+    }
+
+    /// Value and tau-derivative of `f` (one dual pass per actuator seeded on tau_j).
+    #[allow(clippy::too_many_arguments)]
+    fn tau_columns<T: Scalar>(
+        &self,
+        t: T,
+        q: &[T],
+        v: &[T],
+        tau: &[T],
+        val: &mut [T],
+        db: &mut DMatrix<T>,
+        mut f: impl FnMut(
+            Dual<T>,
+            &[Dual<T>],
+            &[Dual<T>],
+            &[Dual<T>],
+            &mut [Dual<T>],
+        ) -> Result<(), linalg::Singular>,
+    ) -> Result<(), linalg::Singular> {
         let (s, m) = self.dims();
-        let n = v.len();
         let td = Dual::from_re(t);
         let qd: Vec<Dual<T>> = q.iter().map(|&x| Dual::from_re(x)).collect();
         let vd: Vec<Dual<T>> = v.iter().map(|&x| Dual::from_re(x)).collect();
         let mut o = vec![Dual::from_re(T::zero()); s];
-        debug_assert_eq!(qd.len(), n);
         for j in 0..m {
             let taud: Vec<Dual<T>> = (0..m)
                 .map(|l| Dual::new(tau[l], if l == j { T::one() } else { T::zero() }))
                 .collect();
-            self.lie(k, td, &qd, &vd, &taud, &mut o)?;
+            f(td, &qd, &vd, &taud, &mut o)?;
             for i in 0..s {
                 db[(i, j)] = o[i].eps;
                 val[i] = o[i].re;
@@ -253,7 +350,93 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         Ok(())
     }
 
+    /// L^k z of the reduction's combinations at constant tau, k <= [`MAX_REDUCED_DEGREE`].
+    pub fn zlie<T: Scalar>(
+        &self,
+        k: usize,
+        t: T,
+        q: &[T],
+        v: &[T],
+        tau: &[T],
+        out: &mut [T],
+    ) -> Result<(), linalg::Singular> {
+        match k {
+            0 => zlie0(self, t, q, v, tau, out),
+            1 => zlie1(self, t, q, v, tau, out),
+            2 => zlie2(self, t, q, v, tau, out),
+            3 => zlie3(self, t, q, v, tau, out),
+            _ => panic!("reduced degree {k} beyond MAX_REDUCED_DEGREE (checked by the caller)"),
+        }
+    }
+
+    /// The combinations z_r = y_r^(r_r) - c_r^T y_I^(r_I), c_r^T = b[r, J] b[I, J]^-1, at
+    /// (t, q, v) into the eliminated rows' slots of `out` (the others are set to zero). Free of
+    /// tau by construction (its terms cancel), so evaluated at tau = 0.
+    fn zrows<T: Scalar>(
+        &self,
+        t: T,
+        q: &[T],
+        v: &[T],
+        out: &mut [T],
+    ) -> Result<(), linalg::Singular> {
+        let red = self.red.expect("zrows needs a reduction");
+        let (s, m) = self.dims();
+        let zero = vec![T::zero(); m];
+        let mut val = vec![T::zero(); s];
+        let mut b = DMatrix::from_element(s, m, T::zero());
+        let mut vk = vec![T::zero(); s];
+        let mut bk = DMatrix::from_element(s, m, T::zero());
+        let mut ks = red.row_degrees.clone();
+        ks.sort_unstable();
+        ks.dedup();
+        for &k in &ks {
+            self.tau_columns(
+                t,
+                q,
+                v,
+                &zero,
+                &mut vk,
+                &mut bk,
+                |td, qd, vd, taud, o| match k {
+                    0 => lie0(self, td, qd, vd, taud, o),
+                    1 => lie1(self, td, qd, vd, taud, o),
+                    2 => lie2(self, td, qd, vd, taud, o),
+                    _ => panic!("eliminated degree {k} beyond MAX_ELIMINATED_DEGREE"),
+                },
+            )?;
+            for i in (0..s).filter(|&i| red.row_degrees[i] == k) {
+                val[i] = vk[i];
+                for j in 0..m {
+                    b[(i, j)] = bk[(i, j)];
+                }
+            }
+        }
+        // b[I, J]^T c_r = b[r, J]^T
+        let rho = red.kept.len();
+        let mut bij = DMatrix::from_fn(rho, rho, |a, c| b[(red.kept[c], red.cols[a])]);
+        let mut piv = vec![0; rho];
+        linalg::lu_factor(&mut bij, rho, &mut piv, 0.0)?;
+        for x in out.iter_mut() {
+            *x = T::zero();
+        }
+        let mut c = vec![T::zero(); rho];
+        for &r in &red.eliminated {
+            for (a, x) in c.iter_mut().enumerate() {
+                *x = b[(r, red.cols[a])];
+            }
+            linalg::lu_solve(&bij, rho, &piv, &mut c);
+            let mut z = val[r];
+            for (a, &i) in red.kept.iter().enumerate() {
+                z -= c[a] * val[i];
+            }
+            out[r] = z;
+        }
+        Ok(())
+    }
+
     /// Relative degrees, index, realization and the decoupling matrix's conditioning at a state.
+    /// A rank-deficient decoupling matrix gets one step of the structure algorithm
+    /// ([`Reduction`]); the analysis then describes the effective rows.
     pub fn analyse(
         &self,
         t: f64,
@@ -269,42 +452,75 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
             self.lie_tau(k, t, q, v, &tau, &mut val, b)
                 .map_err(|_| Unrealizable::Model)?;
         }
-        let norm = |b: &DMatrix<f64>, i: usize| (0..m).map(|j| b[(i, j)].abs()).fold(0.0, f64::max);
-        let mut degrees = vec![0; s];
+        let degrees = first_degrees(&bk, s, m)?;
+        let b_norms: Vec<f64> = (0..s).map(|i| row_norm(&bk[degrees[i]], i)).collect();
+        let index = degrees.iter().copied().max().unwrap_or(0) + 1;
+        let analysis =
+            |degrees: Vec<usize>, b_norms, rcond, reduction, differentiations| Analysis {
+                degrees,
+                index,
+                realization: self.realization(t, q, v),
+                rcond,
+                b_norms,
+                reduction,
+                differentiations,
+            };
+        let err = match self.decoupling(t, q, v, &degrees, &b_norms, rank_tol) {
+            Ok(d) => return Ok(analysis(degrees.clone(), b_norms, d.rcond, None, degrees)),
+            Err(e) => Unrealizable::Singular { rcond: e.rcond },
+        };
+        // Rank-deficient b: one step of the structure algorithm, if the rows allow it.
+        let b = DMatrix::from_fn(s, m, |i, j| bk[degrees[i]][(i, j)]);
+        let Some(red) = reduce(&b, &degrees, rank_tol) else {
+            return Err(err);
+        };
+        let servo = Servo {
+            red: Some(&red),
+            ..*self
+        };
+        let mut zk = vec![DMatrix::zeros(s, m); MAX_REDUCED_DEGREE + 1];
+        for (k, b) in zk.iter_mut().enumerate() {
+            servo
+                .z_tau(k, t, q, v, &tau, &mut val, b)
+                .map_err(|_| Unrealizable::Model)?;
+        }
+        let mut eff = degrees.clone();
+        let mut norms = b_norms;
         let mut missing = vec![];
-        for i in 0..s {
-            let big = bk.iter().map(|b| norm(b, i)).fold(0.0, f64::max);
-            if !big.is_finite() {
-                return Err(Unrealizable::Model);
-            }
-            match (0..=MAX_RELATIVE_DEGREE)
-                .find(|&k| big > 0.0 && norm(&bk[k], i) > DEGREE_TOL * big)
+        for &r in &red.eliminated {
+            let big = zk.iter().map(|b| row_norm(b, r)).fold(0.0, f64::max);
+            match (0..=MAX_REDUCED_DEGREE)
+                .find(|&k| big > 0.0 && row_norm(&zk[k], r) > DEGREE_TOL * big)
             {
-                Some(k) => degrees[i] = k,
-                None => missing.push(i),
+                Some(k) => (eff[r], norms[r]) = (k, row_norm(&zk[k], r)),
+                None => missing.push(r),
             }
         }
         if !missing.is_empty() {
             return Err(Unrealizable::NotReached { rows: missing });
         }
-        let b_norms: Vec<f64> = (0..s).map(|i| norm(&bk[degrees[i]], i)).collect();
-        let rcond = self
-            .decoupling(t, q, v, &degrees, &b_norms, rank_tol)
-            .map(|d| d.rcond)
+        let d = servo
+            .decoupling(t, q, v, &eff, &norms, rank_tol)
             .map_err(|e| Unrealizable::Singular { rcond: e.rcond })?;
-        let index = degrees.iter().copied().max().unwrap_or(0) + 1;
-        Ok(Analysis {
-            degrees,
-            index,
-            realization: self.realization(t, q, v),
-            rcond,
-            b_norms,
-        })
+        let diffs: Vec<usize> = (0..s)
+            .map(|i| {
+                degrees[i]
+                    + if red.eliminated.contains(&i) {
+                        eff[i]
+                    } else {
+                        0
+                    }
+            })
+            .collect();
+        let mut an = analysis(eff, norms, d.rcond, Some(red), diffs);
+        an.index = an.differentiations.iter().copied().max().unwrap_or(0) + 1;
+        Ok(an)
     }
 
-    /// tau = -b^-1 a at (t, q, v) for the given relative degrees. A row of b whose largest entry
-    /// falls below `rank_tol` times its reference `b_norms` (its t0 value), or an LU pivot ratio
-    /// below `rank_tol`, is singular.
+    /// tau = -b^-1 a at (t, q, v) for the given (effective) relative degrees. A row of b whose
+    /// largest entry falls below `rank_tol` times its reference `b_norms` (its t0 value), or an LU
+    /// pivot ratio below `rank_tol`, is singular.
+    #[allow(clippy::too_many_arguments)]
     pub fn decoupling<T: Scalar>(
         &self,
         t: T,
@@ -321,15 +537,24 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         let mut rhs = vec![T::zero(); s];
         let mut val = vec![T::zero(); s];
         let mut db = DMatrix::from_element(s, m, T::zero());
-        let mut ks: Vec<usize> = degrees.to_vec();
-        ks.sort_unstable();
-        ks.dedup();
-        for &k in &ks {
-            self.lie_tau(k, t, q, v, &zero, &mut val, &mut db)?;
-            for i in (0..s).filter(|&i| degrees[i] == k) {
-                rhs[i] = -val[i];
-                for j in 0..m {
-                    b[(i, j)] = db[(i, j)];
+        for z in [false, true] {
+            let mut ks: Vec<usize> = (0..s)
+                .filter(|&i| self.is_z(i) == z)
+                .map(|i| degrees[i])
+                .collect();
+            ks.sort_unstable();
+            ks.dedup();
+            for &k in &ks {
+                if z {
+                    self.z_tau(k, t, q, v, &zero, &mut val, &mut db)?;
+                } else {
+                    self.lie_tau(k, t, q, v, &zero, &mut val, &mut db)?;
+                }
+                for i in (0..s).filter(|&i| degrees[i] == k && self.is_z(i) == z) {
+                    rhs[i] = -val[i];
+                    for j in 0..m {
+                        b[(i, j)] = db[(i, j)];
+                    }
                 }
             }
         }
@@ -421,7 +646,8 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         }
     }
 
-    /// The hidden constraints y_i^(k), k < r_i (row-major: row by row, k ascending), at tau = 0
+    /// The hidden constraints y_i^(k), k < r_i (row-major: row by row, k ascending; with a
+    /// reduction an eliminated row's z_r^(k), k below its degree, follow its own), at tau = 0
     /// (they do not depend on tau).
     pub fn hidden<T: Scalar>(
         &self,
@@ -433,27 +659,56 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
     ) -> Result<(), linalg::Singular> {
         let (s, m) = self.dims();
         let zero = vec![T::zero(); m];
-        let kmax = degrees.iter().copied().max().unwrap_or(0);
+        let kmax = (0..s)
+            .map(|i| self.row_degree(degrees, i))
+            .max()
+            .unwrap_or(0);
         let mut by_k = vec![vec![T::zero(); s]; kmax];
         for (k, row) in by_k.iter_mut().enumerate() {
             self.lie(k, t, q, v, &zero, row)?;
         }
+        let zmax = (0..s)
+            .filter(|&i| self.is_z(i))
+            .map(|i| degrees[i])
+            .max()
+            .unwrap_or(0);
+        let mut zk = vec![vec![T::zero(); s]; zmax];
+        for (k, row) in zk.iter_mut().enumerate() {
+            self.zlie(k, t, q, v, &zero, row)?;
+        }
         out.clear();
         for i in 0..s {
-            for row in by_k.iter().take(degrees[i]) {
+            for row in by_k.iter().take(self.row_degree(degrees, i)) {
                 out.push(row[i]);
+            }
+            if self.is_z(i) {
+                for row in zk.iter().take(degrees[i]) {
+                    out.push(row[i]);
+                }
             }
         }
         Ok(())
     }
 
-    /// Names of the hidden constraints, in the order of [`Servo::hidden`]: `row`, `row'`, ...,
-    /// then `row (d^k/dt^k)` beyond the second derivative.
+    /// Names of the hidden constraints, in the order of [`Servo::hidden`].
     pub fn hidden_names(&self, degrees: &[usize]) -> Vec<(usize, String)> {
         let mut out = vec![];
         for (i, r) in self.cons.rows().iter().enumerate() {
-            for k in 0..degrees[i] {
+            let ri = self.row_degree(degrees, i);
+            for k in 0..ri {
                 out.push((i, format!("{} (d^{k}/dt^{k}, hidden constraint)", r.name)));
+            }
+            if self.is_z(i) {
+                for k in 0..degrees[i] {
+                    out.push((
+                        i,
+                        format!(
+                            "{} (d^{k}/dt^{k} of z = d^{ri}/dt^{ri} less the kept rows' share, \
+                             hidden constraint)",
+                            r.name
+                        ),
+                    ));
+                }
             }
         }
         out
@@ -603,6 +858,106 @@ lie_level!(lie2, lie1);
 lie_level!(lie3, lie2);
 lie_level!(lie4, lie3);
 lie_level!(lie5, lie4);
+
+fn zlie0<M: Model, C: Constraints, T: Scalar>(
+    x: &Servo<'_, M, C>,
+    t: T,
+    q: &[T],
+    v: &[T],
+    _tau: &[T],
+    out: &mut [T],
+) -> Result<(), linalg::Singular> {
+    x.zrows(t, q, v, out)
+}
+lie_level!(zlie1, zlie0);
+lie_level!(zlie2, zlie1);
+lie_level!(zlie3, zlie2);
+
+/// |b_i|: the largest entry of row i.
+fn row_norm(b: &DMatrix<f64>, i: usize) -> f64 {
+    (0..b.ncols()).map(|j| b[(i, j)].abs()).fold(0.0, f64::max)
+}
+
+/// The relative degree of each row: the first order k whose b_k row exceeds [`DEGREE_TOL`] of the
+/// row's largest over all orders.
+fn first_degrees(bk: &[DMatrix<f64>], s: usize, _m: usize) -> Result<Vec<usize>, Unrealizable> {
+    let mut degrees = vec![0; s];
+    let mut missing = vec![];
+    let bigs: Vec<f64> = (0..s)
+        .map(|i| bk.iter().map(|b| row_norm(b, i)).fold(0.0, f64::max))
+        .collect();
+    let all = bigs.iter().copied().fold(0.0, f64::max);
+    for (i, d) in degrees.iter_mut().enumerate() {
+        let big = bigs[i];
+        if !big.is_finite() {
+            return Err(Unrealizable::Model);
+        }
+        // A row whose every b_k is round-off next to the other rows' is not reached at this state
+        // (e.g. a crane's rope hanging still: its tau gradient vanishes to all orders there).
+        if !(big > ROUNDOFF * all) {
+            missing.push(i);
+            continue;
+        }
+        match (0..bk.len()).find(|&k| row_norm(&bk[k], i) > DEGREE_TOL * big) {
+            Some(k) => *d = k,
+            None => missing.push(i),
+        }
+    }
+    if missing.is_empty() {
+        Ok(degrees)
+    } else {
+        Err(Unrealizable::NotReached { rows: missing })
+    }
+}
+
+/// The structure algorithm's step for a rank-deficient square b ([`Reduction`]): pivots of a
+/// Gaussian elimination with complete pivoting above `rank_tol` of the first give rows I and
+/// columns J. None when b is not square, has full rank or rank zero, or a row to combine has a
+/// degree beyond [`MAX_ELIMINATED_DEGREE`].
+fn reduce(b: &DMatrix<f64>, degrees: &[usize], rank_tol: f64) -> Option<Reduction> {
+    let (s, m) = b.shape();
+    if s != m || degrees.iter().any(|&d| d > MAX_ELIMINATED_DEGREE) {
+        return None;
+    }
+    let mut w = b.clone();
+    let (mut rows, mut cols) = (vec![], vec![]);
+    let mut first = 0.0;
+    loop {
+        let mut best = (0.0f64, 0, 0);
+        for i in (0..s).filter(|i| !rows.contains(i)) {
+            for j in (0..m).filter(|j| !cols.contains(j)) {
+                if w[(i, j)].abs() > best.0 {
+                    best = (w[(i, j)].abs(), i, j);
+                }
+            }
+        }
+        let (p, pi, pj) = best;
+        if rows.is_empty() {
+            first = p;
+        }
+        if !(p > rank_tol * first) || rows.len() == s {
+            break;
+        }
+        for i in (0..s).filter(|i| !rows.contains(i) && *i != pi) {
+            let f = w[(i, pj)] / w[(pi, pj)];
+            for j in 0..m {
+                w[(i, j)] -= f * w[(pi, j)];
+            }
+        }
+        rows.push(pi);
+        cols.push(pj);
+    }
+    if rows.is_empty() || rows.len() == s {
+        return None;
+    }
+    let eliminated = (0..s).filter(|i| !rows.contains(i)).collect();
+    Some(Reduction {
+        kept: rows,
+        cols,
+        eliminated,
+        row_degrees: degrees.to_vec(),
+    })
+}
 
 /// The real parts of a slice (messages and tests).
 pub fn real<T: Scalar>(x: &[T]) -> Vec<f64> {

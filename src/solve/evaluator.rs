@@ -48,6 +48,8 @@ pub struct Evaluator<'a, M: Model, C: Constraints, S: Scalar> {
     servo_degrees: Option<Vec<usize>>,
     /// With actuators: each decoupling row's norm at t0 (reference of the vanishing-row test).
     servo_b_norms: Vec<f64>,
+    /// The structure algorithm's step, when the decoupling matrix was rank-deficient at t0.
+    servo_reduction: Option<crate::servo::Reduction>,
 }
 
 impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
@@ -70,13 +72,20 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
             row_scale: vec![1.0; s],
             servo_degrees: None,
             servo_b_norms: vec![],
+            servo_reduction: None,
         }
     }
 
     /// Solve the servo system with these relative degrees and t0 decoupling row norms
     /// ([`crate::servo::Analysis`]; the constraints carry actuators).
-    pub fn set_servo(&mut self, degrees: Vec<usize>, b_norms: Vec<f64>) {
+    pub fn set_servo(
+        &mut self,
+        degrees: Vec<usize>,
+        b_norms: Vec<f64>,
+        reduction: Option<crate::servo::Reduction>,
+    ) {
         self.servo_degrees = Some(degrees);
+        self.servo_reduction = reduction;
         self.servo_b_norms = b_norms;
     }
 
@@ -189,7 +198,8 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
         q: &[S],
         v: &[S],
     ) -> Result<(), FormulationError> {
-        let servo = crate::servo::Servo::new(self.model, self.cons, act);
+        let servo = crate::servo::Servo::new(self.model, self.cons, act)
+            .reduced(self.servo_reduction.as_ref());
         let dec = servo
             .solve(
                 t,

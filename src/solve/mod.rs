@@ -392,7 +392,9 @@ impl std::fmt::Display for ReturnCode {
             } => write!(
                 f,
                 "the actuators {} do not reach programme row(s) {} at t = {t:.6}: tau appears in \
-                 none of their first {} time derivatives",
+                 none of their first {} time derivatives beyond round-off (a state where the \
+                 actuators' effect on the rows vanishes to every order, e.g. a crane's rope \
+                 hanging still, has no relative degree: start the motion off it)",
                 quoted(actuators),
                 quoted(rows),
                 crate::servo::MAX_RELATIVE_DEGREE + 1

@@ -124,7 +124,7 @@ pub(crate) struct MotionOde<'a, M: Model, C: Constraints> {
     last_sample_t: f64,
     budget: StepBudget,
     /// Relative degrees and t0 decoupling row norms of a servo programme (actuators), else None.
-    servo_degrees: Option<(Vec<usize>, Vec<f64>)>,
+    servo_degrees: Option<(Vec<usize>, Vec<f64>, Option<crate::servo::Reduction>)>,
 }
 
 impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
@@ -164,13 +164,13 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
             Some(act) => {
                 let servo = crate::servo::Servo::new(m, c, act);
                 match servo.analyse(t0, &q, &v, settings.rank_dependent) {
-                    Ok(an) => Some((an.degrees, an.b_norms)),
+                    Ok(an) => Some((an.degrees, an.b_norms, an.reduction)),
                     Err(e) => return Err(super::unrealizable(c, act, t0, e)),
                 }
             }
         };
-        if let Some((d, _)) = &servo_degrees {
-            proj.set_servo(d.clone());
+        if let Some((d, _, r)) = &servo_degrees {
+            proj.set_servo(d.clone(), r.clone());
         }
 
         // Consistency of the initial state (2.5).
@@ -222,8 +222,8 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
         }
 
         // The hidden constraints of a servo programme (y^(k), k < r) must hold at t0 too.
-        if let (Some((d, _)), Some(act)) = (&servo_degrees, c.actuation()) {
-            let servo = crate::servo::Servo::new(m, c, act);
+        if let (Some((d, _, r)), Some(act)) = (&servo_degrees, c.actuation()) {
+            let servo = crate::servo::Servo::new(m, c, act).reduced(r.as_ref());
             let hidden_worst = |q: &[f64], v: &[f64]| -> (f64, usize) {
                 let mut h = vec![];
                 if servo.hidden(t0, q, v, d, &mut h).is_err() {
@@ -262,8 +262,8 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
         }
 
         let mut ev = Evaluator::new(m, c);
-        if let Some((d, b)) = &servo_degrees {
-            ev.set_servo(d.clone(), b.clone());
+        if let Some((d, b, r)) = &servo_degrees {
+            ev.set_servo(d.clone(), b.clone(), r.clone());
         }
         // Reference row norms for the vanishing-row test.
         ev.set_row_scale_at(t0, &q, &v);
@@ -652,8 +652,8 @@ impl<'a, M: Model, C: Constraints> OdeProblem for MotionOde<'a, M, C> {
         if self.evd.is_none() {
             let mut e = Evaluator::new(&self.problem.model, &self.problem.constraints);
             e.row_scale = self.ev.row_scale.clone();
-            if let Some((d, b)) = &self.servo_degrees {
-                e.set_servo(d.clone(), b.clone());
+            if let Some((d, b, r)) = &self.servo_degrees {
+                e.set_servo(d.clone(), b.clone(), r.clone());
             }
             self.evd = Some(e);
         }

@@ -45,7 +45,7 @@ pub struct Projector<'a, M: Model, C: Constraints> {
     model: &'a M,
     cons: &'a C,
     /// Relative degrees of a servo programme: project onto its hidden constraints instead.
-    servo: Option<Vec<usize>>,
+    servo: Option<(Vec<usize>, Option<crate::servo::Reduction>)>,
 }
 
 impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
@@ -70,8 +70,8 @@ impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
 
     /// Project onto the hidden constraints y^(k) = 0, k < r_i, of a servo programme with these
     /// relative degrees ([`crate::servo::Servo::project`]) instead of the rows and their rates.
-    pub fn set_servo(&mut self, degrees: Vec<usize>) {
-        self.servo = Some(degrees);
+    pub fn set_servo(&mut self, degrees: Vec<usize>, reduction: Option<crate::servo::Reduction>) {
+        self.servo = Some((degrees, reduction));
     }
 
     /// Residuals at (t, q, v) of the state rows: g for position rows (and dg/dt into `rate`),
@@ -97,8 +97,8 @@ impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
         tol: f64,
         max_iter: usize,
     ) -> ProjectionReport {
-        if let (Some(act), Some(deg)) = (self.cons.actuation(), &self.servo) {
-            let servo = crate::servo::Servo::new(self.model, self.cons, act);
+        if let (Some(act), Some((deg, red))) = (self.cons.actuation(), &self.servo) {
+            let servo = crate::servo::Servo::new(self.model, self.cons, act).reduced(red.as_ref());
             let out = servo.project(t, q, v, deg, tol, max_iter);
             let row = servo.hidden_names(deg).get(out.row).map_or(0, |(i, _)| *i);
             return ProjectionReport {
