@@ -499,7 +499,8 @@ fn validate_reports_the_servo_realization_and_index() {
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(
         out.contains(
-            "servo-constraints: tangential realization at t0, relative degrees [4], index 5"
+            "servo-constraints: tangential realization at t0, derivatives until tau appears [4], \
+             index 5"
         ),
         "{out}"
     );
@@ -521,4 +522,15 @@ fn validate_reports_the_servo_realization_and_index() {
         .unwrap();
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!(v[0]["servo"].is_null());
+    // A rank-deficient decoupling: validate says which rows were kept and which combined.
+    let o = progmo()
+        .args(["validate", scene("overhead_crane").to_str().unwrap()])
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("derivatives until tau appears [4, 2], index 5")
+            && out.contains("kept [\"p_z\"] at degree [2], replaced [\"p_x\"]"),
+        "{out}"
+    );
 }
