@@ -18,7 +18,7 @@ def test_bench_runs_end_to_end_and_every_output_names_its_rerun_command(tmp_path
     expected = ["workprecision.csv", "residual_double_pendulum.csv", "scipy.csv", "scipy_ratio.csv",
                 "conditioning.csv", "scaling.csv", "workprecision_double_pendulum.png",
                 "scipy_double_pendulum.png", "conditioning.png", "scaling.png", "index.html",
-                "testset.csv", "testset_caraxis.png", "drift.csv", "robot.csv"]
+                "testset.csv", "testset_caraxis.png", "drift.csv", "robot.csv", "servo.csv", "servo_crane.png"]
     for name in expected:
         assert (out / name).stat().st_size > 0, name
     rerun = f"progmo bench --smoke --out {out}"
@@ -362,3 +362,20 @@ def test_bench_robot_part_on_the_page(tmp_path, monkeypatch):
     assert "scipy solve_ivp DOP853 + Pinocchio&#x27;s Python binding" in html or \
         "scipy solve_ivp DOP853 + Pinocchio's Python binding" in html
     assert "pin.buildModelFromUrdf" in html and (tmp_path / "robot.csv").stat().st_size > 0
+
+
+def test_the_servo_part_judges_the_crane_against_its_flat_inverse(tmp_path):
+    # bench/servo.py's closed form must agree with the solver's crane (1e-10: the solve is pinned
+    # to the flat solution by its hidden constraints), and must disagree with the ideal
+    # realization's motion (negative control: the ideal u acts on the swing joint too).
+    from progmo.bench import servo
+    from progmo.bench.common import scene_path
+
+    s = Scene(str(scene_path("overhead_crane")))
+    r = s.solve(output_dt=0.25)
+    q = servo.flat_q(dict(s.parameters), r.t)
+    assert np.max(np.abs(r.q - q)) < 1e-10
+    ideal = Scene(str(servo.ideal_scene_file(tmp_path)))
+    assert ideal.actuators == [] and s.actuators != []
+    ri = ideal.solve(output_dt=0.25)
+    assert np.max(np.abs(ri.q - q)) > 1e-3

@@ -1,4 +1,4 @@
-"""`progmo bench [--quick] [--out DIR] [--only workprecision,scipy,conditioning,scaling,anchor,robot,testset,drift,executors]`
+"""`progmo bench [--quick] [--out DIR] [--only workprecision,scipy,conditioning,scaling,anchor,robot,testset,servo,drift,executors]`
 
 Speed against error: writes CSV, PNG and index.html to DIR (default out/bench) and prints the key
 numbers. The `progmo` binary forwards `progmo bench ...` to `python -m progmo.bench.main ...`.
@@ -33,22 +33,23 @@ import numpy as np
 
 from .. import cliutil
 
-PARTS = ("workprecision", "scipy", "conditioning", "scaling", "anchor", "robot", "testset", "drift", "executors")
+PARTS = ("workprecision", "scipy", "conditioning", "scaling", "anchor", "robot", "testset", "servo", "drift",
+         "executors")
 
 # sweep sizes; --quick is the default a test or a shared 2-core machine can afford
-QUICK: dict[str, Any] = dict(scenes=("double_pendulum", "chain_8"), tols=[1e-4, 1e-6, 1e-8, 1e-10], repeats=3,
+QUICK: dict[str, Any] = dict(servo_tols=[1e-6, 1e-8, 1e-10], scenes=("double_pendulum", "chain_8"), tols=[1e-4, 1e-6, 1e-8, 1e-10], repeats=3,
              scipy_tols=[1e-4, 1e-6, 1e-8, 1e-10], radau_min_tol=1e-8, states=3,
              testset_tols=[1e-4, 1e-6, 1e-8, 1e-10], drift_rounds=3, anchor_rounds=3, anchor_budget=0.02,
              robot=dict(rounds=3, budget_s=0.02, check_states=5, solve_repeats=3, load_repeats=10))
 # full: every bundled scene in the work-precision sweep (scipy only where a hand-written pipeline exists)
-FULL: dict[str, Any] = dict(scenes=("double_pendulum", "chain_8", "example_2_1", "example_2_1_through_rd0", "example_3_1_free",
+FULL: dict[str, Any] = dict(servo_tols=[10.0 ** -k for k in range(4, 12)], scenes=("double_pendulum", "chain_8", "example_2_1", "example_2_1_through_rd0", "example_3_1_free",
                     "heavy_top", "planar_arm_line", "knife_edge", "appell_hamel", "slider_crank"),
             tols=[10.0 ** -k for k in range(4, 13)], repeats=5,
             scipy_tols=[10.0 ** -k for k in range(4, 13)], radau_min_tol=1e-10, states=5,
             testset_tols=[10.0 ** -k for k in range(4, 13)], drift_rounds=7, anchor_rounds=7, anchor_budget=0.05,
             robot=dict(rounds=7, budget_s=0.05, check_states=9, solve_repeats=5, load_repeats=20))
 # --smoke: the smallest end-to-end run (tests): one scene, two tolerances, two chain lengths
-SMOKE: dict[str, Any] = dict(scenes=("double_pendulum",), tols=[1e-5, 1e-8], repeats=1, scipy_tols=[1e-5, 1e-8],
+SMOKE: dict[str, Any] = dict(servo_tols=[1e-6], scenes=("double_pendulum",), tols=[1e-5, 1e-8], repeats=1, scipy_tols=[1e-5, 1e-8],
              radau_min_tol=1e-8, states=2, scaling_ns=[2, 7], conditioning="smoke", testset_tols=[1e-6], drift_rounds=1,
              anchor_ns=[2, 7], anchor_rounds=1, anchor_budget=0.002, sweep_samples=2,
              robot=dict(rounds=1, budget_s=0.002, check_states=3, solve_repeats=1, load_repeats=2))
@@ -348,6 +349,23 @@ def main(argv: list[str] | None = None) -> int:
             for r in ts["rows"]:
                 summary.append(f"testset caraxis {r['method']} rtol {r['rtol']:.0e}: mescd {r['mescd_all']:.2f} "
                                f"(states {r['mescd_states']:.2f}) in {r['cpu_s'] * 1e3:.1f} ms CPU, {r['rhs_evals']} RHS")
+
+    if "servo" in only:
+        from . import servo as sv
+
+        try:
+            res = sv.run(out, prov, cfg["servo_tols"], cfg["repeats"])
+            trs = [[r["realization"], f"{r['rtol']:.0e}", r["code"], f"{r['error']:.1e}", page.num(r["cpu_s"]),
+                    r["rhs_evals"], r["steps"], f"{r['us_per_rhs']:.0f}"] for r in res["rows"]]
+            hdr = ["realization", "rtol = atol", "code", "max |q - q_ref|", "CPU (s)", "RHS", "steps", "us per RHS"]
+            lines = sv.lines(res)
+            summary += lines
+            sections.append(("5b. Servo-constraints: the overhead crane, servo against ideal realization",
+                             page.doc(sv.__doc__) + page.table(hdr, trs) + page.img("servo_crane.png")
+                             + "<p>" + "<br>".join(lines) + "</p><p>Data: <a href='servo.csv'>servo.csv</a>.</p>"))
+        except Exception as e:  # noqa: BLE001 - a part that fails is reported, the rest stands
+            failed.append(f"servo: {e}")
+            sections.append(("5b. Servo-constraints", f"<p>FAILED: {e}</p>"))
 
     if "drift" in only:
         from .._core import drift_cost
