@@ -133,7 +133,7 @@ impl Scene {
             if let Some(x) = &a {
                 internal.stability = Some(if x.max_real < 0.0 {
                     "stable"
-                } else if x.min_max_real > 0.0 || x.max_real > 0.0 {
+                } else if x.max_real > 0.0 {
                     "unstable"
                 } else {
                     "marginal"
