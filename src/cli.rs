@@ -495,6 +495,10 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
     let mut write_errors = sink.into_inner().into_inner().errors();
     let wall = started.elapsed().as_secs_f64();
     let rows = layout.row_names.clone();
+    // Servo scenes: the analysis with the internal dynamics along the motion (two more solves).
+    let servo = scene
+        .servo_report(&settings, true)
+        .and_then(|r| serde_json::to_value(r).ok());
     let summary = SummaryInput {
         scene: &scene.name,
         solution: &solution,
@@ -503,6 +507,7 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
         wall_seconds: wall,
         git_revision: (!GIT_REVISION.is_empty()).then_some(GIT_REVISION),
         command_line,
+        servo: servo.as_ref(),
     };
     write_errors.extend(write_summary_to_path(out.join("summary.json"), &summary).err());
     // --json: the summary's content (and where the files are) on stdout, the line on stderr.
@@ -624,7 +629,7 @@ fn validate(scenes: &[PathBuf], json: bool) -> ExitCode {
                     })).collect::<Vec<_>>(),
                     "initial_correction": corr.map(|c| serde_json::json!({"position": c.position, "velocity": c.velocity})),
                     "set_aside": scene.set_aside.as_ref().map(|s| &s.0),
-                    "servo": scene.servo_analysis().and_then(Result::ok),
+                    "servo": scene.servo_report(&scene.settings, false),
                 }));
             }
             Ok((traj, corr)) => {
@@ -659,7 +664,8 @@ fn validate(scenes: &[PathBuf], json: bool) -> ExitCode {
                 for n in &scene.import_notes {
                     say!("  note: {n}");
                 }
-                if let Some(Ok(an)) = scene.servo_analysis() {
+                if let Some(r) = scene.servo_report(&scene.settings, false) {
+                    let an = &r.analysis;
                     say!(
                         "  servo-constraints: {} realization at t0, derivatives until tau appears \
                          {:?}, index {} (decoupling pivot ratio {:.2e})",
@@ -668,19 +674,20 @@ fn validate(scenes: &[PathBuf], json: bool) -> ExitCode {
                         an.index,
                         an.rcond
                     );
-                    if let Some(r) = &an.reduction {
+                    if let Some(red) = &an.reduction {
                         let names = |ix: &[usize]| -> Vec<&str> {
                             ix.iter().map(|&i| rows[i].name.as_str()).collect()
                         };
                         say!(
                             "  rank-deficient decoupling: kept {:?} at degree {:?}, replaced {:?} by \
                              their tau-free combinations with the kept rows (degrees {:?} more)",
-                            names(&r.kept),
-                            r.kept.iter().map(|&i| an.degrees[i]).collect::<Vec<_>>(),
-                            names(&r.eliminated),
-                            r.eliminated.iter().map(|&i| an.degrees[i]).collect::<Vec<_>>()
+                            names(&red.kept),
+                            red.kept.iter().map(|&i| an.degrees[i]).collect::<Vec<_>>(),
+                            names(&red.eliminated),
+                            red.eliminated.iter().map(|&i| an.degrees[i]).collect::<Vec<_>>()
                         );
                     }
+                    say!("  {}", r.internal_line());
                 }
             }
             Err(e) => {

@@ -97,6 +97,7 @@ fn check<M: Model, C: Constraints>(problem: Problem<M, C>) {
         wall_seconds: 0.0,
         git_revision: None,
         command_line: &[],
+        servo: None,
     })
     .unwrap();
     assert_eq!(v["code_name"], sol.code.name());

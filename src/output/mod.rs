@@ -137,6 +137,13 @@
 //! - `wall_seconds`: wall-clock duration of the run, as measured by the caller.
 //! - `versions`: `{"progmo": crate version, "git_revision": string or null}`.
 //! - `command_line`: array of strings, the arguments to rerun (program first).
+//! - `servo` (only for scenes with `[[actuators]]` whose programme is realizable at t0;
+//!   `progmo solve` writes it, Python's `Solution.write_summary` does not yet): the
+//!   `crate::scene::ServoReport`: `degrees`, `index`, `realization`, `rcond`, `b_norms` at t0 and
+//!   `internal` {`dimension` (2n - sum r_i), `eigenvalues_t0` [{`re`, `im`}], `along` (null, or
+//!   {`samples`, `max_real`, `t_max_real`, `eigenvalues_at_max`, `min_max_real`}), `growth` (null,
+//!   or {`initial_separation`, `final_separation`, `max_separation`, `rate`, `t_end`}),
+//!   `stability` (`"stable"`, `"unstable"`, `"marginal"` or null), `horizon` (s, or null)}.
 
 mod csv_sink;
 #[cfg(test)]

@@ -30,6 +30,8 @@ pub struct SummaryInput<'a> {
     pub git_revision: Option<&'a str>,
     /// Command line to rerun (program first).
     pub command_line: &'a [String],
+    /// With `[[actuators]]`: the servo analysis (`Scene::servo_report`), written as `servo`.
+    pub servo: Option<&'a serde_json::Value>,
 }
 
 #[derive(Serialize)]
@@ -73,6 +75,8 @@ struct SummaryOut<'a> {
     wall_seconds: f64,
     versions: Versions<'a>,
     command_line: &'a [String],
+    #[serde(skip_serializing_if = "Option::is_none")]
+    servo: Option<&'a serde_json::Value>,
 }
 
 /// Largest value; NaN if any is NaN; 0 for none.
@@ -142,6 +146,7 @@ fn build<'a>(input: &SummaryInput<'a>, file: &str) -> Result<SummaryOut<'a>, Out
             git_revision: input.git_revision,
         },
         command_line: input.command_line,
+        servo: input.servo,
     })
 }
 
@@ -250,6 +255,7 @@ mod tests {
             wall_seconds: 0.5,
             git_revision: Some("abc123"),
             command_line: &cmd,
+            servo: None,
         };
         let mut buf = Vec::new();
         write_summary(&mut buf, &input).unwrap();
@@ -301,6 +307,7 @@ mod tests {
             wall_seconds: 0.0,
             git_revision: None,
             command_line: &[],
+            servo: None,
         };
         let v = summary_json(&input).unwrap();
         assert_eq!(v["success"], true);
@@ -335,6 +342,7 @@ mod tests {
             wall_seconds: 0.5,
             git_revision: None,
             command_line: &[],
+            servo: None,
         };
         write_summary_to_path(&path, &input).unwrap();
         let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();

@@ -19,12 +19,14 @@ mod load;
 mod reference;
 pub mod rows;
 pub mod schema;
+mod servo_report;
 pub mod signals;
 pub mod tree_model;
 mod view;
 
 pub use error::{SceneError, Source};
 pub use reference::ReferenceValue;
+pub use servo_report::{ServoReport, LINEARIZATION_SAMPLES, PERTURBATION};
 
 use crate::solve::{self, Problem, SampleSink, Settings, Solution};
 use lagrangian::LagrangianModel;

@@ -31,6 +31,8 @@ use crate::scalar::{re, Dual, Scalar};
 use nalgebra::DMatrix;
 use num_dual::Dual64;
 
+pub mod internal;
+
 /// Highest relative degree searched (index 6).
 pub const MAX_RELATIVE_DEGREE: usize = 5;
 

@@ -265,6 +265,7 @@ impl PySolution {
             wall_seconds: self.wall_seconds,
             git_revision: (!progmo::GIT_REVISION.is_empty()).then_some(progmo::GIT_REVISION),
             command_line: &command_line,
+            servo: None,
         };
         write_summary_to_path(path, &input).map_err(os_error)
     }

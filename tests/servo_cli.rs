@@ -1,0 +1,99 @@
+//! The servo analysis at the two doors that report it (issue 17): `progmo validate` (text and
+//! `--json`) and `progmo solve`'s summary.json (`servo`), on passive_arm (internal dynamics of
+//! dimension 2, stable) and two_car_chain (flat: dimension 0).
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn progmo() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_progmo"))
+}
+
+fn scene(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(format!("references/scenes/{name}.toml"))
+}
+
+#[test]
+fn validate_reports_the_internal_dynamics() {
+    let o = progmo()
+        .args(["validate", scene("passive_arm").to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains(
+            "servo-constraints: orthogonal realization at t0, derivatives until tau appears [2, 2], \
+             index 3"
+        ),
+        "{out}"
+    );
+    // -c/(2I) = -0.05/(2 * 0.02667) = -0.9375 (tests/servo_internal.rs: the closed form).
+    assert!(
+        out.contains("internal dynamics: dimension 2, frozen-time eigenvalues at t0: -0.9375 + "),
+        "{out}"
+    );
+    let o = progmo()
+        .args(["validate", "--json", scene("passive_arm").to_str().unwrap()])
+        .output()
+        .unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let i = &v[0]["servo"]["internal"];
+    assert_eq!(i["dimension"], 2);
+    assert_eq!(i["eigenvalues_t0"].as_array().unwrap().len(), 2);
+    assert!(i["along"].is_null(), "validate does not solve");
+    let o = progmo()
+        .args(["validate", scene("two_car_chain").to_str().unwrap()])
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("internal dynamics: none (dimension 0"),
+        "{out}"
+    );
+}
+
+#[test]
+fn the_summary_holds_the_servo_analysis_along_the_motion() {
+    let out = std::env::temp_dir().join(format!("progmo-servo-cli-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let o = progmo()
+        .args([
+            "solve",
+            scene("passive_arm").to_str().unwrap(),
+            "--no-mcap",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let servo = &s["servo"];
+    assert_eq!(servo["realization"], "orthogonal");
+    assert_eq!(servo["index"], 3);
+    let i = &servo["internal"];
+    assert_eq!(i["dimension"], 2);
+    assert_eq!(i["stability"], "stable");
+    assert!(i["horizon"].is_null());
+    assert_eq!(i["along"]["samples"], 41);
+    assert!(i["along"]["max_real"].as_f64().unwrap() < 0.0);
+    assert!(i["growth"]["rate"].as_f64().unwrap() < 0.0);
+    // Without actuators: no `servo` key.
+    let o = progmo()
+        .args([
+            "solve",
+            scene("double_pendulum").to_str().unwrap(),
+            "--no-mcap",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert!(s.get("servo").is_none());
+    let _ = std::fs::remove_dir_all(&out);
+}
