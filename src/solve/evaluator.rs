@@ -48,6 +48,9 @@ pub struct Evaluator<'a, M: Model, C: Constraints, S: Scalar> {
     servo_degrees: Option<Vec<usize>>,
     /// With actuators: each decoupling row's norm at t0 (reference of the vanishing-row test).
     servo_b_norms: Vec<f64>,
+    /// The constraint jet reads the model's forward passes ([`Model::tree_sweep`]); off, it runs
+    /// its own (the plain computation the tests and the bench compare with).
+    share_sweep: bool,
 }
 
 impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
@@ -70,7 +73,32 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
             row_scale: vec![1.0; s],
             servo_degrees: None,
             servo_b_norms: vec![],
+            share_sweep: true,
         }
+    }
+
+    /// One sweep per state (the default): the mass matrix, the forces and the constraint jet share
+    /// the model's forward kinematics and velocities. `false`: the jet runs its own passes (same
+    /// values; for the tests and the bench that compare the two).
+    pub fn set_shared_sweep(&mut self, on: bool) {
+        self.share_sweep = on;
+    }
+
+    /// The model's workspace (the tests read its pass counts through [`Model::tree_sweep`]).
+    pub fn model_workspace(&mut self) -> &mut M::Workspace<S> {
+        &mut self.mws
+    }
+
+    /// The constraint jet at (t, q, v), after the model's passes at the same state.
+    fn compute_jet(&mut self, t: S, q: &[S], v: &[S]) {
+        let model = self.model;
+        let sweep = if self.share_sweep {
+            model.tree_sweep(&mut self.mws)
+        } else {
+            None
+        };
+        self.jet
+            .compute_with(self.cons, model.segments(), t, q, v, sweep);
     }
 
     /// Solve the servo system with these relative degrees and t0 decoupling row norms
@@ -95,7 +123,7 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
     /// A and the constraint jet at (t, q, v): what projection needs (no forces).
     pub fn prepare_geometry(&mut self, t: S, q: &[S], v: &[S]) {
         self.model.mass_matrix(&mut self.mws, q, &mut self.mass);
-        self.jet.compute(self.cons, self.model.segments(), t, q, v);
+        self.compute_jet(t, q, v);
     }
 
     /// A, F = G + Q and the constraint jet at (t, q, v), without solving.
@@ -103,7 +131,7 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
         self.model.mass_matrix(&mut self.mws, q, &mut self.mass);
         self.model
             .natural_forces(&mut self.mws, t, q, v, &mut self.force, &mut self.qf);
-        self.jet.compute(self.cons, self.model.segments(), t, q, v);
+        self.compute_jet(t, q, v);
     }
 
     /// Solve for dv/dt and the multipliers at (t, q, v). Allocates nothing unless it fails.
@@ -130,7 +158,7 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
         if factored {
             self.model
                 .natural_forces(&mut self.mws, t, q, v, &mut self.force, &mut self.qf);
-            self.jet.compute(self.cons, self.model.segments(), t, q, v);
+            self.compute_jet(t, q, v);
         } else {
             self.prepare(t, q, v);
         }
