@@ -1,14 +1,15 @@
 //! Criterion benchmarks of the solver core on the shared test problems: one right-hand side
 //! (accelerations and multipliers) per formulation (chains up to n = 128 for the articulated-body
-//! formulation), and whole solves.
+//! formulation), the shared sweep against the plain passes (`sweep/`), and whole solves.
 //!
-//! Run: `cargo bench --bench core`.
+//! Run: `cargo bench --bench core` (one group: `cargo bench --bench core -- sweep/`).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use progmo::formulation::{Formulation, RankTolerances};
 use progmo::model::Model;
 use progmo::problems::{chain, hard, particle, pendulum, rigid_body};
 use progmo::programme::Constraints;
+use progmo::scalar::{Dual, Scalar};
 use progmo::solve::{
     solve, solve_into, DriftControl, Evaluator, Problem, Sample, SampleSink, Settings,
 };
@@ -77,6 +78,59 @@ fn rhs(c: &mut Criterion) {
     }
 }
 
+/// One sweep per state (issue 15): the right-hand side with the constraint jet reading the model's
+/// forward passes (`shared`) and with its own passes (`plain`, the computation before the sweep
+/// was shared), on generated chains (a tip-height signal row), over f64 and over dual numbers
+/// (what the implicit integrator differentiates).
+fn sweep(c: &mut Criterion) {
+    for n in [7, 30, 64] {
+        let scene = chain::ChainSpec::uniform(n)
+            .scene()
+            .expect("generated chain loads");
+        progmo::with_problem!(&scene.system, p => {
+            sweep_group::<_, _, f64>(c, &format!("sweep/chain_{n}"), p, Formulation::NullSpace);
+            sweep_group::<_, _, f64>(c, &format!("sweep/chain_{n}"), p, Formulation::ArticulatedBody);
+            if n == 7 {
+                sweep_group::<_, _, Dual<f64>>(c, &format!("sweep/chain_{n}/dual"), p, Formulation::NullSpace);
+            }
+        });
+    }
+}
+
+fn sweep_group<M: Model, C: Constraints, S: Scalar>(
+    c: &mut Criterion,
+    name: &str,
+    p: &Problem<M, C>,
+    f: Formulation,
+) {
+    let mut g = c.benchmark_group(name);
+    let tol = RankTolerances::default();
+    let lift = |x: &[f64], d: f64| -> Vec<S> { x.iter().map(|&y| S::from(y + d)).collect() };
+    let states = [lift(&p.q0, 0.0), lift(&p.q0, 1e-9)];
+    let v = lift(&p.v0, 0.0);
+    for (label, shared) in [("shared", true), ("plain", false)] {
+        let mut ev = Evaluator::<M, C, S>::new(&p.model, &p.constraints);
+        ev.set_shared_sweep(shared);
+        let mut k = 0usize;
+        g.bench_function(BenchmarkId::new(format!("{f:?}"), label), |b| {
+            b.iter(|| {
+                k ^= 1; // a new q at every call, as in a solve
+                ev.evaluate(
+                    f,
+                    &tol,
+                    None,
+                    S::from(0.1),
+                    black_box(&states[k]),
+                    black_box(&v),
+                )
+                .unwrap();
+                black_box(ev.acc[0])
+            })
+        });
+    }
+    g.finish();
+}
+
 fn whole_solves(c: &mut Criterion) {
     let mut g = c.benchmark_group("solve");
     g.sample_size(10);
@@ -131,5 +185,5 @@ fn drift(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, rhs, whole_solves, drift);
+criterion_group!(benches, rhs, sweep, whole_solves, drift);
 criterion_main!(benches);

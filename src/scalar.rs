@@ -11,8 +11,35 @@
 pub use num_dual::{Dual, Dual2, DualNum, DualStruct};
 
 /// A real number or a forward-mode dual number over `f64`.
-pub trait Scalar: DualNum<Primitive = f64> + Copy + Send + Sync + nalgebra::Scalar {}
-impl<T: DualNum<Primitive = f64> + Copy + Send + Sync + nalgebra::Scalar> Scalar for T {}
+pub trait Scalar: DualNum<Primitive = f64> + Copy + Send + Sync + nalgebra::Scalar + BitEq {}
+impl<T: DualNum<Primitive = f64> + Copy + Send + Sync + nalgebra::Scalar + BitEq> Scalar for T {}
+
+/// Equality of every part, bit for bit (`==` on dual numbers compares real parts only): the test
+/// by which a cached computation is reused ([`crate::tree::forward_kinematics`]).
+pub trait BitEq {
+    fn bit_eq(&self, other: &Self) -> bool;
+}
+
+impl BitEq for f64 {
+    #[inline(always)]
+    fn bit_eq(&self, other: &Self) -> bool {
+        self.to_bits() == other.to_bits()
+    }
+}
+
+impl<T: BitEq> BitEq for Dual<T> {
+    #[inline(always)]
+    fn bit_eq(&self, other: &Self) -> bool {
+        self.re.bit_eq(&other.re) && self.eps.bit_eq(&other.eps)
+    }
+}
+
+impl<T: BitEq> BitEq for Dual2<T> {
+    #[inline(always)]
+    fn bit_eq(&self, other: &Self) -> bool {
+        self.re.bit_eq(&other.re) && self.v1.bit_eq(&other.v1) && self.v2.bit_eq(&other.v2)
+    }
+}
 
 /// Lift a constant into any scalar type.
 #[inline(always)]

@@ -11,17 +11,26 @@
 //! 2. `Model::natural_forces` of tree scenes (one inverse-dynamics sweep for G and gravity) against
 //!    `velocity_terms + applied_forces` (two sweeps), and the cached forward kinematics against a
 //!    fresh workspace per call.
+//! 3. One sweep per state (issue 15): the right-hand side whose constraint jet reads the model's
+//!    forward passes (`Evaluator` default, `Model::tree_sweep`) against everything recomputed in
+//!    fresh workspaces (A, F, the jet by its own passes, dv/dt and lambda of an evaluator with the
+//!    sweep not shared), bit for bit, over f64 and dual numbers, on every scene and on random
+//!    chains; and the pass counts that show the sweep is shared (one position and one velocity
+//!    pass per state).
 //! States: the initial state and random states around it (quaternions renormalized). Tolerance:
-//! round-off class, 1e3 eps relative to the largest entry of the compared quantity.
+//! round-off class, 1e3 eps relative to the largest entry of the compared quantity; the shared
+//! sweep: none (the same operations on the same inputs).
 
 mod common;
 
+use progmo::formulation::{Formulation, RankTolerances};
 use progmo::model::Model;
 use progmo::problems::chain::ChainSpec;
 use progmo::programme::jet::Jet;
 use progmo::programme::Constraints;
-use progmo::scalar::Dual;
+use progmo::scalar::{BitEq, Dual, Scalar};
 use progmo::scene::Scene;
+use progmo::solve::{Evaluator, Problem};
 use progmo::with_problem;
 use std::path::PathBuf;
 
@@ -204,4 +213,209 @@ fn natural_forces_and_cached_kinematics_match_the_plain_computation() {
         });
     }
     assert!(compared > 100);
+}
+
+/// Random chains: 3 to 12 links, random masses, length and initial bend.
+fn random_chains(count: usize, seed: u64) -> Vec<Scene> {
+    let mut rng = Rng(seed);
+    (0..count)
+        .map(|_| {
+            let n = 3 + ((rng.next() + 1.0) * 4.99) as usize;
+            let spec = ChainSpec {
+                masses: Some((0..n).map(|_| 0.3 + 0.25 * rng.next()).collect()),
+                length: 0.25 + 0.15 * rng.next(),
+                q0: Some(0.3 * rng.next()),
+                ..ChainSpec::uniform(n)
+            };
+            spec.scene().unwrap()
+        })
+        .collect()
+}
+
+/// First index where the bits differ (every dual part), if any.
+fn differ<S: BitEq>(a: &[S], b: &[S]) -> Option<usize> {
+    assert_eq!(a.len(), b.len());
+    (0..a.len()).find(|&i| !a[i].bit_eq(&b[i]))
+}
+
+/// The sequence of states the shared-sweep tests walk: each random state, then a new q with the
+/// same v (the velocity pass must not be reused on new positions), then a new v with the same q
+/// (the position pass is, the velocity pass is not).
+fn walk(states: &[(f64, Vec<f64>, Vec<f64>)]) -> Vec<(f64, Vec<f64>, Vec<f64>)> {
+    let mut out = vec![];
+    for w in states.windows(2) {
+        let ((t0, q0, v0), (t1, q1, v1)) = (&w[0], &w[1]);
+        out.push((*t0, q0.clone(), v0.clone()));
+        out.push((*t1, q1.clone(), v0.clone()));
+        out.push((*t1, q1.clone(), v1.clone()));
+    }
+    out
+}
+
+/// Everything the shared sweep touches, from the evaluator that shares it, against fresh
+/// workspaces that recompute every pass; returns the number of states compared.
+fn compare_shared_sweep<M: Model, C: Constraints, S: Scalar>(
+    name: &str,
+    p: &Problem<M, C>,
+    states: &[(S, Vec<S>, Vec<S>)],
+) -> usize {
+    let (m, c) = (&p.model, &p.constraints);
+    let (nv, tol) = (m.nv(), RankTolerances::default());
+    let mut compared = 0;
+    for f in [Formulation::NullSpace, Formulation::ArticulatedBody] {
+        // one evaluator for the whole walk: its caches see every change of q and v
+        let mut shared = Evaluator::<M, C, S>::new(m, c);
+        for (t, q, v) in states {
+            let (t, q, v) = (*t, &q[..], &v[..]);
+            let r = shared.evaluate(f, &tol, None, t, q, v);
+            let mut plain = Evaluator::<M, C, S>::new(m, c);
+            plain.set_shared_sweep(false);
+            let r0 = plain.evaluate(f, &tol, None, t, q, v);
+            assert_eq!(r.is_ok(), r0.is_ok(), "{name} {f:?}: {r:?} vs {r0:?}");
+            if r.is_err() {
+                continue;
+            }
+            let mut fresh_jet = Jet::<C, S>::new(c, m.segments(), m.nq(), m.nv());
+            fresh_jet.compute(c, m.segments(), t, q, v);
+            let (mut force, mut scratch) = (vec![S::zero(); nv], vec![S::zero(); nv]);
+            m.natural_forces(&mut m.workspace(), t, q, v, &mut force, &mut scratch);
+            let mut checks = vec![
+                ("F", differ(&shared.force, &force)),
+                ("B", differ(shared.jet.b.as_slice(), fresh_jet.b.as_slice())),
+                ("gamma", differ(&shared.jet.gamma, &fresh_jet.gamma)),
+                ("value", differ(&shared.jet.value, &fresh_jet.value)),
+                ("gdot", differ(&shared.jet.gdot, &fresh_jet.gdot)),
+                ("dv/dt", differ(&shared.acc, &plain.acc)),
+                ("lambda", differ(&shared.lambda, &plain.lambda)),
+            ];
+            if f == Formulation::NullSpace {
+                let mut a = nalgebra::DMatrix::from_element(nv, nv, S::zero());
+                m.mass_matrix(&mut m.workspace(), q, &mut a);
+                checks.push(("A", differ(shared.mass.as_slice(), a.as_slice())));
+            }
+            for (what, d) in checks {
+                assert!(
+                    d.is_none(),
+                    "{name} {f:?}: {what} differs at entry {d:?}, t = {}",
+                    t.re()
+                );
+            }
+            compared += 1;
+        }
+    }
+    compared
+}
+
+#[test]
+fn shared_sweep_equals_the_plain_computation_bit_for_bit() {
+    let mut compared = 0;
+    let mut all = scenes();
+    all.extend(random_chains(6, 0x2545f4914f6cdd1d));
+    for scene in all {
+        with_problem!(&scene.system, p => {
+            let states = walk(&states(&p.model, &p.q0, &p.v0, 6, 11));
+            compared += compare_shared_sweep(&scene.name, p, &states);
+        });
+    }
+    assert!(compared >= 20 * 2 * 18, "compared {compared} states");
+}
+
+/// Over dual numbers (the implicit integrator's Jacobians): the passes are reused only when every
+/// dual part is unchanged; the walk also changes only the derivative parts of q and v (the real
+/// parts, which `==` compares, stay the same).
+#[test]
+fn shared_sweep_equals_the_plain_computation_over_dual_numbers() {
+    type D = Dual<f64>;
+    let mut compared = 0;
+    let mut all = scenes();
+    all.extend(random_chains(3, 0x51a3));
+    for scene in all {
+        with_problem!(&scene.system, p => {
+            let mut rng = Rng(5);
+            let mut seeded = vec![];
+            for (t, q, v) in walk(&states(&p.model, &p.q0, &p.v0, 3, 23)) {
+                for _ in 0..2 {
+                    let td = D::new(t, rng.next());
+                    let qd: Vec<D> = q.iter().map(|&x| D::new(x, rng.next())).collect();
+                    let vd: Vec<D> = v.iter().map(|&x| D::new(x, rng.next())).collect();
+                    seeded.push((td, qd, vd));
+                }
+            }
+            compared += compare_shared_sweep(&scene.name, p, &seeded);
+        });
+    }
+    assert!(compared >= 20 * 2 * 12, "compared {compared} states");
+}
+
+/// The sweep is shared: per new state one position pass and one velocity pass on the model's
+/// workspace, which the forces and the constraint jet reuse; without sharing the jet's passes are
+/// its own (the model's velocity pass is never reused). Over f64 and dual numbers.
+#[test]
+fn one_position_and_one_velocity_pass_per_state() {
+    fn count<S: Scalar>(shared: bool, lift: impl Fn(f64, f64) -> S) -> progmo::tree::SweepPasses {
+        let scene = ChainSpec::uniform(7).scene().unwrap();
+        with_problem!(&scene.system, p => {
+            let mut ev = Evaluator::<_, _, S>::new(&p.model, &p.constraints);
+            ev.set_shared_sweep(shared);
+            let tol = RankTolerances::default();
+            for k in 0..5 {
+                let d = 1e-3 * k as f64;
+                let q: Vec<S> = p.q0.iter().map(|&x| lift(x + d, d)).collect();
+                let v: Vec<S> = p.v0.iter().map(|&x| lift(x + d, 1.0)).collect();
+                ev.evaluate(Formulation::NullSpace, &tol, None, lift(0.1, 0.0), &q, &v).unwrap();
+            }
+            p.model.tree_sweep(ev.model_workspace()).unwrap().data.passes()
+        })
+    }
+    let f = |x: f64, _| x;
+    let d = |x: f64, e: f64| Dual::new(x, e);
+    for (kind, on, off) in [
+        ("f64", count::<f64>(true, f), count::<f64>(false, f)),
+        (
+            "dual",
+            count::<Dual<f64>>(true, d),
+            count::<Dual<f64>>(false, d),
+        ),
+    ] {
+        // positions: the mass matrix; reused by the forces and the jet (2 per state)
+        assert_eq!(
+            (on.positions, on.positions_reused),
+            (5, 10),
+            "{kind}: {on:?}"
+        );
+        assert_eq!(
+            (on.velocities, on.velocities_reused),
+            (5, 5),
+            "{kind}: {on:?}"
+        );
+        assert_eq!(
+            (off.positions, off.positions_reused),
+            (5, 5),
+            "{kind}: {off:?}"
+        );
+        assert_eq!(
+            (off.velocities, off.velocities_reused),
+            (5, 0),
+            "{kind}: {off:?}"
+        );
+    }
+}
+
+/// The reuse test compares every dual part: a q differing only in its derivative part reruns the
+/// position pass (with `==`, which compares real parts, it would not).
+#[test]
+fn a_change_in_a_dual_part_alone_reruns_the_passes() {
+    let scene = ChainSpec::uniform(3).scene().unwrap();
+    with_problem!(&scene.system, p => {
+        let tree = p.model.tree_sweep(&mut p.model.workspace::<f64>()).unwrap().model.clone();
+        let mut data = tree.data::<Dual<f64>>();
+        let q1: Vec<Dual<f64>> = p.q0.iter().map(|&x| Dual::new(x, 1.0)).collect();
+        let q2: Vec<Dual<f64>> = p.q0.iter().map(|&x| Dual::new(x, 2.0)).collect();
+        assert!(q1[0] == q2[0], "== compares real parts");
+        progmo::tree::forward_kinematics(&tree, &mut data, &q1);
+        progmo::tree::forward_kinematics(&tree, &mut data, &q1);
+        progmo::tree::forward_kinematics(&tree, &mut data, &q2);
+        let n = data.passes();
+        assert_eq!((n.positions, n.positions_reused), (2, 1), "{n:?}");
+    });
 }

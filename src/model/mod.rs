@@ -86,6 +86,17 @@ pub trait Model: Send + Sync {
         }
     }
 
+    /// The kinematic tree and the workspace's forward passes, lent to constraints on the same tree
+    /// (body-point signals) so that one sweep per state serves the mass matrix, the forces and the
+    /// constraint jet. `None` (the default) for models that are not trees. The passes are valid
+    /// only where their cache says so ([`crate::tree::forward_kinematics`] checks q itself).
+    fn tree_sweep<'w, S: Scalar>(
+        &'w self,
+        _ws: &'w mut Self::Workspace<S>,
+    ) -> Option<crate::tree::TreeSweep<'w, S>> {
+        None
+    }
+
     /// Whether [`Model::mass_factor`], [`Model::mass_solve`] and [`Model::mass_mul`] work in O(n)
     /// without forming A (kinematic trees: the articulated-body factorization). Default false: the
     /// articulated-body formulation then factors the dense A (Cholesky) instead, and `auto` never

@@ -108,13 +108,27 @@ impl<C: Constraints, S: Scalar> Jet<C, S> {
     /// Compute B, gamma, the row values and dg/dt at (t, q, v): the constraints' own
     /// [`Constraints::jet`] when they have one, else [`Jet::compute_generic`]. Allocates nothing.
     pub fn compute(&mut self, c: &C, segments: &[Segment], t: S, q: &[S], v: &[S]) {
+        self.compute_with(c, segments, t, q, v, None)
+    }
+
+    /// [`Jet::compute`] reading the model's forward passes where the constraints can
+    /// ([`crate::model::Model::tree_sweep`]): the same values, one sweep fewer.
+    pub fn compute_with(
+        &mut self,
+        c: &C,
+        segments: &[Segment],
+        t: S,
+        q: &[S],
+        v: &[S],
+        sweep: Option<crate::tree::TreeSweep<'_, S>>,
+    ) {
         let out = JetRows {
             b: &mut self.b,
             gamma: &mut self.gamma,
             value: &mut self.value,
             gdot: &mut self.gdot,
         };
-        if !c.jet(&mut self.ws0, segments, t, q, v, out) {
+        if !c.jet(&mut self.ws0, segments, t, q, v, out, sweep) {
             self.compute_generic(c, segments, t, q, v);
         }
     }

@@ -89,8 +89,11 @@ pub trait Constraints: Send + Sync {
     /// B, gamma, the row values and dg/dt (the outputs of [`jet::Jet`]) in one go, for constraints
     /// that know their structure better than generic AD passes over [`Constraints::eval`] (scene
     /// rows: chain rule through their slots, [`crate::scene`]). Return `false` (the default) to let
-    /// [`jet::Jet`] run the generic passes. `ws` is a workspace over `S` itself.
-    #[allow(unused_variables)]
+    /// [`jet::Jet`] run the generic passes. `ws` is a workspace over `S` itself. `sweep`: the
+    /// model's tree and forward passes ([`crate::model::Model::tree_sweep`]), which constraints on
+    /// the same tree read instead of running their own (the same values: the passes recompute
+    /// whatever is stale).
+    #[allow(unused_variables, clippy::too_many_arguments)]
     fn jet<S: Scalar>(
         &self,
         ws: &mut Self::Workspace<S>,
@@ -99,6 +102,7 @@ pub trait Constraints: Send + Sync {
         q: &[S],
         v: &[S],
         out: jet::JetRows<'_, S>,
+        sweep: Option<crate::tree::TreeSweep<'_, S>>,
     ) -> bool {
         false
     }

@@ -194,6 +194,7 @@ impl Constraints for ExprConstraints {
         q: &[S],
         v: &[S],
         out: JetRows<'_, S>,
+        sweep: Option<crate::tree::TreeSweep<'_, S>>,
     ) -> bool {
         let l = &self.layout;
         let z = S::zero();
@@ -207,8 +208,14 @@ impl Constraints for ExprConstraints {
                 ws.qdd[iq..iq + 4].copy_from_slice(&r);
             }
         }
-        self.signals
-            .jets(&mut ws.signals, q, v, &self.signal_needs, &mut ws.jets);
+        self.signals.jets(
+            &mut ws.signals,
+            sweep,
+            q,
+            v,
+            &self.signal_needs,
+            &mut ws.jets,
+        );
         // Values at dv/dt = 0.
         ws.slots[l.t] = t;
         ws.slots[l.q..l.q + l.nq].copy_from_slice(q);

@@ -221,7 +221,12 @@ impl Signals {
     }
 
     /// Taylor jets of all signals along the motion with dv/dt = 0 at (q, v), and the Jacobian rows
-    /// of the signals flagged in `needs` (see [`SignalJets`]). One set of forward passes.
+    /// of the signals flagged in `needs` (see [`SignalJets`]). One set of forward passes: those of
+    /// `sweep` (the model's workspace) when it is over this tree, whose position and velocity
+    /// passes are then already done at (q, v) by the mass matrix and the forces and are reused bit
+    /// for bit ([`tree::forward_kinematics`] recomputes them otherwise); only the acceleration pass
+    /// (dv/dt = 0, no gravity) runs here, over the model's accelerations, which the forces have
+    /// consumed.
     ///
     /// Position p: (p, p', p''_0), row J_p; velocity p': (p', p''_0), row J_p; acceleration p'':
     /// p''_0, row J_p. Angular velocity w: (w, w'_0), row J_w; w': w'_0, row J_w. Orientation
@@ -230,17 +235,22 @@ impl Signals {
     pub fn jets<S: Scalar>(
         &self,
         w: &mut SignalWork<S>,
+        sweep: Option<tree::TreeSweep<'_, S>>,
         q: &[S],
         v: &[S],
         needs: &[bool],
         out: &mut SignalJets<S>,
     ) {
-        let (Some(tree), Some(data)) = (&self.tree, &mut w.data) else {
+        let (Some(tree), Some(own)) = (&self.tree, &mut w.data) else {
             return;
         };
         if self.list.is_empty() {
             return;
         }
+        let data = match sweep {
+            Some(s) if std::ptr::eq(s.model, &**tree) => s.data,
+            _ => own,
+        };
         let zero_a = std::mem::take(&mut data.zero_v);
         tree::forward_kinematics(tree, data, q);
         tree::forward_velocity(tree, data, v);

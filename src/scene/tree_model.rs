@@ -192,6 +192,15 @@ impl Model for TreeSceneModel {
         self.add_user_forces(ws, t, q, v);
         f.copy_from_slice(ws.buf.as_slice());
     }
+    fn tree_sweep<'w, S: Scalar>(
+        &'w self,
+        ws: &'w mut TreeWork<S>,
+    ) -> Option<tree::TreeSweep<'w, S>> {
+        Some(tree::TreeSweep {
+            model: &self.tree,
+            data: &mut ws.data,
+        })
+    }
     fn has_mass_factor(&self) -> bool {
         true
     }

@@ -50,6 +50,9 @@ pub struct Evaluator<'a, M: Model, C: Constraints, S: Scalar> {
     servo_b_norms: Vec<f64>,
     /// The structure algorithm's step, when the decoupling matrix was rank-deficient at t0.
     servo_reduction: Option<crate::servo::Reduction>,
+    /// The constraint jet reads the model's forward passes ([`Model::tree_sweep`]); off, it runs
+    /// its own (the plain computation the tests and the bench compare with).
+    share_sweep: bool,
 }
 
 impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
@@ -73,7 +76,32 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
             servo_degrees: None,
             servo_b_norms: vec![],
             servo_reduction: None,
+            share_sweep: true,
         }
+    }
+
+    /// One sweep per state (the default): the mass matrix, the forces and the constraint jet share
+    /// the model's forward kinematics and velocities. `false`: the jet runs its own passes (same
+    /// values; for the tests and the bench that compare the two).
+    pub fn set_shared_sweep(&mut self, on: bool) {
+        self.share_sweep = on;
+    }
+
+    /// The model's workspace (the tests read its pass counts through [`Model::tree_sweep`]).
+    pub fn model_workspace(&mut self) -> &mut M::Workspace<S> {
+        &mut self.mws
+    }
+
+    /// The constraint jet at (t, q, v), after the model's passes at the same state.
+    fn compute_jet(&mut self, t: S, q: &[S], v: &[S]) {
+        let model = self.model;
+        let sweep = if self.share_sweep {
+            model.tree_sweep(&mut self.mws)
+        } else {
+            None
+        };
+        self.jet
+            .compute_with(self.cons, model.segments(), t, q, v, sweep);
     }
 
     /// Solve the servo system with these relative degrees and t0 decoupling row norms
@@ -104,7 +132,7 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
     /// A and the constraint jet at (t, q, v): what projection needs (no forces).
     pub fn prepare_geometry(&mut self, t: S, q: &[S], v: &[S]) {
         self.model.mass_matrix(&mut self.mws, q, &mut self.mass);
-        self.jet.compute(self.cons, self.model.segments(), t, q, v);
+        self.compute_jet(t, q, v);
     }
 
     /// A, F = G + Q and the constraint jet at (t, q, v), without solving.
@@ -112,7 +140,7 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
         self.model.mass_matrix(&mut self.mws, q, &mut self.mass);
         self.model
             .natural_forces(&mut self.mws, t, q, v, &mut self.force, &mut self.qf);
-        self.jet.compute(self.cons, self.model.segments(), t, q, v);
+        self.compute_jet(t, q, v);
     }
 
     /// Solve for dv/dt and the multipliers at (t, q, v). Allocates nothing unless it fails.
@@ -139,7 +167,7 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
         if factored {
             self.model
                 .natural_forces(&mut self.mws, t, q, v, &mut self.force, &mut self.qf);
-            self.jet.compute(self.cons, self.model.segments(), t, q, v);
+            self.compute_jet(t, q, v);
         } else {
             self.prepare(t, q, v);
         }

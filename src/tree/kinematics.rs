@@ -57,10 +57,16 @@ pub struct TreeData<S: Scalar> {
     /// Result of the last [`super::rnea`].
     pub(crate) tau: DVector<S>,
     pub(crate) zero_v: Vec<S>,
-    /// q of the last [`forward_kinematics`] (its results are reused while q is unchanged: the
-    /// mass matrix, the forces and the signals of one evaluation share one pass).
+    /// q of the last [`forward_kinematics`] and v of the last [`forward_velocity`]: their results
+    /// are reused while q (and v) are bit for bit unchanged, for every scalar type (all dual parts
+    /// compared), so the CRBA, the RNEA and the signal jets of one evaluation share one sweep
+    /// (the idea of Pinocchio's `computeAllTerms`). The velocity pass is valid only for the
+    /// positions it ran on (`fv_valid` is cleared whenever the position pass runs).
     fk_q: Vec<S>,
     fk_valid: bool,
+    fv_v: Vec<S>,
+    fv_valid: bool,
+    passes: SweepPasses,
     /// World-frame motion subspace column of each dof (CRBA).
     pub(crate) sw_dof: Vec<Motion<S>>,
     /// The articulated-body factorization's per-link scratch ([`super::aba_factor`]).
@@ -75,10 +81,42 @@ impl<S: Scalar> TreeData<S> {
             zero_v: vec![c(0.0); model.nv()],
             fk_q: vec![c(0.0); model.nq()],
             fk_valid: false,
+            fv_v: vec![c(0.0); model.nv()],
+            fv_valid: false,
+            passes: SweepPasses::default(),
             sw_dof: vec![Motion::zero(); model.nv()],
             aba: vec![super::aba::AbaLink::new(); model.links.len()],
         }
     }
+}
+
+/// How often the position and velocity passes ran on a [`TreeData`] and how often a call found
+/// them already done for its (q, v) and reused them (what the shared-sweep tests count).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SweepPasses {
+    pub positions: u64,
+    pub positions_reused: u64,
+    pub velocities: u64,
+    pub velocities_reused: u64,
+}
+
+impl<S: Scalar> TreeData<S> {
+    /// Pass counts since the workspace was made.
+    pub fn passes(&self) -> SweepPasses {
+        self.passes
+    }
+}
+
+/// A tree and a workspace over it, lent by a model to constraints on the same tree (body-point
+/// signals) so they read the model's forward passes instead of running their own.
+pub struct TreeSweep<'a, S: Scalar> {
+    pub model: &'a Model,
+    pub data: &'a mut TreeData<S>,
+}
+
+/// Same bits in every part (dual parts included); `==` on dual numbers compares real parts only.
+fn same_bits<S: Scalar>(a: &[S], b: &[S]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.bit_eq(y))
 }
 
 pub(crate) fn ensure_vec<S: Scalar>(x: &mut DVector<S>, n: usize) {
@@ -107,15 +145,16 @@ fn check_len(what: &str, got: usize, want: usize) {
 /// post-joint frame: hinge `(u, a x u)`, slide `(0, u)`, ball `(e_k, a x e_k)`, free
 /// `[(0, R^T e_k) | (e_k, 0)]` (world linear velocity, body angular velocity).
 ///
-/// Over `f64`, skipped when q equals the q of the previous call on `data`. (Not over dual numbers:
-/// their `==` compares real parts only.)
+/// Skipped when q has the same bits (every dual part) as the q of the previous call on `data`.
 pub fn forward_kinematics<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &[S]) {
     check_len("q", q.len(), model.nq());
-    let plain = std::any::TypeId::of::<S>() == std::any::TypeId::of::<f64>();
-    if plain && data.fk_valid && data.fk_q.as_slice() == q {
+    if data.fk_valid && same_bits(&data.fk_q, q) {
+        data.passes.positions_reused += 1;
         return;
     }
+    data.passes.positions += 1;
     data.fk_valid = false;
+    data.fv_valid = false;
     let zero = Vector3::<S>::zeros();
     for (i, link) in model.links.iter().enumerate() {
         let place = Xform::<S>::lift(&link.place);
@@ -175,9 +214,15 @@ pub fn forward_kinematics<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &
 
 /// Velocity pass (after [`forward_kinematics`]): `v_i = X_i v_λ + S_i qdot_i` (Featherstone
 /// Table 5.1) and `c_J` = apparent derivative of S times qdot (nonzero only for the free
-/// joint, whose S depends on q: `c_J = (0, -ω x (R^T v_world))`).
+/// joint, whose S depends on q: `c_J = (0, -ω x (R^T v_world))`). Skipped when neither the
+/// positions nor the bits of v changed since the previous call on `data`.
 pub fn forward_velocity<S: Scalar>(model: &Model, data: &mut TreeData<S>, v: &[S]) {
     check_len("v", v.len(), model.nv());
+    if data.fv_valid && same_bits(&data.fv_v, v) {
+        data.passes.velocities_reused += 1;
+        return;
+    }
+    data.passes.velocities += 1;
     for (i, link) in model.links.iter().enumerate() {
         let vp = match link.parent {
             Some(p) => data.links[p].v,
@@ -199,6 +244,8 @@ pub fn forward_velocity<S: Scalar>(model: &Model, data: &mut TreeData<S>, v: &[S
         ld.vj = vj;
         ld.cj = cj;
     }
+    data.fv_v.copy_from_slice(v);
+    data.fv_valid = data.fk_valid;
 }
 
 /// Acceleration pass (after [`forward_velocity`]): `a_i = X_i a_λ + S_i qddot_i + c_J + v_i x v_J`
