@@ -1,17 +1,19 @@
 //! Criterion benchmarks of the solver core on the shared test problems: one right-hand side
 //! (accelerations and multipliers) per formulation (chains up to n = 128 for the articulated-body
-//! formulation), the shared sweep against the plain passes (`sweep/`), and whole solves.
+//! formulation), the shared sweep against the plain passes (`sweep/`), lagrangian scenes' right-hand
+//! side (car axis, slider crank) and whole solves.
 //!
-//! Run: `cargo bench --bench core` (one group: `cargo bench --bench core -- sweep/`).
+//! Run: `cargo bench --bench core` (one group: `cargo bench --bench core -- sweep/`, or `-- lagrangian`).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use progmo::formulation::{Formulation, RankTolerances};
+use progmo::integrate::Method;
 use progmo::model::Model;
 use progmo::problems::{chain, hard, particle, pendulum, rigid_body};
 use progmo::programme::Constraints;
 use progmo::scalar::{Dual, Scalar};
 use progmo::solve::{
-    solve, solve_into, DriftControl, Evaluator, Problem, Sample, SampleSink, Settings,
+    solve, solve_into, DriftControl, Evaluator, Output, Problem, Sample, SampleSink, Settings,
 };
 use std::hint::black_box;
 
@@ -185,5 +187,52 @@ fn drift(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, rhs, sweep, whole_solves, drift);
+/// Lagrangian scenes (expression A, forces, rows): one RHS at the scene's own formulation, and the
+/// car axis solved with DOP853 at rtol = atol = 1e-10 (8.4 digits; the bench's testset part).
+fn lagrangian(c: &mut Criterion) {
+    let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("references");
+    let scenes = [
+        ("caraxis", root.join("testset/caraxis.toml")),
+        ("slider_crank", root.join("scenes/slider_crank.toml")),
+    ];
+    let mut g = c.benchmark_group("rhs_lagrangian");
+    for (name, path) in &scenes {
+        let scene = progmo::scene::Scene::load(path).expect("bundled scene loads");
+        let f = scene.settings.formulation;
+        progmo::with_problem!(&scene.system, p => {
+            let mut ev = Evaluator::new(&p.model, &p.constraints);
+            let tol = RankTolerances::default();
+            let qb: Vec<f64> = p.q0.iter().map(|x| x + 1e-9).collect();
+            let states = [&p.q0, &qb];
+            let mut k = 0usize;
+            g.bench_function(*name, |b| {
+                b.iter(|| {
+                    k ^= 1;
+                    ev.evaluate(f, &tol, None, black_box(0.1), black_box(states[k]), black_box(&p.v0))
+                        .unwrap();
+                    black_box(ev.acc[0])
+                })
+            });
+        });
+    }
+    g.finish();
+    let mut g = c.benchmark_group("solve_lagrangian");
+    g.sample_size(10);
+    let scene = progmo::scene::Scene::load(&scenes[0].1).expect("car axis loads");
+    progmo::with_problem!(&scene.system, p => {
+        let s = Settings {
+            rtol: 1e-10,
+            atol: 1e-10,
+            integrator: Method::Dop853,
+            output: Output::Every(p.t1 - p.t0),
+            ..scene.settings.clone()
+        };
+        g.bench_function("caraxis/dop853/1e-10", |b| {
+            b.iter(|| black_box(solve_into(p, &s, &mut Discard).t_end))
+        });
+    });
+    g.finish();
+}
+
+criterion_group!(benches, rhs, sweep, lagrangian, whole_solves, drift);
 criterion_main!(benches);

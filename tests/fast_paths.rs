@@ -17,6 +17,11 @@
 //!    sweep not shared), bit for bit, over f64 and dual numbers, on every scene and on random
 //!    chains; and the pass counts that show the sweep is shared (one position and one velocity
 //!    pass per state).
+//! 4. Lagrangian scenes: G (dA/dt and dA/dq_k of the mass entries) and -dV/dq from one gradient
+//!    per expression (a reverse sweep over its tape) against one dual pass per direction, and B of
+//!    the rows from one gradient per row against one dual pass per slot; over f64 and duals. Scenes:
+//!    the car axis, both slider cranks and an inline double pendulum with a potential.
+//!
 //! States: the initial state and random states around it (quaternions renormalized). Tolerance:
 //! round-off class, 1e3 eps relative to the largest entry of the compared quantity; the shared
 //! sweep: none (the same operations on the same inputs).
@@ -29,7 +34,7 @@ use progmo::problems::chain::ChainSpec;
 use progmo::programme::jet::Jet;
 use progmo::programme::Constraints;
 use progmo::scalar::{BitEq, Dual, Scalar};
-use progmo::scene::Scene;
+use progmo::scene::{Scene, SceneSystem};
 use progmo::solve::{Evaluator, Problem};
 use progmo::with_problem;
 use std::path::PathBuf;
@@ -59,9 +64,61 @@ fn scenes() -> Vec<Scene> {
     out.push(
         Scene::load(root.join("tests/scenes/all_signals.toml")).unwrap_or_else(|e| panic!("{e}")),
     );
+    for name in ["caraxis.toml", "crank_rigid.toml"] {
+        out.push(
+            Scene::load(root.join("references/testset").join(name))
+                .unwrap_or_else(|e| panic!("{e}")),
+        );
+    }
     for n in [2, 3, 7] {
         out.push(ChainSpec::uniform(n).scene().unwrap());
     }
+    out
+}
+
+/// A double pendulum as a lagrangian scene: full mass matrix in q, a potential, one programme row.
+const PENDULUM: &str = r#"
+name = "lagrangian_pendulum"
+description = "double pendulum, lagrangian form"
+purpose = "tests/fast_paths.rs: mass entries in q and a potential"
+[parameters]
+m1 = 1.3
+m2 = 0.7
+l1 = 0.9
+l2 = 0.6
+g = 9.81
+[model]
+kind = "lagrangian"
+coordinates = ["a", "b"]
+mass_matrix = [
+  ["(m1 + m2)*l1^2",       "m2*l1*l2*cos(a - b)"],
+  ["m2*l1*l2*cos(a - b)",  "m2*l2^2"],
+]
+potential = "-(m1 + m2)*g*l1*cos(a) - m2*g*l2*cos(b)"
+[[programme]]
+name = "sum"
+expr = "a + b - 0.5*sin(2*t)"
+[initial]
+q = { a = 0.3, b = -0.3 }
+v = { a = 0.6, b = 0.4 }
+[time]
+t1 = 1.0
+"#;
+
+fn lagrangian_scenes() -> Vec<Scene> {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let mut out: Vec<Scene> = [
+        "references/testset/caraxis.toml",
+        "references/testset/crank_rigid.toml",
+        "references/scenes/slider_crank.toml",
+    ]
+    .iter()
+    .map(|p| Scene::load(root.join(p)).unwrap_or_else(|e| panic!("{e}")))
+    .collect();
+    out.push(
+        Scene::from_text(&root.join("lagrangian_pendulum.toml"), PENDULUM)
+            .unwrap_or_else(|e| panic!("{e}")),
+    );
     out
 }
 
@@ -418,4 +475,89 @@ fn a_change_in_a_dual_part_alone_reruns_the_passes() {
         let n = data.passes();
         assert_eq!((n.positions, n.positions_reused), (2, 1), "{n:?}");
     });
+}
+
+/// G, Q and B of lagrangian scenes: gradients (the default) against one dual pass per direction.
+#[test]
+fn lagrangian_gradients_match_the_dual_passes() {
+    type D = Dual<f64>;
+    let mut nontrivial_g = 0;
+    for scene in lagrangian_scenes() {
+        let SceneSystem::Lagrangian(p) = &scene.system else {
+            panic!("{}: not lagrangian", scene.name);
+        };
+        let fast = &p.model;
+        let mut plain = p.model.clone();
+        plain.set_plain_passes(true);
+        let fc = &p.constraints;
+        let mut pc = p.constraints.clone();
+        pc.set_plain_passes(true);
+        let nv = fast.nv();
+        let (mut wf, mut wp) = (fast.workspace::<f64>(), plain.workspace::<f64>());
+        let (mut wfd, mut wpd) = (fast.workspace::<D>(), plain.workspace::<D>());
+        let mut jf = Jet::<_, f64>::new(fc, fast.segments(), nv, nv);
+        let mut jp = Jet::<_, f64>::new(&pc, fast.segments(), nv, nv);
+        let mut jfd = Jet::<_, D>::new(fc, fast.segments(), nv, nv);
+        let mut jpd = Jet::<_, D>::new(&pc, fast.segments(), nv, nv);
+        let mut rng = Rng(5);
+        for (t, q, v) in states(fast, &p.q0, &p.v0, 20, 3) {
+            let (mut g1, mut g2) = (vec![0.0; nv], vec![0.0; nv]);
+            fast.velocity_terms(&mut wf, &q, &v, &mut g1);
+            plain.velocity_terms(&mut wp, &q, &v, &mut g2);
+            let (mut f1, mut f2) = (vec![0.0; nv], vec![0.0; nv]);
+            fast.applied_forces(&mut wf, t, &q, &v, &mut f1);
+            plain.applied_forces(&mut wp, t, &q, &v, &mut f2);
+            jf.compute(fc, fast.segments(), t, &q, &v);
+            jp.compute(&pc, fast.segments(), t, &q, &v);
+            for (what, a, b) in [
+                ("G", &g2[..], &g1[..]),
+                ("Q", &f2[..], &f1[..]),
+                ("B", jp.b.as_slice(), jf.b.as_slice()),
+                ("gamma", &jp.gamma[..], &jf.gamma[..]),
+            ] {
+                let err = rel(a, b);
+                assert!(
+                    err <= TOL,
+                    "{}: {what} differs by {err:.2e} at q = {q:?}",
+                    scene.name
+                );
+            }
+            if max_abs(g2.iter().copied()) > 1e-3 {
+                nontrivial_g += 1;
+            }
+            // over duals (the implicit integrator's Jacobian): value and derivative parts
+            let td = D::new(t, rng.next());
+            let qd: Vec<D> = q.iter().map(|&x| D::new(x, rng.next())).collect();
+            let vd: Vec<D> = v.iter().map(|&x| D::new(x, rng.next())).collect();
+            let (mut g1, mut g2) = (vec![D::from(0.0); nv], vec![D::from(0.0); nv]);
+            fast.velocity_terms(&mut wfd, &qd, &vd, &mut g1);
+            plain.velocity_terms(&mut wpd, &qd, &vd, &mut g2);
+            let (mut f1, mut f2) = (vec![D::from(0.0); nv], vec![D::from(0.0); nv]);
+            fast.applied_forces(&mut wfd, td, &qd, &vd, &mut f1);
+            plain.applied_forces(&mut wpd, td, &qd, &vd, &mut f2);
+            jfd.compute(fc, fast.segments(), td, &qd, &vd);
+            jpd.compute(&pc, fast.segments(), td, &qd, &vd);
+            let parts = |x: &[D]| -> (Vec<f64>, Vec<f64>) {
+                (
+                    x.iter().map(|d| d.re).collect(),
+                    x.iter().map(|d| d.eps).collect(),
+                )
+            };
+            for (what, a, b) in [
+                ("G", &g2[..], &g1[..]),
+                ("Q", &f2[..], &f1[..]),
+                ("B", jpd.b.as_slice(), jfd.b.as_slice()),
+            ] {
+                let ((ar, ae), (br, be)) = (parts(a), parts(b));
+                let err = rel(&ar, &br).max(rel(&ae, &be));
+                assert!(
+                    err <= TOL,
+                    "{}: {what} (dual) differs by {err:.2e}",
+                    scene.name
+                );
+            }
+        }
+    }
+    // the mass entries of the cranks and the pendulum depend on q: G is not zero there
+    assert!(nontrivial_g >= 3 * 20, "G nonzero at {nontrivial_g} states");
 }

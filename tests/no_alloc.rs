@@ -69,7 +69,14 @@ fn right_hand_side_does_not_allocate() {
     assert_eq!(allocations_per_evaluation(&pendulum::rod_and_swing()), 0);
     let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("references/scenes");
     // chain_8: the articulated-body factorization on a tree of hinges; heavy_top: on a ball joint
-    for name in ["heavy_top", "double_pendulum", "example_2_1", "chain_8"] {
+    // slider_crank: a lagrangian model (gradients of the mass entries and of the rows)
+    for name in [
+        "heavy_top",
+        "double_pendulum",
+        "example_2_1",
+        "chain_8",
+        "slider_crank",
+    ] {
         let scene = progmo::scene::Scene::load(dir.join(format!("{name}.toml"))).unwrap();
         let n = progmo::with_problem!(&scene.system, p => allocations_per_evaluation(p));
         assert_eq!(n, 0, "{name}");

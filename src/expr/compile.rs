@@ -62,6 +62,9 @@ pub struct Expr {
     max_stack: usize,
     /// Temporaries of repeated subexpressions, kept at the bottom of the stack.
     temps: usize,
+    /// The code as a tape for [`Expr::gradient`] (`tape.rs`), and its result's index.
+    tape: Vec<super::tape::Step>,
+    tape_out: u32,
     /// Sorted, distinct slots read.
     slots: Vec<usize>,
     time_order: u8,
@@ -448,7 +451,7 @@ fn collect_slots(n: &Node, out: &mut Vec<usize>, order: &mut u8) {
 /// `atan2` whose derivative part stays finite on the y axis (`x = 0`), where num-dual's
 /// `atan(y/x)` form divides by zero. The value part is `f64::atan2` exactly.
 #[inline]
-fn atan2<S: Scalar>(y: S, x: S) -> S {
+pub(super) fn atan2<S: Scalar>(y: S, x: S) -> S {
     if S::NDERIV == 0 {
         return y.atan2(x);
     }
@@ -466,7 +469,7 @@ fn atan2<S: Scalar>(y: S, x: S) -> S {
 /// exponent; over duals `powd` = `exp(y ln x)`, with a negative base and an integer-valued
 /// exponent handled as `±(-x)^y` (num-dual cannot tell whether `y` carries derivatives).
 #[inline]
-fn pow<S: Scalar>(x: S, y: S) -> S {
+pub(super) fn pow<S: Scalar>(x: S, y: S) -> S {
     let yr = y.re();
     if S::NDERIV == 0 {
         match pow_kind(yr) {
@@ -492,7 +495,7 @@ fn pow<S: Scalar>(x: S, y: S) -> S {
 /// even in the value; there, for p > 1, the value and first derivatives are exactly 0 (the second
 /// derivatives too when p >= 2; for 1 < p < 2 they are infinite and are returned as 0).
 #[inline]
-fn powf<S: Scalar>(x: S, p: f64) -> S {
+pub(super) fn powf<S: Scalar>(x: S, p: f64) -> S {
     if S::NDERIV > 0 && x.re() == 0.0 && p > 1.0 {
         x * 0.0
     } else {
@@ -501,7 +504,7 @@ fn powf<S: Scalar>(x: S, p: f64) -> S {
 }
 
 #[inline]
-fn abs<S: Scalar>(x: S) -> S {
+pub(super) fn abs<S: Scalar>(x: S) -> S {
     if x.re() < 0.0 {
         -x
     } else {
@@ -543,7 +546,10 @@ impl Expr {
         g.emit(&folded);
         debug_assert_eq!(g.depth, 1);
         let temps = g.temps.len();
+        let (tape, tape_out) = super::tape::build(&g.code);
         Ok(Expr {
+            tape,
+            tape_out,
             code: g.code,
             max_stack: g.max + temps,
             temps,
@@ -680,6 +686,18 @@ impl Expr {
             }
         }
         acc
+    }
+
+    /// The value, and in `grad[s]` its derivative in slot s for every slot it reads (other entries
+    /// untouched), by one reverse sweep (`tape.rs`) instead of one dual pass per slot. `work` is
+    /// scratch; no allocation when its capacity is at least [`Expr::gradient_work`].
+    pub fn gradient<S: Scalar>(&self, slots: &[S], work: &mut Vec<S>, grad: &mut [S]) -> S {
+        super::tape::gradient(&self.tape, self.tape_out, &self.slots, slots, work, grad)
+    }
+
+    /// Scratch capacity [`Expr::gradient`] needs to run without allocating.
+    pub fn gradient_work(&self) -> usize {
+        2 * self.tape.len()
     }
 
     /// Convenience evaluation that allocates its own stack (not for hot loops).

@@ -86,6 +86,7 @@ mod cse;
 mod error;
 mod lexer;
 mod parser;
+mod tape;
 #[cfg(test)]
 mod tests;
 

@@ -1,9 +1,12 @@
 //! Lagrangian scenes: named coordinates, A(q) and forces given as expressions, G derived exactly.
 //!
 //! With T = 1/2 v^T A(q) v (2.1), Lagrange's equations d/dt(dT/dv) - dT/dq = Q give (2.2) with
-//! G = dT/dq - (dA/dt) v, i.e. G_k = 1/2 v^T (dA/dq_k) v - sum_j (dA_kj/dt) v_j. Both terms come from
-//! forward-AD passes over the entry expressions (dA/dt along q' = v in one pass, dA/dq_k in one pass
-//! each); a potential V(q) adds Q = -dV/dq. No symbolic or finite-difference derivatives.
+//! G = dT/dq - (dA/dt) v, i.e. G_k = 1/2 v^T (dA/dq_k) v - sum_j (dA_kj/dt) v_j, with
+//! dA_ij/dt = sum_k dA_ij/dq_k v_k. Both terms come from one gradient of each non-constant entry
+//! (one reverse sweep over its tape, [`Expr::gradient`]); a potential V(q) adds Q = -dV/dq, one
+//! gradient too. The plain computation (one dual pass for dA/dt, one per q_k for dA/dq_k and
+//! -dV/dq_k; [`LagrangianModel::set_plain_passes`]) stays for the tests to compare. No symbolic or
+//! finite-difference derivatives.
 
 use super::layout::Layout;
 use crate::expr::Expr;
@@ -22,6 +25,9 @@ pub struct LagrangianModel {
     potential: Option<Expr>,
     forces: Vec<(usize, Expr)>,
     max_stack: usize,
+    max_work: usize,
+    /// Dual passes per direction instead of gradients (the plain computation, for tests).
+    plain: bool,
 }
 
 /// Scratch of a [`LagrangianModel`] evaluation.
@@ -30,6 +36,8 @@ pub struct LagrangianWork<S: Scalar> {
     stack: Vec<S>,
     dslots: Vec<Dual<S>>,
     dstack: Vec<Dual<S>>,
+    grad: Vec<S>,
+    work: Vec<S>,
 }
 
 impl LagrangianModel {
@@ -50,6 +58,12 @@ impl LagrangianModel {
             .chain(forces.iter().map(|f| f.1.max_stack()))
             .max()
             .unwrap_or(1);
+        let max_work = mass
+            .iter()
+            .map(|m| m.2.gradient_work())
+            .chain(potential.iter().map(|e| e.gradient_work()))
+            .max()
+            .unwrap_or(0);
         LagrangianModel {
             names,
             segments: [Segment::Euclidean { q: 0, v: 0, len: n }],
@@ -58,7 +72,15 @@ impl LagrangianModel {
             potential,
             forces,
             max_stack,
+            max_work,
+            plain: false,
         }
+    }
+
+    /// G and -dV/dq by one dual pass per direction (true) or one gradient per expression (false,
+    /// the default); the tests compare the two.
+    pub fn set_plain_passes(&mut self, plain: bool) {
+        self.plain = plain;
     }
 
     fn fill<S: Scalar>(&self, slots: &mut [S], t: S, q: &[S], v: &[S]) {
@@ -79,6 +101,8 @@ impl Model for LagrangianModel {
             stack: Vec::with_capacity(self.max_stack),
             dslots: vec![Dual::from_re(S::zero()); n],
             dstack: Vec::with_capacity(self.max_stack),
+            grad: vec![S::zero(); n],
+            work: Vec::with_capacity(self.max_work),
         }
     }
     fn nq(&self) -> usize {
@@ -113,6 +137,30 @@ impl Model for LagrangianModel {
         let l = &self.layout;
         for x in g.iter_mut() {
             *x = S::zero();
+        }
+        if !self.plain {
+            ws.slots[l.q..l.q + n].copy_from_slice(q);
+            for (i, j, e) in &self.mass {
+                if e.slots().is_empty() {
+                    continue;
+                }
+                e.gradient(&ws.slots, &mut ws.work, &mut ws.grad);
+                let (i, j) = (*i, *j);
+                let w = if i == j { 0.5 } else { 1.0 };
+                let vv = v[i] * v[j] * w;
+                let mut ad = S::zero();
+                for &s in e.slots() {
+                    let k = s - l.q;
+                    let d = ws.grad[s];
+                    ad += d * v[k];
+                    g[k] += d * vv;
+                }
+                g[i] -= ad * v[j];
+                if i != j {
+                    g[j] -= ad * v[i];
+                }
+            }
+            return;
         }
         for k in 0..ws.dslots.len() {
             ws.dslots[k] = Dual::from_re(S::zero());
@@ -165,7 +213,15 @@ impl Model for LagrangianModel {
             f[*i] += e.eval(&slots, &mut ws.stack);
         }
         ws.slots = slots;
-        if let Some(pot) = &self.potential {
+        if let (Some(pot), false) = (&self.potential, self.plain) {
+            let l = &self.layout;
+            pot.gradient(&ws.slots, &mut ws.work, &mut ws.grad);
+            for &s in pot.slots() {
+                if s >= l.q && s < l.q + q.len() {
+                    f[s - l.q] -= ws.grad[s];
+                }
+            }
+        } else if let Some(pot) = &self.potential {
             let l = &self.layout;
             for k in 0..ws.dslots.len() {
                 ws.dslots[k] = Dual::from_re(S::zero());

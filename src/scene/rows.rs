@@ -14,7 +14,9 @@
 //!   expressions of that level;
 //! - B_i = d(d^m E_i/dt^m)/d(dv/dt) = sum over the slots s of level L that E_i reads of
 //!   dE_i/ds * J_s, with J_s = N(q) rows for q, unit rows for v and dv/dt, the tree's point
-//!   Jacobian rows for signals; one `Dual` pass per such slot gives dE_i/ds.
+//!   Jacobian rows for signals; one gradient of E_i (a reverse sweep over its tape,
+//!   [`Expr::gradient`]) gives every dE_i/ds (the plain computation, one `Dual` pass per slot, stays
+//!   for the tests: [`ExprConstraints::set_plain_passes`]).
 
 use super::layout::Layout;
 use super::signals::{SignalJets, SignalWork, Signals};
@@ -35,6 +37,11 @@ pub struct ExprConstraints {
     max_stack: usize,
     /// Slots that enter B (read by a row of the slot's own level), each with those rows.
     seeds: Vec<(usize, Vec<usize>)>,
+    /// The same by row: rows that have such slots, each with them.
+    row_seeds: Vec<(usize, Vec<usize>)>,
+    max_work: usize,
+    /// B by one dual pass per slot (the plain computation, for tests) instead of gradients.
+    plain: bool,
     /// Signals whose Jacobian row enters B.
     signal_needs: Vec<bool>,
     /// Rows per level: position, velocity, acceleration.
@@ -53,6 +60,8 @@ pub struct RowsWork<S: Scalar> {
     slots2: Vec<Dual2<S>>,
     stack2: Vec<Dual2<S>>,
     jets: SignalJets<S>,
+    grad: Vec<S>,
+    work: Vec<S>,
     qd: Vec<S>,
     qdd: Vec<S>,
 }
@@ -85,10 +94,15 @@ impl ExprConstraints {
         };
         let mut seeds: Vec<(usize, Vec<usize>)> = vec![];
         let mut signal_needs = vec![false; signals.len()];
+        let mut row_seeds: Vec<(usize, Vec<usize>)> = vec![];
         for (i, (sp, e)) in specs.iter().zip(&exprs).enumerate() {
             for &slot in e.slots() {
                 if slot_level(slot) != Some(sp.level) {
                     continue;
+                }
+                match row_seeds.last_mut() {
+                    Some((r, slots)) if *r == i => slots.push(slot),
+                    _ => row_seeds.push((i, vec![slot])),
                 }
                 if slot >= layout.signals {
                     signal_needs[slot - layout.signals] = true;
@@ -99,6 +113,7 @@ impl ExprConstraints {
                 }
             }
         }
+        let max_work = exprs.iter().map(|e| e.gradient_work()).max().unwrap_or(0);
         ExprConstraints {
             specs,
             exprs,
@@ -106,10 +121,19 @@ impl ExprConstraints {
             signals,
             max_stack,
             seeds,
+            row_seeds,
+            max_work,
+            plain: false,
             signal_needs,
             by_level,
             actuation: None,
         }
+    }
+
+    /// B by one dual pass per slot (true) or one gradient per row (false, the default); the tests
+    /// compare the two.
+    pub fn set_plain_passes(&mut self, plain: bool) {
+        self.plain = plain;
     }
 
     /// Realize the programme by these actuators ([`crate::servo`]).
@@ -156,6 +180,8 @@ impl Constraints for ExprConstraints {
             slots2: vec![Dual2::from_re(S::zero()); n],
             stack2: Vec::with_capacity(self.max_stack),
             jets: SignalJets::new(self.signals.len(), self.layout.nv),
+            grad: vec![S::zero(); n],
+            work: Vec::with_capacity(self.max_work),
             qd: vec![S::zero(); self.layout.nq],
             qdd: vec![S::zero(); self.layout.nq],
         }
@@ -266,8 +292,20 @@ impl Constraints for ExprConstraints {
             out.value[i] = h;
             out.gamma[i] = -h;
         }
-        // B: one Dual pass per slot that enters it.
         out.b.fill(z);
+        if !self.plain {
+            // B: one gradient per row.
+            for (i, slots) in &self.row_seeds {
+                let i = *i;
+                self.exprs[i].gradient(&ws.slots, &mut ws.work, &mut ws.grad);
+                for &slot in slots {
+                    let d = ws.grad[slot];
+                    add_slot(l, segments, q, &ws.jets, slot, d, out.b, i);
+                }
+            }
+            return true;
+        }
+        // B: one Dual pass per slot that enters it.
         for x in ws.slots1.iter_mut().zip(&ws.slots) {
             *x.0 = Dual::from_re(*x.1);
         }
@@ -276,22 +314,37 @@ impl Constraints for ExprConstraints {
             ws.slots1[slot].eps = S::one();
             for &i in rows {
                 let d = self.exprs[i].eval(&ws.slots1, &mut ws.stack1).eps;
-                if slot >= l.signals {
-                    let k = slot - l.signals;
-                    for j in 0..l.nv {
-                        out.b[(i, j)] += d * ws.jets.jac[(k, j)];
-                    }
-                } else if slot >= l.a {
-                    out.b[(i, slot - l.a)] += d;
-                } else if slot >= l.v {
-                    out.b[(i, slot - l.v)] += d;
-                } else {
-                    add_n_row(segments, q, slot - l.q, d, out.b, i);
-                }
+                add_slot(l, segments, q, &ws.jets, slot, d, out.b, i);
             }
             ws.slots1[slot].eps = z;
         }
         true
+    }
+}
+
+/// b[i, :] += d * J_slot: a signal's Jacobian row, a unit row (v, dv/dt) or a row of N(q).
+#[allow(clippy::too_many_arguments)]
+fn add_slot<S: Scalar>(
+    l: &Layout,
+    segments: &[Segment],
+    q: &[S],
+    jets: &SignalJets<S>,
+    slot: usize,
+    d: S,
+    b: &mut DMatrix<S>,
+    i: usize,
+) {
+    if slot >= l.signals {
+        let k = slot - l.signals;
+        for j in 0..l.nv {
+            b[(i, j)] += d * jets.jac[(k, j)];
+        }
+    } else if slot >= l.a {
+        b[(i, slot - l.a)] += d;
+    } else if slot >= l.v {
+        b[(i, slot - l.v)] += d;
+    } else {
+        add_n_row(segments, q, slot - l.q, d, b, i);
     }
 }
 
