@@ -568,3 +568,73 @@ fn the_overhead_crane_converges_at_rk4_order_without_projection() {
         );
     }
 }
+
+// rotary_crane (references/scenes): the load's path in polar form R = Rc + D (1 - cos w t),
+// psi = Psi (1 - cos w t), z = -L0 + H (1 - cos w t); flat inverse as in the scene's purpose.
+
+/// The rotary crane's flat inverse at t: (phi, r, rope length - L0, hoist force), the path's
+/// acceleration by second-order dual numbers through its closed form.
+fn rotary_flat(s: &Scene, t: f64) -> [f64; 4] {
+    use num_dual::{Dual2_64, DualNum};
+    let p = |n| param(s, n);
+    let (rc, psi, d, h, w, g, l0, ml) = (
+        p("Rc"),
+        p("Psi"),
+        p("D"),
+        p("H"),
+        p("w"),
+        p("g"),
+        p("L0"),
+        p("mL"),
+    );
+    let tt = Dual2_64::new(t, 1.0, 0.0);
+    let c = -(tt * w).cos() + 1.0;
+    let (r, ang) = (c * d + rc, c * psi);
+    let pos = [r * ang.cos(), r * ang.sin(), c * h - l0];
+    let dir = [-pos[0].v2, -pos[1].v2, -g - pos[2].v2];
+    let n = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
+    let e = [dir[0] / n, dir[1] / n, dir[2] / n];
+    let rho = pos[2].re / e[2];
+    let (sx, sy) = (pos[0].re - rho * e[0], pos[1].re - rho * e[1]);
+    [sy.atan2(sx), sx.hypot(sy), rho - l0, -ml * n]
+}
+
+#[test]
+fn the_rotary_crane_combines_two_rows_and_matches_its_flat_inverse() {
+    let path = root().join("references/scenes/rotary_crane.toml");
+    let s = Scene::from_text(&path, &std::fs::read_to_string(&path).unwrap())
+        .unwrap_or_else(|e| panic!("{e}"));
+    let an = s.servo_analysis().expect("actuated").expect("realizable");
+    let red = an.reduction.as_ref().expect("rank-1 decoupling");
+    assert_eq!(
+        (red.kept.clone(), red.eliminated.clone()),
+        (vec![2], vec![0, 1])
+    );
+    assert_eq!(an.differentiations, vec![4, 4, 2]);
+    assert_eq!(an.index, 5);
+    let sol = s.solve(&s.settings);
+    assert!(sol.code.is_success(), "{}", sol.code);
+    let tr = &sol.trajectory;
+    let names = s.v_names();
+    let ix = |n: &str| names.iter().position(|x| x == n).unwrap();
+    let (phi, r, l) = (ix("phi"), ix("r"), ix("l"));
+    let (mut eq, mut eu) = (0.0f64, 0.0f64);
+    for i in 0..tr.len() {
+        let f = rotary_flat(&s, tr.t[i]);
+        let q = tr.q_at(i);
+        eq = eq
+            .max((q[phi] - f[0]).abs())
+            .max((q[r] - f[1]).abs())
+            .max((q[l] - f[2]).abs());
+        let u = tr.u_at(i);
+        eu = eu
+            .max((u[l] - f[3]).abs())
+            .max(u[ix("alpha")].abs())
+            .max(u[ix("beta")].abs());
+    }
+    // Integrated-trajectory class in units of rtol (1e-10); the swing joints carry no force.
+    let rtol = s.settings.rtol;
+    eprintln!("rotary_crane vs flat inverse: q {eq:.2e}, hoist force {eu:.2e} (rtol {rtol:.0e})");
+    assert!(eq < 20.0 * rtol, "q error {eq:.2e}");
+    assert!(eu < 200.0 * rtol, "force error {eu:.2e}");
+}
