@@ -446,6 +446,16 @@ impl DenseOutput for PolyDense<'_> {
     }
 }
 
+/// The dense output of a step whose problem declared it unneeded ([`OdeProblem::needs_dense`]):
+/// NaN, so a misuse shows as a non-finite sample rather than a plausible wrong one.
+struct NoDense;
+
+impl DenseOutput for NoDense {
+    fn eval(&self, _t: f64, out: &mut [f64]) {
+        out.fill(f64::NAN);
+    }
+}
+
 /// Workspace of the explicit methods.
 pub(crate) struct ErkWork {
     n: usize,
@@ -773,17 +783,23 @@ impl ErkWork {
                 hnew = ctl.accepted(err, hs, ctl.safe, opts.h_max, last_rejected);
                 last_rejected = false;
             }
-            // Accepted.
-            if let Err(error) = self.prepare_dense(kind, problem, t, y, hs, stats) {
-                // As for a failed stage: shrink while the step can.
-                stats.rejected += 1;
-                h = hs * 0.25;
-                last_rejected = true;
-                if !adaptive || h < h_min(opts, t) {
-                    return Outcome::Problem { t, error };
+            // Accepted. Without dense output this step, the stage f(t + h, y_new) waits until the
+            // problem has seen (and perhaps projected) y_new: it is then f at the state the next
+            // step starts from, the same value FSAL would give when nothing changed.
+            let want_dense = problem.needs_dense(t, t + hs);
+            if want_dense {
+                if let Err(error) = self.prepare_dense(kind, problem, t, y, hs, stats) {
+                    // As for a failed stage: shrink while the step can.
+                    stats.rejected += 1;
+                    h = hs * 0.25;
+                    last_rejected = true;
+                    if !adaptive || h < h_min(opts, t) {
+                        return Outcome::Problem { t, error };
+                    }
+                    continue;
                 }
-                continue;
             }
+            let t_fsal = t + hs;
             y.copy_from_slice(&self.ynew);
             let tnew = if last {
                 t1
@@ -794,18 +810,31 @@ impl ErkWork {
             };
             stats.steps += 1;
             ifixed += 1;
-            let dense = PolyDense {
-                t0: t,
-                h: hs,
-                n,
-                r: &self.rcont[..kind.rcont_terms() * n],
+            let acc = if want_dense {
+                let dense = PolyDense {
+                    t0: t,
+                    h: hs,
+                    n,
+                    r: &self.rcont[..kind.rcont_terms() * n],
+                };
+                problem.accepted(t, tnew, y, &dense)
+            } else {
+                problem.accepted(t, tnew, y, &NoDense)
             };
-            let acc = problem.accepted(t, tnew, y, &dense);
             t = tnew;
+            // Dormand-Prince 5(4) has its FSAL stage from the error estimate already.
+            let fsal_ready = want_dense || kind == Kind::Dopri5;
             match acc {
                 Err(error) => return Outcome::Problem { t, error },
-                Ok(Accept::Unchanged) => {
+                Ok(Accept::Unchanged) if fsal_ready => {
                     self.k.copy_within(fs * n..(fs + 1) * n, 0);
+                }
+                Ok(Accept::Unchanged) => {
+                    // The deferred FSAL stage, at the abscissa t + h of the method.
+                    stats.rhs_evals += 1;
+                    if let Err(error) = problem.rhs(t_fsal, y, &mut self.k[..n]) {
+                        return Outcome::Problem { t, error };
+                    }
                 }
                 Ok(Accept::Changed) => {
                     stats.rhs_evals += 1;

@@ -152,6 +152,14 @@ pub trait OdeProblem {
         }
     }
 
+    /// Whether `accepted` of the step from t0 to t1 will evaluate the dense output. The explicit
+    /// methods skip its extra stages (DOP853: 3 per step) and, when the problem may change `y`,
+    /// defer the FSAL stage until after `accepted` when it will not. A problem that answers false
+    /// must not call `DenseOutput::eval` for that step (it would read NaN).
+    fn needs_dense(&self, _t0: f64, _t1: f64) -> bool {
+        true
+    }
+
     /// Called after every accepted step from t0 to t1 with the new value `y`. `dense` interpolates
     /// the step. The problem may change `y` (return [`Accept::Changed`]) or stop the run (`Err`).
     fn accepted(

@@ -74,6 +74,8 @@ struct Prob {
     /// Evaluate the dense output at t0 + theta (t1 - t0) of every step.
     probe: Option<f64>,
     probes: Vec<(f64, Vec<f64>)>,
+    /// What `needs_dense` answers.
+    dense: bool,
 }
 
 impl Prob {
@@ -88,6 +90,7 @@ impl Prob {
             log: Vec::new(),
             probe: None,
             probes: Vec::new(),
+            dense: true,
         }
     }
 }
@@ -160,6 +163,9 @@ impl OdeProblem for Prob {
             }
         }
         Ok(())
+    }
+    fn needs_dense(&self, _t0: f64, _t1: f64) -> bool {
+        self.dense
     }
     fn accepted(
         &mut self,
@@ -568,6 +574,53 @@ fn accepted_hook_projection_keeps_controller() {
             _ => {}
         }
     }
+}
+
+/// A problem that needs no dense output gets the same steps and the same y bit for bit, with fewer
+/// evaluations of f: DOP853 skips its 3 dense stages per accepted step, and (DOP853, RK4) the FSAL
+/// stage waits until after `accepted`, so a projected step end costs one f, not two. Dopri5's FSAL
+/// stage belongs to its error estimate: unchanged. Negative control: the dense output of such a step
+/// reads NaN, never a stale interpolant.
+#[test]
+fn dense_output_skipped_when_unneeded() {
+    let methods = [Method::Rk4 { h: 0.05 }, Method::Dopri5, Method::Dop853];
+    for m in methods {
+        for project in [false, true] {
+            let mut with = Prob::new(Eq::Harmonic);
+            with.project = project;
+            let (out, st_with, y_with) = run(m, opts(1e-9), &mut with, 0.0, 10.0);
+            assert_eq!(out, Outcome::Finished);
+            let mut without = Prob::new(Eq::Harmonic);
+            without.project = project;
+            without.dense = false;
+            let (out, st, y) = run(m, opts(1e-9), &mut without, 0.0, 10.0);
+            assert_eq!(out, Outcome::Finished);
+            assert_eq!(
+                without.log, with.log,
+                "{m:?} projected {project}: other steps"
+            );
+            assert_eq!(y, y_with, "{m:?} projected {project}: other end value");
+            assert_eq!((st.steps, st.rejected), (st_with.steps, st_with.rejected));
+            let saved = st_with.rhs_evals - st.rhs_evals;
+            let per_step = match (m, project) {
+                (Method::Dop853, false) => 3,
+                (Method::Dop853, true) => 4,
+                (Method::Rk4 { .. }, true) => 1,
+                _ => 0,
+            };
+            assert_eq!(
+                saved,
+                per_step * st.steps,
+                "{m:?} projected {project}: {st:?}"
+            );
+        }
+    }
+    let mut p = Prob::new(Eq::Harmonic);
+    p.dense = false;
+    p.probe = Some(0.5);
+    let (out, _, _) = run(Method::Dop853, opts(1e-9), &mut p, 0.0, 1.0);
+    assert_eq!(out, Outcome::Finished);
+    assert!(p.probes.iter().all(|(_, v)| v.iter().all(|x| x.is_nan())));
 }
 
 /// Errors from `jacobian` and `accepted` stop the run at once with Outcome::Problem at the last

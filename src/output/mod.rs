@@ -138,7 +138,7 @@
 //! - `versions`: `{"progmo": crate version, "git_revision": string or null}`.
 //! - `command_line`: array of strings, the arguments to rerun (program first).
 //! - `servo` (only for scenes with `[[actuators]]` whose programme is realizable at t0;
-//!   `progmo solve` writes it, Python's `Solution.write_summary` does not yet): the
+//!   written by `progmo solve` and by Python's `Solution.write_summary`): the
 //!   `crate::scene::ServoReport`: `degrees`, `index`, `realization`, `rcond`, `b_norms` at t0 and
 //!   `internal` {`dimension` (2n - sum r_i), `eigenvalues_t0` [{`re`, `im`}], `along` (null, or
 //!   {`samples`, `max_real`, `t_max_real`, `eigenvalues_at_max`, `min_max_real`}), `growth` (null,

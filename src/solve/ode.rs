@@ -709,6 +709,26 @@ impl<'a, M: Model, C: Constraints> OdeProblem for MotionOde<'a, M, C> {
         }
     }
 
+    /// Only interior output times read the dense output (`Output::Every`, the same test as in
+    /// `accepted`); with output at step ends or at t1 only, the integrator skips it.
+    fn needs_dense(&self, t0: f64, t1: f64) -> bool {
+        let Output::Every(dt) = self.settings.output else {
+            return false;
+        };
+        let (ts, te) = (self.problem.t0, self.problem.t1);
+        let mut k = self.out_index;
+        loop {
+            let tk = ts + k as f64 * dt;
+            if tk >= t1 - 1e-12 * t1.abs().max(1.0) || tk > te {
+                return false;
+            }
+            if tk > t0 {
+                return true;
+            }
+            k += 1;
+        }
+    }
+
     fn accepted(
         &mut self,
         t0: f64,

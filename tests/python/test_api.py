@@ -69,6 +69,26 @@ def test_solution_arrays_and_writers_equal_the_files_of_progmo_solve(tmp_path):
     assert np.array_equal(rows[:, 0], sol.t) and np.array_equal(rows[:, 1:3], sol.q)
 
 
+def test_a_servo_scenes_summary_carries_the_servo_analysis_through_both_doors(tmp_path):
+    # passive_arm (issue 17): the analysis with its internal dynamics along the motion; the summary
+    # of Scene.solve equals the one of `progmo solve`, `servo` included
+    scene = progmo.load("passive_arm")
+    sol = scene.solve(t1=1.0, output_dt=0.05)
+    assert sol.success, sol.message
+    sol.write_summary(tmp_path / "py.json")
+    r = progmo_cmd("solve", "passive_arm", "--t1", "1", "--output-dt", "0.05", "--out", tmp_path / "cli",
+                   cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    a, b = (json.loads(p.read_text()) for p in (tmp_path / "py.json", tmp_path / "cli" / "summary.json"))
+    for k in ("wall_seconds", "command_line"):
+        a.pop(k, None), b.pop(k, None)
+    assert a["servo"]["internal"]["dimension"] == 2 and a["servo"]["internal"]["stability"] == "stable"
+    assert a == b
+    # a scene without actuators has no servo key
+    progmo.load("double_pendulum").solve(t1=0.1).write_summary(tmp_path / "plain.json")
+    assert "servo" not in json.loads((tmp_path / "plain.json").read_text())
+
+
 def test_a_stopped_solve_keeps_its_samples_and_can_raise(tmp_path):
     scene = progmo.load(DEGENERATE)
     sol = scene.solve(strict=True)

@@ -259,7 +259,12 @@ impl PyScene {
         let started = std::time::Instant::now();
         let sol: Solution = py.detach(|| scene.solve(&s));
         let wall = started.elapsed().as_secs_f64();
-        PySolution::new(py, scene.name.clone(), sol, s, layout, scene.bodies(), wall)
+        let (name, bodies) = (scene.name.clone(), scene.bodies());
+        // Servo scenes keep their scene: write_summary adds the servo analysis as `progmo solve` does.
+        let actuated =
+            matches!(&scene.system, SceneSystem::Tree(p) if p.constraints.actuation().is_some());
+        let servo_scene = actuated.then_some(scene);
+        PySolution::new(py, name, sol, s, layout, bodies, wall, servo_scene)
     }
 
     /// Residuals of every row along a trajectory (n samples): position rows g(t, q), velocity

@@ -7,6 +7,7 @@ use progmo::output::{
     replay, write_summary_to_path, Bodies, CsvSink, McapSink, OutputError, SampleLayout,
     SummaryInput,
 };
+use progmo::scene::Scene;
 use progmo::solve::{Settings, Solution};
 use pyo3::exceptions::PyOSError;
 use pyo3::prelude::*;
@@ -23,6 +24,8 @@ pub struct PySolution {
     /// The mechanism for the MCAP's 3D view (tree scenes).
     bodies: Option<Bodies>,
     wall_seconds: f64,
+    /// The solved scene when it has `[[actuators]]`: its servo analysis goes into the summary.
+    servo_scene: Option<Scene>,
     /// (name, array) of every sampled quantity, built once, read-only.
     arrays: Vec<(&'static str, Py<PyAny>)>,
     stats: Py<PyAny>,
@@ -45,6 +48,7 @@ impl PySolution {
         layout: SampleLayout,
         bodies: Option<Bodies>,
         wall_seconds: f64,
+        servo_scene: Option<Scene>,
     ) -> PyResult<Self> {
         let tr = &sol.trajectory;
         let (nq, nv, s) = (tr.q_names.len(), tr.v_names.len(), tr.row_names.len());
@@ -96,6 +100,7 @@ impl PySolution {
             layout,
             bodies,
             wall_seconds,
+            servo_scene,
             arrays,
         })
     }
@@ -255,8 +260,14 @@ impl PySolution {
     }
     /// Write `progmo solve`'s summary.json (return code, statistics, settings, max residuals),
     /// whole or not at all.
-    fn write_summary(&self, path: PathBuf) -> PyResult<()> {
+    /// Servo scenes: with the servo analysis and the internal dynamics along the motion (two more
+    /// solves, as `progmo solve` does).
+    fn write_summary(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         let command_line = vec!["progmo.Scene.solve (Python)".to_string()];
+        let servo = self.servo_scene.as_ref().and_then(|scene| {
+            py.detach(|| scene.servo_report(&self.settings, true))
+                .and_then(|r| serde_json::to_value(r).ok())
+        });
         let input = SummaryInput {
             scene: &self.scene,
             solution: &self.sol,
@@ -265,7 +276,7 @@ impl PySolution {
             wall_seconds: self.wall_seconds,
             git_revision: (!progmo::GIT_REVISION.is_empty()).then_some(progmo::GIT_REVISION),
             command_line: &command_line,
-            servo: None,
+            servo: servo.as_ref(),
         };
         write_summary_to_path(path, &input).map_err(os_error)
     }
