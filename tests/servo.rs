@@ -94,23 +94,31 @@ fn two_car_chain_converges_at_rk4_order_without_projection() {
     // the flat solution; without it the index-reduced ODE's own integration error shows: RK4
     // must converge at order 4 (observed order within 0.3 of nominal).
     let s = load(&text());
-    let mut errs = vec![];
-    let hs = [0.04, 0.02, 0.01];
-    for &h in &hs {
-        let settings = Settings {
-            integrator: Method::Rk4 { h },
-            drift: DriftControl::None,
-            output: Output::Every(0.2),
-            ..s.settings.clone()
-        };
-        errs.push(errors(&s, &settings).0);
-    }
-    eprintln!("rk4 without projection, h = {hs:?}: errors {errs:?}");
+    assert_rk4_order("two_car_chain", &s, [0.04, 0.02, 0.01], 0.2, |st| {
+        errors(&s, st).0
+    });
+}
+
+/// RK4 without projection at the three steps `hs` (output every `dt`): the errors `err` measures
+/// against the scene's independent reference fall at order 4 within 0.3.
+fn assert_rk4_order(name: &str, s: &Scene, hs: [f64; 3], dt: f64, err: impl Fn(&Settings) -> f64) {
+    let errs: Vec<f64> = hs
+        .iter()
+        .map(|&h| {
+            err(&Settings {
+                integrator: Method::Rk4 { h },
+                drift: DriftControl::None,
+                output: Output::Every(dt),
+                ..s.settings.clone()
+            })
+        })
+        .collect();
+    eprintln!("{name} rk4 without projection, h = {hs:?}: errors {errs:?}");
     for k in 1..hs.len() {
         let order = (errs[k - 1] / errs[k]).log2();
         assert!(
             (order - 4.0).abs() < 0.3,
-            "errors {errs:?}: order {order:.2}"
+            "{name}: errors {errs:?}: order {order:.2}"
         );
     }
 }
@@ -548,25 +556,9 @@ fn the_overhead_crane_converges_at_rk4_order_without_projection() {
     // Without projection the index-reduced ODE's own integration error shows (the swing angle is
     // driven through the reduced row z): RK4 must converge at order 4 within 0.3.
     let s = crane();
-    let mut errs = vec![];
-    let hs = [0.1, 0.05, 0.025];
-    for &h in &hs {
-        let settings = Settings {
-            integrator: Method::Rk4 { h },
-            drift: DriftControl::None,
-            output: Output::Every(0.5),
-            ..s.settings.clone()
-        };
-        errs.push(crane_errors(&s, &settings).0);
-    }
-    eprintln!("overhead_crane rk4 without projection, h = {hs:?}: errors {errs:?}");
-    for k in 1..hs.len() {
-        let order = (errs[k - 1] / errs[k]).log2();
-        assert!(
-            (order - 4.0).abs() < 0.3,
-            "errors {errs:?}: order {order:.2}"
-        );
-    }
+    assert_rk4_order("overhead_crane", &s, [0.1, 0.05, 0.025], 0.5, |st| {
+        crane_errors(&s, st).0
+    });
 }
 
 // rotary_crane (references/scenes): the load's path in polar form R = Rc + D (1 - cos w t),
@@ -651,17 +643,9 @@ fn the_rotary_crane_converges_at_rk4_order_without_projection() {
     let names = s.v_names();
     let ix = |n: &str| names.iter().position(|x| x == n).unwrap();
     let (phi, r, l) = (ix("phi"), ix("r"), ix("l"));
-    let hs = [0.1, 0.05, 0.025];
-    let mut errs = vec![];
-    for &h in &hs {
-        let settings = Settings {
-            integrator: Method::Rk4 { h },
-            drift: DriftControl::None,
-            output: Output::Every(0.5),
-            ..s.settings.clone()
-        };
-        let sol = s.solve(&settings);
-        assert!(sol.code.is_success(), "h = {h}: {}", sol.code);
+    assert_rk4_order("rotary_crane", &s, [0.1, 0.05, 0.025], 0.5, |settings| {
+        let sol = s.solve(settings);
+        assert!(sol.code.is_success(), "{}", sol.code);
         let tr = &sol.trajectory;
         let mut e = 0.0f64;
         for i in 0..tr.len() {
@@ -671,14 +655,6 @@ fn the_rotary_crane_converges_at_rk4_order_without_projection() {
                 .max((q[r] - f[1]).abs())
                 .max((q[l] - f[2]).abs());
         }
-        errs.push(e);
-    }
-    eprintln!("rotary_crane rk4 without projection, h = {hs:?}: errors {errs:?}");
-    for k in 1..hs.len() {
-        let order = (errs[k - 1] / errs[k]).log2();
-        assert!(
-            (order - 4.0).abs() < 0.3,
-            "errors {errs:?}: order {order:.2}"
-        );
-    }
+        e
+    });
 }
