@@ -272,8 +272,9 @@ fn the_maximal_examples_load_match_the_schema_and_use_every_key() {
         &maximal_closure(WELD),
         &maximal_closure(DISTANCE),
         &maximal_closure(LINE),
-        // `[[actuators]]` with every key (servo-constraints).
+        // `[[actuators]]` with every key (servo-constraints): a joint, a direction.
         include_str!("../references/scenes/two_car_chain.toml"),
+        include_str!("../references/scenes/thruster_cars.toml"),
     ];
     for text in examples {
         Scene::from_text(Path::new("maximal"), text).unwrap_or_else(|e| panic!("{e}"));

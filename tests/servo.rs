@@ -658,3 +658,82 @@ fn the_rotary_crane_converges_at_rk4_order_without_projection() {
         e
     });
 }
+
+// thruster_cars (references/scenes): the same two cars, car 1's position y = x1 = A sin(w t)
+// programmed, the actuator a world-frame force F on car 2, i.e. the direction (1, 1) over (x1, d).
+// Flat inverse: m1 y'' = k d gives d = m1 y''/k, and F = m2 (y'' + d'') + k d, so with
+// s = sin(w t): d = -m1 A w^2 s/k, F = -A w^2 s (m1 + m2 - m1 m2 w^2/k), u = (F, F).
+
+fn thruster() -> Scene {
+    let path = root().join("references/scenes/thruster_cars.toml");
+    Scene::from_text(&path, &std::fs::read_to_string(&path).unwrap())
+        .unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Largest errors of (q, v) and of u against the thruster's flat inverse.
+fn thruster_errors(s: &Scene, settings: &Settings) -> (f64, f64) {
+    let p = |n| param(s, n);
+    let (m1, m2, k, a, w) = (p("m1"), p("m2"), p("k"), p("A"), p("w"));
+    let sol = s.solve(settings);
+    assert!(sol.code.is_success(), "{}", sol.code);
+    let tr = &sol.trajectory;
+    let (mut ex, mut eu) = (0.0f64, 0.0f64);
+    for i in 0..tr.len() {
+        let (sn, cs) = ((w * tr.t[i]).sin(), (w * tr.t[i]).cos());
+        let x = [
+            a * sn,
+            -m1 * a * w * w * sn / k,
+            a * w * cs,
+            -m1 * a * w * w * w * cs / k,
+        ];
+        let f = -a * w * w * sn * (m1 + m2 - m1 * m2 * w * w / k);
+        let (q, v, u) = (tr.q_at(i), tr.v_at(i), tr.u_at(i));
+        for (got, want) in q.iter().chain(v.iter()).zip(x) {
+            ex = ex.max((got - want).abs());
+        }
+        eu = eu.max((u[0] - f).abs()).max((u[1] - f).abs());
+    }
+    (ex, eu)
+}
+
+#[test]
+fn a_thruster_along_a_direction_is_tangential_with_index_5_and_matches_its_flat_inverse() {
+    let s = thruster();
+    let an = s.servo_analysis().expect("actuated").expect("realizable");
+    assert_eq!(an.realization, Realization::Tangential);
+    assert_eq!((an.differentiations.clone(), an.index), (vec![4], 5));
+    let (ex, eu) = thruster_errors(&s, &s.settings);
+    let rtol = s.settings.rtol;
+    eprintln!("thruster_cars vs flat inverse: state {ex:.2e}, force {eu:.2e} (rtol {rtol:.0e})");
+    assert!(ex < 20.0 * rtol, "state error {ex:.2e}");
+    assert!(eu < 20.0 * rtol, "force error {eu:.2e}");
+}
+
+#[test]
+fn the_thruster_converges_at_rk4_order_without_projection() {
+    let s = thruster();
+    assert_rk4_order("thruster_cars", &s, [0.04, 0.02, 0.01], 0.2, |st| {
+        thruster_errors(&s, st).0
+    });
+}
+
+#[test]
+fn the_same_thruster_as_a_joint_list_is_not_the_same_actuator() {
+    // Negative control: a force on joint d alone (car 2 pushed relative to car 1, car 1 pushed
+    // back) is another actuator: it reaches car 1 at acceleration level (mixed, degree 2) and
+    // gives another force.
+    let text = std::fs::read_to_string(root().join("references/scenes/thruster_cars.toml"))
+        .unwrap()
+        .replace("direction = { x1 = 1.0, d = 1.0 }", "joint = \"d\"");
+    let s = Scene::from_text(&root().join("thruster_joint.toml"), &text)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let an = s.servo_analysis().expect("actuated").expect("realizable");
+    assert_eq!(an.realization, Realization::Mixed);
+    assert_eq!(an.differentiations, vec![2]);
+    let (ex, eu) = thruster_errors(&s, &s.settings);
+    eprintln!("thruster_cars with joint d instead: state {ex:.2e}, force {eu:.2e}");
+    assert!(
+        eu > 1e-3,
+        "the joint actuator must not reproduce the thruster's force: {eu:.2e}"
+    );
+}

@@ -189,8 +189,12 @@ class Scene:
         """Raises SceneError with the located message `progmo solve` gives when the solver refuses
         the initial state."""
     @property
-    def actuators(self) -> list[tuple[str, int]]:
-        """[[actuators]] of the scene: (name, index into v) each; empty: the ideal realization."""
+    def actuators(self) -> list[tuple[str, int | None]]:
+        """[[actuators]] of the scene: (name, index into v) each, None for an actuator along a
+        `direction`; empty: the ideal realization."""
+    @property
+    def actuation_map(self) -> F64 | None:
+        """The actuation map H (n x m, u = H tau); None without actuators."""
     @property
     def expected_not_checked(self) -> list[tuple[str, str]]:
         """[checks] not_checked of the scene: (simulator, reason)."""

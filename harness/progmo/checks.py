@@ -28,8 +28,9 @@ A check is a sequence of small steps over a typed back-end (``simulators.Backend
 6. **Open-loop replay** of the solver's u(t): ``replay_residual`` (max |row| of the core's own
    evaluator on the replayed states) and ``replay_deviation`` (max |dq|, |dv| against the solver,
    quaternions up to sign); the growth rate of the deviation is ``info``, not judged. With
-   ``[[actuators]]`` also ``replay_unactuated``: the replayed force on joints no actuator drives,
-   relative to max |u| (:func:`unactuated_force`).
+   ``[[actuators]]`` also ``replay_unactuated``: the part of the replayed force no actuator can
+   produce (outside range(H); on joint actuators the force on the other joints), relative to
+   max |u| (:func:`unactuated_force`).
 
 A scene no simulator document describes (a lagrangian model) is checked ``solver_only``
 (``run_check(path, "solver_only")``): the scene (step 1), then :func:`_solver_only`: the solve with
@@ -111,8 +112,10 @@ def default_budgets(settings: dict[str, Any]) -> dict[str, tuple[float, str]]:
                                    "generalized reaction J^T f from the simulator's own multipliers under "
                                    "the solver's u vs ours B_c^T lambda_c, relative to its max (Pinocchio "
                                    "catalog <= 1e-13; MuJoCo's soft equalities need a scene budget)"),
-        "replay_unactuated": (1e-14, "default (algebraic identity): the replayed force on joints no "
-                                     "actuator drives, relative to max|u|: u = H tau has exact zeros there"),
+        "replay_unactuated": (1e-14, "default (algebraic identity): the part of the replayed force "
+                                     "outside range(H), relative to max|u|: u = H tau has exact zeros on "
+                                     "joints no actuator drives (along a direction: round-off of the "
+                                     "projection, ~1e-16)"),
         "formulation_deviation": (1e-8, f"default (integrated): max |dq|, |dv| between two formulations "
                                         f"solved at rtol {REF_RTOL:g}: both carry the integration error "
                                         "(about 1e4 x rtol for non-stiff scenes) and the conditioning of B"),
@@ -520,7 +523,7 @@ def _replay(c: _Check) -> None:
         res.info["replay_closure_residual"] = float(np.abs(R[:, ci]).max())
     res.metrics["replay_deviation"] = float(dev.max())
     if scene.actuators:  # servo-constraints: the force fed to the simulator acts on actuated joints only
-        res.metrics["replay_unactuated"] = unactuated_force(ref.u, [d for _, d in scene.actuators])
+        res.metrics["replay_unactuated"] = unactuated_force(ref.u, scene.actuation_map)
     g = growth_rate(rp.t, dev)
     res.info["replay_growth_rate"] = g
     if math.isfinite(g) and g * c.horizon > math.log(100):
@@ -561,14 +564,21 @@ def _replay(c: _Check) -> None:
             for b in res.breaches)
 
 
-def unactuated_force(u: np.ndarray, actuated: list[int]) -> float:
-    """max |u_j| over the joints j no actuator drives, relative to max |u| (0 when u = 0)."""
-    u = np.asarray(u)
-    free = [j for j in range(u.shape[1]) if j not in actuated]
+def unactuated_force(u: np.ndarray, H: np.ndarray) -> float:
+    """The largest part of u(t) no actuator can produce, relative to max |u| (0 when u = 0): on
+    joint actuators (unit columns of H) max |u_j| over the joints j none drives, read exactly; else
+    the component of u outside range(H), |u - Q Q^T u| with Q an orthonormal basis of range(H)."""
+    u, H = np.asarray(u), np.asarray(H)
     scale = float(np.abs(u).max()) if u.size else 0.0
-    if not free or scale == 0.0:
+    if scale == 0.0:
         return 0.0
-    return float(np.abs(u[:, free]).max()) / scale
+    unit = all(np.count_nonzero(c) == 1 and c[np.flatnonzero(c)[0]] == 1.0 for c in H.T)
+    if unit:
+        free = [j for j in range(u.shape[1]) if not H[j].any()]
+        return float(np.abs(u[:, free]).max()) / scale if free else 0.0
+    Q, _ = np.linalg.qr(H)
+    off = u - (u @ Q) @ Q.T
+    return float(np.abs(off).max()) / scale
 
 
 def _first_times(first: dict, bval: dict) -> dict:

@@ -153,7 +153,8 @@ pub struct SceneFile {
     /// (FORMAT.md, "Actuators"); as many actuators as programme rows. Absent: the ideal
     /// realization, u in the row space of the programme Jacobian.
     #[serde(default)]
-    pub actuators: Vec<ActuatorFile>,
+    #[schemars(with = "Vec<ActuatorFile>")]
+    pub actuators: Vec<Spanned<ActuatorFile>>,
     #[schemars(with = "InitialFile")]
     pub initial: Spanned<InitialFile>,
     #[schemars(with = "TimeFile")]
@@ -568,14 +569,22 @@ pub struct RowFile {
     pub expr: Spanned<String>,
 }
 
-/// One actuator: a generalized force on one hinge or slide joint.
+/// One actuator: a generalized force on one hinge or slide joint (`joint`), or along a fixed
+/// direction over the velocities (`direction`, e.g. a force between two joints); exactly one of the
+/// two.
 #[derive(Clone, Debug, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 #[schemars(rename = "actuator")]
 pub struct ActuatorFile {
     /// The actuated joint: a hinge or slide joint of the model (its velocity's name).
-    #[schemars(with = "Identifier")]
-    pub joint: Spanned<String>,
+    #[serde(default)]
+    #[schemars(with = "Option<Identifier>")]
+    pub joint: Option<Spanned<String>>,
+    /// The generalized force per unit tau by velocity name (numbers or parameter expressions);
+    /// velocities not listed get 0. Needs `name`.
+    #[serde(default)]
+    #[schemars(with = "Option<BTreeMap<String, Number>>")]
+    pub direction: Option<Spanned<BTreeMap<String, Spanned<Number>>>>,
     /// Name in messages and outputs (an identifier, unique among actuators); default: the joint's.
     #[serde(default)]
     #[schemars(with = "Option<Identifier>")]

@@ -88,9 +88,13 @@ pub(super) fn load(src: Source) -> R<Scene> {
     let (system, spans) = match kind {
         "lagrangian" => {
             if let Some(a) = file.actuators.first() {
+                let (span, field) = match &a.get_ref().joint {
+                    Some(j) => (j.span(), "actuators[0].joint"),
+                    None => (a.span(), "actuators[0]"),
+                };
                 return Err(src.error(
-                    a.joint.span(),
-                    "actuators[0].joint",
+                    span,
+                    field,
                     "actuators need a tree or urdf model (they act on its joints); a lagrangian \
                      scene realizes its programme ideally",
                 ));
@@ -143,7 +147,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
                 closure_rows.len(),
                 &settings,
             )?;
-            actuators(&src, &file, &mut p, !closures.is_empty())?;
+            actuators(&src, &file, &params, &mut p, !closures.is_empty())?;
             extra = (closures, set_aside);
             (SceneSystem::Tree(p), spans)
         }
@@ -196,6 +200,7 @@ type SetAsideRows = Option<(Vec<SetAside>, ExprConstraints)>;
 fn actuators<M: Model>(
     src: &Source,
     file: &SceneFile,
+    params: &[(String, f64)],
     p: &mut Problem<M, ExprConstraints>,
     has_closures: bool,
 ) -> R<()> {
@@ -203,85 +208,159 @@ fn actuators<M: Model>(
         return Ok(());
     }
     let v_names = p.model.v_names();
-    let first = &file.actuators[0];
+    let n = v_names.len();
+    // Where an actuator's messages point: its joint, else its direction, else its table.
+    let at = |i: usize| -> (Range<usize>, String) {
+        let a = &file.actuators[i];
+        match (&a.get_ref().joint, &a.get_ref().direction) {
+            (Some(j), _) => (j.span(), format!("actuators[{i}].joint")),
+            (None, Some(d)) => (d.span(), format!("actuators[{i}].direction")),
+            (None, None) => (a.span(), format!("actuators[{i}]")),
+        }
+    };
     if has_closures || !file.constraints.is_empty() {
+        let (span, field) = at(0);
         return Err(src.error(
-            first.joint.span(),
-            "actuators[0].joint",
+            span,
+            &field,
             "actuators with system constraints or loop closures are not supported yet: their \
              reactions would join tau in the index reduction",
         ));
     }
     if let Some(j) = v_names.iter().find(|n| n.contains('.')) {
         let joint = j.split('.').next().unwrap_or(j);
+        let (span, field) = at(0);
         return Err(src.error(
-            first.joint.span(),
-            "actuators[0].joint",
+            span,
+            &field,
             format!(
                 "actuators need a model of hinge and slide joints only; joint `{joint}` is a ball \
                  or free joint (its quaternion coordinates are not supported by the servo solver yet)"
             ),
         ));
     }
+    let mut consts = SymbolTable::new();
+    for (name, x) in params {
+        consts.define(name.clone(), *x);
+    }
     let mut names: Vec<String> = vec![];
-    let mut dofs: Vec<usize> = vec![];
+    let mut columns: Vec<Vec<f64>> = vec![];
+    let mut joints: Vec<usize> = vec![];
     for (i, a) in file.actuators.iter().enumerate() {
-        let joint = a.joint.get_ref();
-        let field = format!("actuators[{i}].joint");
-        let Some(d) = v_names.iter().position(|n| n == joint) else {
-            return Err(src.error(
-                a.joint.span(),
-                &field,
-                format!(
-                    "unknown joint `{joint}`: the actuated joints are among {}",
-                    and_list(&v_names.iter().map(String::as_str).collect::<Vec<_>>())
-                ),
-            ));
-        };
-        if dofs.contains(&d) {
-            return Err(src.error(
-                a.joint.span(),
-                &field,
-                format!("joint `{joint}` is actuated twice"),
-            ));
-        }
-        let name = match &a.name {
-            Some(n) => {
-                if !is_identifier(n.get_ref()) {
+        let (span, field) = at(i);
+        let a = a.get_ref();
+        let mut col = vec![0.0; n];
+        let default_name = match (&a.joint, &a.direction) {
+            (Some(_), Some(_)) | (None, None) => {
+                return Err(src.error(
+                    span,
+                    &field,
+                    "an actuator has either `joint` (a hinge or slide joint) or `direction` (a \
+                     generalized force over the velocities), exactly one of the two",
+                ));
+            }
+            (Some(joint), None) => {
+                let joint = joint.get_ref();
+                let Some(d) = v_names.iter().position(|n| n == joint) else {
                     return Err(src.error(
-                        n.span(),
+                        span,
+                        &field,
+                        format!(
+                            "unknown joint `{joint}`: the actuated joints are among {}",
+                            and_list(&v_names.iter().map(String::as_str).collect::<Vec<_>>())
+                        ),
+                    ));
+                };
+                if joints.contains(&d) {
+                    return Err(src.error(
+                        span,
+                        &field,
+                        format!("joint `{joint}` is actuated twice"),
+                    ));
+                }
+                joints.push(d);
+                col[d] = 1.0;
+                Some(joint.clone())
+            }
+            (None, Some(dir)) => {
+                for (key, x) in dir.get_ref() {
+                    let f = format!("actuators[{i}].direction.{key}");
+                    let Some(d) = v_names.iter().position(|n| n == key) else {
+                        return Err(src.error(
+                            x.span(),
+                            &f,
+                            format!(
+                                "`{key}` is not a velocity: the direction's entries are among {}",
+                                and_list(&v_names.iter().map(String::as_str).collect::<Vec<_>>())
+                            ),
+                        ));
+                    };
+                    let value = number(src, &consts, x.get_ref(), x.span(), &f)?;
+                    if !value.is_finite() {
+                        return Err(src.error(x.span(), &f, format!("is {value}")));
+                    }
+                    col[d] = value;
+                }
+                None
+            }
+        };
+        let name = match (&a.name, default_name) {
+            (Some(nm), _) => {
+                if !is_identifier(nm.get_ref()) {
+                    return Err(src.error(
+                        nm.span(),
                         &format!("actuators[{i}].name"),
                         "an actuator name must be an identifier",
                     ));
                 }
-                if names.contains(n.get_ref()) {
+                if names.contains(nm.get_ref()) {
                     return Err(src.error(
-                        n.span(),
+                        nm.span(),
                         &format!("actuators[{i}].name"),
-                        format!("actuator name `{}` is used twice", n.get_ref()),
+                        format!("actuator name `{}` is used twice", nm.get_ref()),
                     ));
                 }
-                n.get_ref().clone()
+                nm.get_ref().clone()
             }
-            None => joint.clone(),
+            (None, Some(joint)) => joint,
+            (None, None) => {
+                return Err(src.error(
+                    span,
+                    &field,
+                    "an actuator with a `direction` needs a `name` (an identifier)",
+                ));
+            }
         };
         names.push(name);
-        dofs.push(d);
+        columns.push(col);
     }
-    let (m, s, n) = (dofs.len(), file.programme.len(), v_names.len());
+    let (m, s) = (columns.len(), file.programme.len());
     if m != s {
-        let at = &file.actuators[m.min(s).min(m - 1)];
+        let (span, field) = at(m.min(s).min(m - 1));
         return Err(src.error(
-            at.joint.span(),
-            &format!("actuators[{}].joint", m.min(s).min(m - 1)),
+            span,
+            &field,
             format!(
                 "{m} actuator(s) for {s} programme row(s) ({n} degrees of freedom): the servo \
                  solver needs as many actuators as programme rows (a square decoupling matrix)"
             ),
         ));
     }
-    p.constraints
-        .set_actuation(crate::servo::Actuation { names, dofs });
+    let act = crate::servo::Actuation::new(names.clone(), columns).map_err(|e| match e {
+        crate::servo::ActuationError::Dependent { column, ratio } => {
+            let (span, field) = at(column);
+            src.error(
+                span,
+                &field,
+                format!(
+                    "actuator `{}` is zero or a combination of the actuators before it (its part \
+                     outside theirs is {ratio:.1e} of its length): H needs independent columns",
+                    names[column]
+                ),
+            )
+        }
+    })?;
+    p.constraints.set_actuation(act);
     Ok(())
 }
 

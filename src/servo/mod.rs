@@ -2,7 +2,8 @@
 //!
 //! The ideal realization (Do Sanh 1998, (2.7)) lets the control force act along every programme
 //! gradient, u in range(B^T). Real machines push on given joints: A dv/dt - F = H tau with H the
-//! n x m actuation map (here: unit columns of the actuated joints' velocities). The programme rows
+//! n x m actuation map (constant: unit columns of actuated joints, or fixed directions over the
+//! velocities, [`Actuation`]). The programme rows
 //! are then *servo-constraints* (Blajer & Kolodziejczyk, Multibody Syst. Dyn. 11 (2004) 343-364):
 //! - orthogonal realization: range(H) = range(B^T) (the ideal case);
 //! - tangential: B A^-1 H = 0 (tau does not reach the programme at acceleration level);
@@ -53,13 +54,116 @@ pub const ROUNDOFF: f64 = 1e-12;
 /// round-off, about 1e-16 of their size.
 pub const DEGREE_TOL: f64 = 1e-8;
 
-/// Which joint velocities the actuators drive: H = [e_dofs[0], e_dofs[1], ...] (n x m).
+/// The actuation map H (n x m, constant): column j is the generalized force of actuator j per unit
+/// tau_j, a unit vector on one joint's velocity (`joint = ...`) or a fixed direction over the
+/// velocities (`direction = {...}`, e.g. a force acting between two joints).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Actuation {
     /// Actuator names (for messages and outputs), in file order.
     pub names: Vec<String>,
-    /// The velocity index each actuator's generalized force acts on.
-    pub dofs: Vec<usize>,
+    /// The columns of H, each of length n.
+    columns: Vec<Vec<f64>>,
+    /// Orthonormal basis of range(H) (modified Gram-Schmidt), for the component of a force
+    /// outside it.
+    basis: Vec<Vec<f64>>,
+}
+
+/// Why a set of actuation columns is not an actuation map.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ActuationError {
+    /// Column `j` is zero or a combination of the columns before it (|residual| / |column|).
+    Dependent { column: usize, ratio: f64 },
+}
+
+impl Actuation {
+    /// Columns below this relative residual after removing the earlier columns are dependent.
+    pub const DEPENDENT: f64 = 1e-10;
+
+    /// H from its columns (all of one length n, independent).
+    pub fn new(names: Vec<String>, columns: Vec<Vec<f64>>) -> Result<Self, ActuationError> {
+        let mut basis: Vec<Vec<f64>> = Vec::with_capacity(columns.len());
+        for (j, c) in columns.iter().enumerate() {
+            let norm = c.iter().map(|x| x * x).sum::<f64>().sqrt();
+            let mut r = c.clone();
+            for e in &basis {
+                let d: f64 = r.iter().zip(e).map(|(x, y)| x * y).sum();
+                for (x, y) in r.iter_mut().zip(e) {
+                    *x -= d * y;
+                }
+            }
+            let rn = r.iter().map(|x| x * x).sum::<f64>().sqrt();
+            let ratio = if norm > 0.0 { rn / norm } else { 0.0 };
+            if !(ratio > Self::DEPENDENT) {
+                return Err(ActuationError::Dependent { column: j, ratio });
+            }
+            r.iter_mut().for_each(|x| *x /= rn);
+            basis.push(r);
+        }
+        Ok(Actuation {
+            names,
+            columns,
+            basis,
+        })
+    }
+
+    /// Actuators on joints only: H = [e_dofs[0], e_dofs[1], ...] over n velocities.
+    pub fn joints(names: Vec<String>, dofs: &[usize], n: usize) -> Result<Self, ActuationError> {
+        let cols = dofs
+            .iter()
+            .map(|&d| {
+                let mut c = vec![0.0; n];
+                c[d] = 1.0;
+                c
+            })
+            .collect();
+        Self::new(names, cols)
+    }
+
+    /// Number of actuators m.
+    pub fn len(&self) -> usize {
+        self.columns.len()
+    }
+
+    /// True without actuators.
+    pub fn is_empty(&self) -> bool {
+        self.columns.is_empty()
+    }
+
+    /// Column j of H.
+    pub fn column(&self, j: usize) -> &[f64] {
+        &self.columns[j]
+    }
+
+    /// The velocity index of actuator j when its column is a unit vector (a joint actuator).
+    pub fn joint(&self, j: usize) -> Option<usize> {
+        let c = &self.columns[j];
+        let nz: Vec<usize> = (0..c.len()).filter(|&i| c[i] != 0.0).collect();
+        (nz.len() == 1 && c[nz[0]] == 1.0).then(|| nz[0])
+    }
+
+    /// out += H tau (u = H tau, the actuators' generalized force).
+    pub fn add_force<T: Scalar>(&self, tau: &[T], out: &mut [T]) {
+        for (c, &tj) in self.columns.iter().zip(tau) {
+            for (o, &h) in out.iter_mut().zip(c) {
+                if h != 0.0 {
+                    *o += tj * h;
+                }
+            }
+        }
+    }
+
+    /// |x - P x| with P the orthogonal projector onto range(H): the part of x no actuator can
+    /// produce (exactly the entries on unactuated joints when every column is a joint's).
+    pub fn outside(&self, x: &[f64]) -> f64 {
+        let mut r = x.to_vec();
+        for e in &self.basis {
+            let d: f64 = r.iter().zip(e).map(|(a, b)| a * b).sum();
+            for (a, b) in r.iter_mut().zip(e) {
+                *a -= d * b;
+            }
+        }
+        r.iter().map(|a| a * a).sum::<f64>().sqrt()
+    }
 }
 
 /// The realization of a programme by the actuators at a state (Blajer & Kolodziejczyk 2004).
@@ -190,7 +294,7 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
 
     /// Number of rows s and actuators m.
     pub fn dims(&self) -> (usize, usize) {
-        (self.cons.rows().len(), self.act.dofs.len())
+        (self.cons.rows().len(), self.act.len())
     }
 
     /// dv/dt = A^-1 (F + H tau) (2.2 with u = H tau).
@@ -209,9 +313,7 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         let mut scratch = vec![T::zero(); n];
         self.model
             .natural_forces(&mut ws, t, q, v, out, &mut scratch);
-        for (j, &d) in self.act.dofs.iter().enumerate() {
-            out[d] += tau[j];
-        }
+        self.act.add_force(tau, out);
         linalg::cholesky(&mut a, n)?;
         linalg::cholesky_solve(&a, n, out);
         Ok(())
@@ -612,16 +714,19 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         jet.compute(self.cons, self.model.segments(), t, q, v);
         let b = &jet.b;
         let bnorm = b.iter().fold(0.0f64, |x, y| x.max(y.abs()));
-        // range(B^T) within range(H): B vanishes on the unactuated velocities; with s = m and both
-        // of full rank the ranges are then equal.
-        let unactuated = (0..n).filter(|j| !self.act.dofs.contains(j));
-        let off = unactuated
-            .flat_map(|j| (0..s).map(move |i| b[(i, j)].abs()))
+        // range(B^T) within range(H): every row's gradient is a force the actuators produce (on
+        // joint actuators: B vanishes on the unactuated velocities); with s = m and both of full
+        // rank the ranges are then equal.
+        let off = (0..s)
+            .map(|i| {
+                self.act
+                    .outside(&b.row(i).iter().copied().collect::<Vec<_>>())
+            })
             .fold(0.0f64, f64::max);
         if s == m && off <= 1e-12 * bnorm {
             return Realization::Orthogonal;
         }
-        // B A^-1 H = 0: the columns A^-1 e_d of the actuated dofs.
+        // B A^-1 H = 0: the columns A^-1 h_j.
         let mut ws = self.model.workspace::<f64>();
         let mut a = DMatrix::zeros(n, n);
         self.model.mass_matrix(&mut ws, q, &mut a);
@@ -630,15 +735,17 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         }
         let mut worst = 0.0f64;
         let mut scale = 0.0f64;
-        for &d in &self.act.dofs {
-            let mut col = vec![0.0; n];
-            col[d] = 1.0;
+        for j in 0..m {
+            let mut col = self.act.column(j).to_vec();
             linalg::cholesky_solve(&a, n, &mut col);
+            // Against |B_i| |A^-1 h_j|, not the products' sizes: A^-1 h_j may be round-off exactly
+            // where B_i reads it (a force reaching the row's coordinates only through others).
+            let cn = col.iter().map(|x| x * x).sum::<f64>().sqrt();
             for i in 0..s {
                 let x: f64 = (0..n).map(|j| b[(i, j)] * col[j]).sum();
-                let terms: f64 = (0..n).map(|j| (b[(i, j)] * col[j]).abs()).sum();
+                let bn = (0..n).map(|j| b[(i, j)] * b[(i, j)]).sum::<f64>().sqrt();
                 worst = worst.max(x.abs());
-                scale = scale.max(terms);
+                scale = scale.max(bn * cn);
             }
         }
         if worst <= 1e-12 * scale.max(f64::MIN_POSITIVE) {

@@ -272,9 +272,7 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
         if let (Some(act), Some(_)) = (self.cons.actuation(), &self.servo_degrees) {
             // u = H tau (the actuators' generalized forces); no system rows with actuators.
             if role == Role::Programme {
-                for (j, &d) in act.dofs.iter().enumerate() {
-                    out[d] += self.lambda[j];
-                }
+                act.add_force(&self.lambda[..act.len()], out);
             }
             return;
         }

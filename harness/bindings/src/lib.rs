@@ -259,12 +259,7 @@ impl PyScene {
         let started = std::time::Instant::now();
         let sol: Solution = py.detach(|| scene.solve(&s));
         let wall = started.elapsed().as_secs_f64();
-        let (name, bodies) = (scene.name.clone(), scene.bodies());
-        // Servo scenes keep their scene: write_summary adds the servo analysis as `progmo solve` does.
-        let actuated =
-            matches!(&scene.system, SceneSystem::Tree(p) if p.constraints.actuation().is_some());
-        let servo_scene = actuated.then_some(scene);
-        PySolution::new(py, name, sol, s, layout, bodies, wall, servo_scene)
+        PySolution::new(py, scene, sol, s, layout, wall)
     }
 
     /// Residuals of every row along a trajectory (n samples): position rows g(t, q), velocity
@@ -452,25 +447,27 @@ impl PyScene {
             .map_err(scene_error)
     }
 
-    /// `[[actuators]]` of the scene: (name, index into v) of each actuator, in file order; empty
-    /// for the ideal realization (u in the row space of the programme Jacobian).
+    /// `[[actuators]]` of the scene: (name, index into v) of each actuator, the index None for an
+    /// actuator along a `direction`; empty for the ideal realization (u in the row space of the
+    /// programme Jacobian).
     #[getter]
-    fn actuators(&self) -> Vec<(String, usize)> {
-        use progmo::programme::Constraints;
-        match &self.scene.system {
-            SceneSystem::Tree(p) => p
-                .constraints
-                .actuation()
-                .map(|a| {
-                    a.names
-                        .iter()
-                        .cloned()
-                        .zip(a.dofs.iter().copied())
-                        .collect()
-                })
-                .unwrap_or_default(),
-            SceneSystem::Lagrangian(_) => vec![],
-        }
+    fn actuators(&self) -> Vec<(String, Option<usize>)> {
+        self.actuation()
+            .map(|a| {
+                (0..a.len())
+                    .map(|j| (a.names[j].clone(), a.joint(j)))
+                    .collect()
+            })
+            .unwrap_or_default()
+    }
+
+    /// The actuation map H (n x m; u = H tau), or None without actuators.
+    #[getter]
+    fn actuation_map<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray2<f64>>> {
+        self.actuation().map(|a| {
+            let n = self.scene.v_names().len();
+            Array2::from_shape_fn((n, a.len()), |(i, j)| a.column(j)[i]).into_pyarray(py)
+        })
     }
 
     /// `[checks] not_checked` of the scene: {simulator: reason}.
@@ -742,4 +739,15 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(chain_toml, m)?)?;
     m.add_function(wrap_pyfunction!(drift_cost, m)?)?;
     Ok(())
+}
+
+impl PyScene {
+    /// The scene's actuation map (tree scenes with `[[actuators]]`).
+    fn actuation(&self) -> Option<&progmo::servo::Actuation> {
+        use progmo::programme::Constraints;
+        match &self.scene.system {
+            SceneSystem::Tree(p) => p.constraints.actuation(),
+            SceneSystem::Lagrangian(_) => None,
+        }
+    }
 }

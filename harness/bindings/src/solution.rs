@@ -40,16 +40,22 @@ fn frozen(a: Bound<'_, PyAny>) -> PyResult<Py<PyAny>> {
 }
 
 impl PySolution {
+    /// The solution of `scene` (its end time as solved); a servo scene is kept for the summary's
+    /// servo analysis.
     pub fn new(
         py: Python<'_>,
-        scene: String,
+        scene: Scene,
         sol: Solution,
         settings: Settings,
         layout: SampleLayout,
-        bodies: Option<Bodies>,
         wall_seconds: f64,
-        servo_scene: Option<Scene>,
     ) -> PyResult<Self> {
+        use progmo::programme::Constraints;
+        let bodies = scene.bodies();
+        let actuated = matches!(&scene.system,
+            progmo::scene::SceneSystem::Tree(p) if p.constraints.actuation().is_some());
+        let name = scene.name.clone();
+        let servo_scene = actuated.then_some(scene);
         let tr = &sol.trajectory;
         let (nq, nv, s) = (tr.q_names.len(), tr.v_names.len(), tr.row_names.len());
         let arrays = vec![
@@ -94,7 +100,7 @@ impl PySolution {
             settings_py: json_to_py(py, &settings)?.unbind(),
             code: json_to_py(py, &sol.code)?.unbind(),
             warnings: warnings.into_any().unbind(),
-            scene,
+            scene: name,
             sol,
             settings,
             layout,
