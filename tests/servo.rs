@@ -737,3 +737,144 @@ fn the_same_thruster_as_a_joint_list_is_not_the_same_actuator() {
         "the joint actuator must not reproduce the thruster's force: {eu:.2e}"
     );
 }
+
+// cylinder_cars (references/scenes): thruster_cars' cars and programme, the actuator a cylinder
+// from car 2 (at x2 = x1 + d) to a pin at (X, h): H(q) = (X - x2)/L (1, 1), L = |(X - x2, h)|.
+// The horizontal force car 2 needs is thruster_cars' F, so the cylinder force is
+// tau = F L/(X - x2) with x2 = A s (1 - m1 w^2/k) on the flat motion.
+
+fn cylinder(text: &str) -> Scene {
+    Scene::from_text(&root().join("cylinder_cars.toml"), text).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn cylinder_text() -> String {
+    std::fs::read_to_string(root().join("references/scenes/cylinder_cars.toml")).unwrap()
+}
+
+/// Largest errors of (q, v), of u and of tau against the cylinder's flat inverse.
+fn cylinder_errors(s: &Scene, settings: &Settings) -> (f64, f64, f64) {
+    let p = |n| param(s, n);
+    let (m1, m2, k, a, w, x, h) = (p("m1"), p("m2"), p("k"), p("A"), p("w"), p("X"), p("h"));
+    let sol = s.solve(settings);
+    assert!(sol.code.is_success(), "{}", sol.code);
+    let tr = &sol.trajectory;
+    let (mut ex, mut eu, mut et) = (0.0f64, 0.0f64, 0.0f64);
+    for i in 0..tr.len() {
+        let (sn, cs) = ((w * tr.t[i]).sin(), (w * tr.t[i]).cos());
+        let want = [
+            a * sn,
+            -m1 * a * w * w * sn / k,
+            a * w * cs,
+            -m1 * a * w * w * w * cs / k,
+        ];
+        let f = -a * w * w * sn * (m1 + m2 - m1 * m2 * w * w / k);
+        let x2 = a * sn * (1.0 - m1 * w * w / k);
+        let tau = f * ((x - x2).powi(2) + h * h).sqrt() / (x - x2);
+        let (q, v, u) = (tr.q_at(i), tr.v_at(i), tr.u_at(i));
+        for (got, want) in q.iter().chain(v.iter()).zip(want) {
+            ex = ex.max((got - want).abs());
+        }
+        eu = eu.max((u[0] - f).abs()).max((u[1] - f).abs());
+        et = et.max((tr.lambda_at(i)[0] - tau).abs());
+    }
+    (ex, eu, et)
+}
+
+#[test]
+fn a_cylinder_whose_line_of_pull_turns_matches_its_flat_inverse() {
+    let s = cylinder(&cylinder_text());
+    let an = s.servo_analysis().expect("actuated").expect("realizable");
+    assert_eq!(an.realization, Realization::Tangential);
+    assert_eq!((an.differentiations.clone(), an.index), (vec![4], 5));
+    let (ex, eu, et) = cylinder_errors(&s, &s.settings);
+    let rtol = s.settings.rtol;
+    eprintln!(
+        "cylinder_cars vs flat inverse: state {ex:.2e}, u {eu:.2e}, tau {et:.2e} (rtol {rtol:.0e})"
+    );
+    assert!(ex < 20.0 * rtol, "state error {ex:.2e}");
+    assert!(eu < 20.0 * rtol, "force error {eu:.2e}");
+    assert!(et < 20.0 * rtol, "cylinder force error {et:.2e}");
+    // negative control of the pole detector below: no warning away from the pole
+    let sol = s.solve(&s.settings);
+    assert!(sol.warnings.is_empty(), "{:?}", sol.warnings);
+}
+
+#[test]
+fn the_cylinder_converges_at_rk4_order_without_projection() {
+    let s = cylinder(&cylinder_text());
+    assert_rk4_order("cylinder_cars", &s, [0.04, 0.02, 0.01], 0.2, |st| {
+        let (ex, _, et) = cylinder_errors(&s, st);
+        ex.max(et)
+    });
+}
+
+#[test]
+fn a_cylinder_map_frozen_at_its_initial_value_misses_the_cylinder_force() {
+    // Negative control of the state-dependent map: the same line of pull as numbers (its value at
+    // q0, X/sqrt(X^2 + h^2) = 0.8) gives the same motion and u but another tau (off by up to 15 %).
+    let text = cylinder_text().replace(
+        "direction = { x1 = \"(X - x1 - d)/sqrt((X - x1 - d)^2 + h^2)\", d = \"(X - x1 - d)/sqrt((X - x1 - d)^2 + h^2)\" }",
+        "direction = { x1 = 0.8, d = 0.8 }",
+    );
+    let s = cylinder(&text);
+    let (ex, eu, et) = cylinder_errors(&s, &s.settings);
+    eprintln!("cylinder_cars with H frozen at q0: state {ex:.2e}, u {eu:.2e}, tau {et:.2e}");
+    assert!(
+        ex < 1e-9 && eu < 1e-9,
+        "same motion and u: {ex:.2e} {eu:.2e}"
+    );
+    assert!(
+        et > 1e-3,
+        "a frozen map must not give the cylinder's force: {et:.2e}"
+    );
+}
+
+#[test]
+fn a_cylinder_turning_square_to_the_rail_stops_the_solve_naming_the_row() {
+    // With the pin at X = 0.05, car 2 (amplitude A (1 - m1 w^2/k) = 0.08) passes under it where
+    // x2 = X: the cylinder's horizontal reach (X - x2)/L vanishes and tau = F L/(X - x2) has a pole.
+    // The region where |b|/|b(t0)| < 1e-3 is about 4e-4 s wide, narrower than the steps: det b's
+    // sign change between output samples (every 0.01 s) reports it, and strict mode stops at the
+    // first sample after the pole with the results up to there.
+    let text = cylinder_text().replace("X = 0.4 ", "X = 0.05 ");
+    let p = |s: &Scene, n| param(s, n);
+    let loose = cylinder(&text);
+    let (m1, k, a, w, x) = (
+        p(&loose, "m1"),
+        p(&loose, "k"),
+        p(&loose, "A"),
+        p(&loose, "w"),
+        p(&loose, "X"),
+    );
+    assert_eq!(x, 0.05);
+    let t_pole = (x / (a * (1.0 - m1 * w * w / k))).asin() / w;
+    let sol = loose.solve(&loose.settings);
+    assert!(sol.code.is_success(), "{}", sol.code);
+    let seen = sol
+        .warnings
+        .iter()
+        .find(|w| w.rows == vec!["path".to_string()] && w.worst == 0.0)
+        .unwrap_or_else(|| panic!("the pole must be reported: {:?}", sol.warnings));
+    assert!(
+        seen.t_worst >= t_pole && seen.t_worst <= t_pole + 0.01 + 1e-12,
+        "reported before t = {}, pole at {t_pole}",
+        seen.t_worst
+    );
+    let strict = cylinder(&text.replace("[tolerances]", "[solver]\nstrict = true\n\n[tolerances]"));
+    let sol = strict.solve(&strict.settings);
+    match &sol.code {
+        ReturnCode::IllConditioned { t, warning } => {
+            assert!(
+                *t >= t_pole && *t <= t_pole + 0.01 + 1e-12,
+                "stopped at t = {t}, pole at {t_pole}"
+            );
+            assert_eq!(warning.rows, vec!["path".to_string()]);
+            let tr = &sol.trajectory;
+            assert!(
+                (tr.t[tr.len() - 1] - t).abs() < 1e-12,
+                "results kept up to the stop"
+            );
+        }
+        other => panic!("{other}"),
+    }
+}

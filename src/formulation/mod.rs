@@ -218,6 +218,8 @@ pub struct Diagnostics {
     pub u_norm: f64,
     /// max(|A a|, |F|, |A a - F|) (inf-norms): the terms u is computed from.
     pub u_terms: f64,
+    /// With actuators: the sign of the decoupling matrix's determinant (+1 or -1; 0 otherwise).
+    pub det_sign: f64,
 }
 
 /// Tolerances of the rank decisions.
@@ -380,6 +382,7 @@ impl<S: Scalar> FormulationWork<S> {
             row_ratio_row: 0,
             u_norm: 0.0,
             u_terms: 0.0,
+            det_sign: 0.0,
         };
         // Normalize rows: B_hat = N^-1 B, gamma_hat = N^-1 gamma.
         for i in 0..s {

@@ -243,6 +243,15 @@ fn actuators<M: Model>(
     for (name, x) in params {
         consts.define(name.clone(), *x);
     }
+    // A direction's entries may read t and the coordinates (hinge and slide joints only here, so
+    // the coordinates are the velocities' names): slots [t, q_0, ..].
+    let mut state_table = consts.clone();
+    state_table.insert("t");
+    for name in &v_names {
+        state_table.insert(name.clone());
+    }
+    let slots0: Vec<f64> = std::iter::once(p.t0).chain(p.q0.iter().copied()).collect();
+    let mut entries: Vec<crate::servo::MapEntry> = vec![];
     let mut names: Vec<String> = vec![];
     let mut columns: Vec<Vec<f64>> = vec![];
     let mut joints: Vec<usize> = vec![];
@@ -295,7 +304,30 @@ fn actuators<M: Model>(
                             ),
                         ));
                     };
-                    let value = number(src, &consts, x.get_ref(), x.span(), &f)?;
+                    let value = match x.get_ref() {
+                        Number::Value(v) => *v,
+                        // an expression of the parameters, t and the coordinates (H(t, q))
+                        Number::Expr(text) => {
+                            let e = Expr::compile(text, &state_table)
+                                .map_err(|e| src.expr_error(x.span(), &f, &e))?;
+                            let at0 = e.value::<f64>(&slots0);
+                            if !at0.is_finite() {
+                                return Err(src.error(
+                                    x.span(),
+                                    &f,
+                                    format!("is {at0} at the initial state"),
+                                ));
+                            }
+                            if !e.slots().is_empty() {
+                                entries.push(crate::servo::MapEntry {
+                                    row: d,
+                                    col: i,
+                                    expr: e,
+                                });
+                            }
+                            at0
+                        }
+                    };
                     if !value.is_finite() {
                         return Err(src.error(x.span(), &f, format!("is {value}")));
                     }
@@ -346,15 +378,21 @@ fn actuators<M: Model>(
             ),
         ));
     }
-    let act = crate::servo::Actuation::new(names.clone(), columns).map_err(|e| match e {
+    let built = if entries.is_empty() {
+        crate::servo::Actuation::new(names.clone(), columns)
+    } else {
+        crate::servo::Actuation::with_entries(names.clone(), columns, entries, p.t0, &p.q0)
+    };
+    let act = built.map_err(|e| match e {
         crate::servo::ActuationError::Dependent { column, ratio } => {
             let (span, field) = at(column);
             src.error(
                 span,
                 &field,
                 format!(
-                    "actuator `{}` is zero or a combination of the actuators before it (its part \
-                     outside theirs is {ratio:.1e} of its length): H needs independent columns",
+                    "actuator `{}` is zero or a combination of the actuators before it at the \
+                     initial state (its part outside theirs is {ratio:.1e} of its length): H needs \
+                     independent columns",
                     names[column]
                 ),
             )

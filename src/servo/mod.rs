@@ -54,18 +54,37 @@ pub const ROUNDOFF: f64 = 1e-12;
 /// round-off, about 1e-16 of their size.
 pub const DEGREE_TOL: f64 = 1e-8;
 
-/// The actuation map H (n x m, constant): column j is the generalized force of actuator j per unit
-/// tau_j, a unit vector on one joint's velocity (`joint = ...`) or a fixed direction over the
-/// velocities (`direction = {...}`, e.g. a force acting between two joints).
+/// The actuation map H (n x m): column j is the generalized force of actuator j per unit tau_j, a
+/// unit vector on one joint's velocity (`joint = ...`) or a direction over the velocities
+/// (`direction = {...}`, e.g. a force acting between two joints). A direction's entries may be
+/// expressions of t and the coordinates ([`MapEntry`]: a cable whose line of pull turns with the
+/// motion); H is then evaluated at each state, with the scalar type of the caller, so the Lie
+/// derivatives differentiate it exactly.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Actuation {
     /// Actuator names (for messages and outputs), in file order.
     pub names: Vec<String>,
-    /// The columns of H, each of length n.
+    /// The columns of H at the state the map was built at (the initial state), each of length n.
     columns: Vec<Vec<f64>>,
-    /// Orthonormal basis of range(H) (modified Gram-Schmidt), for the component of a force
-    /// outside it.
+    /// The same with the state-dependent entries set to zero (the part [`Actuation::add_force`]
+    /// does not evaluate).
+    fixed: Vec<Vec<f64>>,
+    /// The state-dependent entries.
+    entries: Vec<MapEntry>,
+    /// Orthonormal basis of range(H) at the build state (modified Gram-Schmidt), for the
+    /// component of a force outside it.
     basis: Vec<Vec<f64>>,
+}
+
+/// Entry (row, col) of H as an expression over the slots [t, q_0, .., q_{nq-1}].
+#[derive(Clone, Debug, PartialEq)]
+pub struct MapEntry {
+    /// Velocity index (row of H).
+    pub row: usize,
+    /// Actuator index (column of H).
+    pub col: usize,
+    /// The entry's expression (slot 0 is t, slot 1 + i is q_i).
+    pub expr: crate::expr::Expr,
 }
 
 /// Why a set of actuation columns is not an actuation map.
@@ -79,8 +98,45 @@ impl Actuation {
     /// Columns below this relative residual after removing the earlier columns are dependent.
     pub const DEPENDENT: f64 = 1e-10;
 
-    /// H from its columns (all of one length n, independent).
+    /// H from its constant columns (all of one length n, independent).
     pub fn new(names: Vec<String>, columns: Vec<Vec<f64>>) -> Result<Self, ActuationError> {
+        let basis = Self::orthonormal(&columns)?;
+        Ok(Actuation {
+            names,
+            fixed: columns.clone(),
+            columns,
+            entries: vec![],
+            basis,
+        })
+    }
+
+    /// H with state-dependent entries: `columns` hold the constant entries (the entries' slots are
+    /// overwritten), checked independent at (t, q).
+    pub fn with_entries(
+        names: Vec<String>,
+        columns: Vec<Vec<f64>>,
+        entries: Vec<MapEntry>,
+        t: f64,
+        q: &[f64],
+    ) -> Result<Self, ActuationError> {
+        let mut fixed = columns;
+        for e in &entries {
+            fixed[e.col][e.row] = 0.0;
+        }
+        let mut act = Actuation {
+            names,
+            columns: fixed.clone(),
+            fixed,
+            entries,
+            basis: vec![],
+        };
+        act.columns = act.columns_at(t, q);
+        act.basis = Self::orthonormal(&act.columns)?;
+        Ok(act)
+    }
+
+    /// Modified Gram-Schmidt on the columns, refusing a dependent one.
+    fn orthonormal(columns: &[Vec<f64>]) -> Result<Vec<Vec<f64>>, ActuationError> {
         let mut basis: Vec<Vec<f64>> = Vec::with_capacity(columns.len());
         for (j, c) in columns.iter().enumerate() {
             let norm = c.iter().map(|x| x * x).sum::<f64>().sqrt();
@@ -99,11 +155,7 @@ impl Actuation {
             r.iter_mut().for_each(|x| *x /= rn);
             basis.push(r);
         }
-        Ok(Actuation {
-            names,
-            columns,
-            basis,
-        })
+        Ok(basis)
     }
 
     /// Actuators on joints only: H = [e_dofs[0], e_dofs[1], ...] over n velocities.
@@ -129,34 +181,72 @@ impl Actuation {
         self.columns.is_empty()
     }
 
-    /// Column j of H.
+    /// Does H depend on the state (t, q)?
+    pub fn is_constant(&self) -> bool {
+        self.entries.is_empty()
+    }
+
+    /// Column j of H at the build state (the initial state; H itself when constant).
     pub fn column(&self, j: usize) -> &[f64] {
         &self.columns[j]
     }
 
-    /// The velocity index of actuator j when its column is a unit vector (a joint actuator).
+    /// The columns of H at (t, q).
+    pub fn columns_at(&self, t: f64, q: &[f64]) -> Vec<Vec<f64>> {
+        let mut cols = self.fixed.clone();
+        if !self.entries.is_empty() {
+            let slots = Self::slots(t, q);
+            for e in &self.entries {
+                cols[e.col][e.row] = e.expr.value(&slots);
+            }
+        }
+        cols
+    }
+
+    /// The velocity index of actuator j when its column is a constant unit vector (a joint).
     pub fn joint(&self, j: usize) -> Option<usize> {
+        if self.entries.iter().any(|e| e.col == j) {
+            return None;
+        }
         let c = &self.columns[j];
         let nz: Vec<usize> = (0..c.len()).filter(|&i| c[i] != 0.0).collect();
         (nz.len() == 1 && c[nz[0]] == 1.0).then(|| nz[0])
     }
 
-    /// out += H tau (u = H tau, the actuators' generalized force).
-    pub fn add_force<T: Scalar>(&self, tau: &[T], out: &mut [T]) {
-        for (c, &tj) in self.columns.iter().zip(tau) {
+    fn slots<T: Scalar>(t: T, q: &[T]) -> Vec<T> {
+        std::iter::once(t).chain(q.iter().copied()).collect()
+    }
+
+    /// out += H(t, q) tau (u = H tau, the actuators' generalized force).
+    pub fn add_force<T: Scalar>(&self, t: T, q: &[T], tau: &[T], out: &mut [T]) {
+        for (c, &tj) in self.fixed.iter().zip(tau) {
             for (o, &h) in out.iter_mut().zip(c) {
                 if h != 0.0 {
                     *o += tj * h;
                 }
             }
         }
+        if !self.entries.is_empty() {
+            let slots = Self::slots(t, q);
+            for e in &self.entries {
+                out[e.row] += tau[e.col] * e.expr.value(&slots);
+            }
+        }
     }
 
-    /// |x - P x| with P the orthogonal projector onto range(H): the part of x no actuator can
-    /// produce (exactly the entries on unactuated joints when every column is a joint's).
-    pub fn outside(&self, x: &[f64]) -> f64 {
+    /// |x - P x| with P the orthogonal projector onto range(H(t, q)): the part of x no actuator
+    /// can produce (exactly the entries on unactuated joints when every column is a joint's).
+    pub fn outside(&self, t: f64, q: &[f64], x: &[f64]) -> f64 {
+        let owned;
+        let basis = if self.entries.is_empty() {
+            &self.basis
+        } else {
+            // dependent columns at this state: everything outside the independent ones' span
+            owned = Self::orthonormal(&self.columns_at(t, q)).unwrap_or_default();
+            &owned
+        };
         let mut r = x.to_vec();
-        for e in &self.basis {
+        for e in basis {
             let d: f64 = r.iter().zip(e).map(|(a, b)| a * b).sum();
             for (a, b) in r.iter_mut().zip(e) {
                 *a -= d * b;
@@ -313,7 +403,7 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         let mut scratch = vec![T::zero(); n];
         self.model
             .natural_forces(&mut ws, t, q, v, out, &mut scratch);
-        self.act.add_force(tau, out);
+        self.act.add_force(t, q, tau, out);
         linalg::cholesky(&mut a, n)?;
         linalg::cholesky_solve(&a, n, out);
         Ok(())
@@ -678,12 +768,18 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         }
         let mut piv = vec![0; s];
         let rcond = linalg::lu_factor(&mut b, s, &mut piv, rank_tol)?;
+        // sign of det b = prod u_kk times the parity of the row swaps
+        let det_sign = (0..s).fold(1.0, |sg, k| {
+            let swap = if piv[k] != k { -1.0 } else { 1.0 };
+            sg * swap * re(b[(k, k)]).signum()
+        });
         linalg::lu_solve(&b, s, &piv, &mut rhs);
         Ok(Decoupled {
             tau: rhs,
             rcond,
             row_ratio: ratio,
             row,
+            det_sign,
         })
     }
 
@@ -720,7 +816,7 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         let off = (0..s)
             .map(|i| {
                 self.act
-                    .outside(&b.row(i).iter().copied().collect::<Vec<_>>())
+                    .outside(t, q, &b.row(i).iter().copied().collect::<Vec<_>>())
             })
             .fold(0.0f64, f64::max);
         if s == m && off <= 1e-12 * bnorm {
@@ -735,8 +831,7 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         }
         let mut worst = 0.0f64;
         let mut scale = 0.0f64;
-        for j in 0..m {
-            let mut col = self.act.column(j).to_vec();
+        for mut col in self.act.columns_at(t, q) {
             linalg::cholesky_solve(&a, n, &mut col);
             // Against |B_i| |A^-1 h_j|, not the products' sizes: A^-1 h_j may be round-off exactly
             // where B_i reads it (a force reaching the row's coordinates only through others).
@@ -921,6 +1016,9 @@ pub struct Decoupled<T> {
     /// Smallest |b_i| / reference over the rows, and its row.
     pub row_ratio: f64,
     pub row: usize,
+    /// Sign of det b (+1 or -1): a change between two states means b passed through singular
+    /// between them, however narrow the region where it is small.
+    pub det_sign: f64,
 }
 
 /// What [`Servo::project`] did.

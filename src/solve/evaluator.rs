@@ -50,6 +50,8 @@ pub struct Evaluator<'a, M: Model, C: Constraints, S: Scalar> {
     servo_b_norms: Vec<f64>,
     /// The structure algorithm's step, when the decoupling matrix was rank-deficient at t0.
     servo_reduction: Option<crate::servo::Reduction>,
+    /// With actuators: u = H(t, q) tau at the last state.
+    servo_u: Vec<S>,
     /// The constraint jet reads the model's forward passes ([`Model::tree_sweep`]); off, it runs
     /// its own (the plain computation the tests and the bench compare with).
     share_sweep: bool,
@@ -76,6 +78,7 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
             servo_degrees: None,
             servo_b_norms: vec![],
             servo_reduction: None,
+            servo_u: vec![z; nv],
             share_sweep: true,
         }
     }
@@ -248,6 +251,8 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
         {
             return Err(FormulationError::NonFinite);
         }
+        self.servo_u.iter_mut().for_each(|x| *x = S::zero());
+        act.add_force(t, q, &self.lambda[..act.len()], &mut self.servo_u);
         let u_norm = self.lambda.iter().fold(0.0f64, |m, x| m.max(re(*x).abs()));
         let f_norm = self.force.iter().fold(0.0f64, |m, x| m.max(re(*x).abs()));
         self.diag = Diagnostics {
@@ -260,6 +265,7 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
             row_ratio_row: dec.row,
             u_norm,
             u_terms: u_norm.max(f_norm),
+            det_sign: dec.det_sign,
         };
         Ok(())
     }
@@ -269,10 +275,11 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
         for x in out.iter_mut() {
             *x = S::zero();
         }
-        if let (Some(act), Some(_)) = (self.cons.actuation(), &self.servo_degrees) {
-            // u = H tau (the actuators' generalized forces); no system rows with actuators.
+        if self.cons.actuation().is_some() && self.servo_degrees.is_some() {
+            // u = H(t, q) tau (the actuators' generalized forces, kept by the last evaluation);
+            // no system rows with actuators.
             if role == Role::Programme {
-                act.add_force(&self.lambda[..act.len()], out);
+                out.copy_from_slice(&self.servo_u);
             }
             return;
         }

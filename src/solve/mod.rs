@@ -187,6 +187,13 @@ impl std::fmt::Display for Warning {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let rows = quoted(&self.rows);
         match self.kind {
+            WarningKind::RowGradient if self.worst == 0.0 => write!(
+                f,
+                "the gradient of row {rows} passed through zero before t = {:.6} (first seen at \
+                 t = {:.6}, threshold {:.0e}): the programme is singular there, dv/dt and u have a \
+                 pole",
+                self.t_worst, self.t, self.threshold
+            ),
             WarningKind::RowGradient => write!(
                 f,
                 "the gradient of row {rows} fell to {:.2e} of its initial norm at t = {:.6} \

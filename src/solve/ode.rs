@@ -114,6 +114,8 @@ pub(crate) struct MotionOde<'a, M: Model, C: Constraints> {
     pub warnings: Vec<Warning>,
     /// Smallest singular value of the t0-scaled B at t0 (s >= 2).
     sigma0: Option<f64>,
+    /// With actuators: the decoupling determinant's sign at the last emitted sample (0 before).
+    det_sign: f64,
     /// Largest |u| so far above round-off of its terms (the scale of the cancellation test).
     u_scale: f64,
     gram: DMatrix<f64>,
@@ -305,6 +307,7 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
             initial_correction,
             warnings: vec![],
             sigma0: None,
+            det_sign: 0.0,
             u_scale: 0.0,
             gram: DMatrix::zeros(s, s),
             eigv: DMatrix::zeros(s, s),
@@ -438,7 +441,26 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
         self.res = hbuf;
         self.out_index += 1;
         self.last_sample_t = t;
+        self.decoupling_sign(t)?;
         self.conditioning(t)
+    }
+
+    /// With actuators: det b changing sign between two samples means the decoupling matrix passed
+    /// through singular between them (tau has a pole there), however narrow the region where the
+    /// per-evaluation row test would see it: a row_gradient warning with value 0.
+    fn decoupling_sign(&mut self, t: f64) -> Result<(), Stop> {
+        let sign = self.ev.diag.det_sign;
+        if sign == 0.0 {
+            return Ok(());
+        }
+        let before = std::mem::replace(&mut self.det_sign, sign);
+        if before != 0.0 && before != sign {
+            let rows = (0..self.levels.len()).collect();
+            let threshold = self.settings.conditioning.row_gradient;
+            let k = self.raise(WarningKind::RowGradient, rows, t, 0.0, threshold);
+            self.strict_stop(k)?;
+        }
+        Ok(())
     }
 
     /// Conditioning monitor, part 2 (every output sample): the smallest singular value of
