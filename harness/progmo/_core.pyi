@@ -194,7 +194,13 @@ class Scene:
         `direction`; empty: the ideal realization."""
     @property
     def actuation_map(self) -> F64 | None:
-        """The actuation map H (n x m, u = H tau); None without actuators."""
+        """The actuation map H (n x m, u = H tau) at the initial state (H itself when constant);
+        None without actuators."""
+    @property
+    def actuation_varies(self) -> bool:
+        """Does H depend on the state (a `direction` of expressions of t and the coordinates)?"""
+    def actuation_map_at(self, t: float, q: F64) -> F64 | None:
+        """H(t, q) (n x m); None without actuators."""
     @property
     def expected_not_checked(self) -> list[tuple[str, str]]:
         """[checks] not_checked of the scene: (simulator, reason)."""

@@ -325,12 +325,19 @@ def _solve_reference(c: _Check, h: float):
     if len(t) != 2 * n + 1 or np.abs(t - (scene.t0 + 0.5 * h * np.arange(2 * n + 1))).max() > 1e-9:
         raise _Stop("error", f"solver output grid does not match the stages of h = {h:g} "
                              f"({len(t)} outputs for {2 * n + 1} stage times)")
-    u = np.array(sol.u)
+    u_model = np.array(sol.u)
+    u = u_model
     if c.corrupt_u is not None:
-        u = np.array([c.corrupt_u(tk, uk) for tk, uk in zip(t, u)])
-    return Reference(t, np.asarray(sol.q), np.asarray(sol.v), np.asarray(sol.a), u,
-                     np.asarray(sol.residuals), h, n, scene.t0, _time.perf_counter() - t0s,
-                     np.asarray(sol.lambda_), np.asarray(sol.residual_rates))
+        u = np.array([c.corrupt_u(tk, uk) for tk, uk in zip(t, u_model)])
+    lam = np.asarray(sol.lambda_)
+    ref = Reference(t, np.asarray(sol.q), np.asarray(sol.v), np.asarray(sol.a), u,
+                    np.asarray(sol.residuals), h, n, scene.t0, _time.perf_counter() - t0s,
+                    lam, np.asarray(sol.residual_rates))
+    if scene.actuation_varies:  # H(t, q): the replay applies H at the simulator's state
+        m = len(scene.actuators)
+        ref.actuation = lambda tk, qk: np.asarray(scene.actuation_map_at(tk, qk))
+        ref.tau, ref.u_model = lam[:, :m], u_model
+    return ref
 
 
 def _replay_of(c: _Check, ref):
@@ -523,7 +530,9 @@ def _replay(c: _Check) -> None:
         res.info["replay_closure_residual"] = float(np.abs(R[:, ci]).max())
     res.metrics["replay_deviation"] = float(dev.max())
     if scene.actuators:  # servo-constraints: the force fed to the simulator acts on actuated joints only
-        res.metrics["replay_unactuated"] = unactuated_force(ref.u, scene.actuation_map)
+        H = (np.array([scene.actuation_map_at(tk, qk) for tk, qk in zip(ref.t, ref.q)])
+             if scene.actuation_varies else scene.actuation_map)
+        res.metrics["replay_unactuated"] = unactuated_force(ref.u, H)
     g = growth_rate(rp.t, dev)
     res.info["replay_growth_rate"] = g
     if math.isfinite(g) and g * c.horizon > math.log(100):
@@ -567,11 +576,14 @@ def _replay(c: _Check) -> None:
 def unactuated_force(u: np.ndarray, H: np.ndarray) -> float:
     """The largest part of u(t) no actuator can produce, relative to max |u| (0 when u = 0): on
     joint actuators (unit columns of H) max |u_j| over the joints j none drives, read exactly; else
-    the component of u outside range(H), |u - Q Q^T u| with Q an orthonormal basis of range(H)."""
+    the component of u outside range(H), |u - Q Q^T u| with Q an orthonormal basis of range(H).
+    H is one n x m map, or one per sample of u (K x n x m) for a state-dependent map."""
     u, H = np.asarray(u), np.asarray(H)
     scale = float(np.abs(u).max()) if u.size else 0.0
     if scale == 0.0:
         return 0.0
+    if H.ndim == 3:
+        return max(unactuated_force(uk[None, :], Hk) * float(np.abs(uk).max()) for uk, Hk in zip(u, H)) / scale
     unit = all(np.count_nonzero(c) == 1 and c[np.flatnonzero(c)[0]] == 1.0 for c in H.T)
     if unit:
         free = [j for j in range(u.shape[1]) if not H[j].any()]

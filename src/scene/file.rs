@@ -569,9 +569,9 @@ pub struct RowFile {
     pub expr: Spanned<String>,
 }
 
-/// One actuator: a generalized force on one hinge or slide joint (`joint`), or along a fixed
-/// direction over the velocities (`direction`, e.g. a force between two joints); exactly one of the
-/// two.
+/// One actuator: a generalized force on one hinge or slide joint (`joint`), or along a direction
+/// over the velocities (`direction`, e.g. a force between two joints, possibly turning with the
+/// coordinates); exactly one of the two.
 #[derive(Clone, Debug, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 #[schemars(rename = "actuator")]
@@ -580,8 +580,8 @@ pub struct ActuatorFile {
     #[serde(default)]
     #[schemars(with = "Option<Identifier>")]
     pub joint: Option<Spanned<String>>,
-    /// The generalized force per unit tau by velocity name (numbers or parameter expressions);
-    /// velocities not listed get 0. Needs `name`.
+    /// The generalized force per unit tau by velocity name (numbers, or expressions of the
+    /// parameters, t and the coordinates: H(t, q)); velocities not listed get 0. Needs `name`.
     #[serde(default)]
     #[schemars(with = "Option<BTreeMap<String, Number>>")]
     pub direction: Option<Spanned<BTreeMap<String, Spanned<Number>>>>,

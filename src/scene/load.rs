@@ -308,6 +308,19 @@ fn actuators<M: Model>(
                         Number::Value(v) => *v,
                         // an expression of the parameters, t and the coordinates (H(t, q))
                         Number::Expr(text) => {
+                            if let Ok(names) = expr::referenced_names(text) {
+                                if let Some(bad) = names.iter().find(|n| n.ends_with('\'')) {
+                                    return Err(src.error(
+                                        x.span(),
+                                        &f,
+                                        format!(
+                                            "`{bad}` is a velocity or acceleration: a direction \
+                                             may read the parameters, t and the coordinates \
+                                             (H(t, q))"
+                                        ),
+                                    ));
+                                }
+                            }
                             let e = Expr::compile(text, &state_table)
                                 .map_err(|e| src.expr_error(x.span(), &f, &e))?;
                             let at0 = e.value::<f64>(&slots0);

@@ -80,3 +80,56 @@ def test_the_overhead_crane_passes_with_trolley_and_hoist_forces_only(sim):
     assert r.status == "pass", (r.reason, r.metrics)
     assert r.metrics["replay_unactuated"] == 0.0
     assert r.metrics["replay_deviation"] < 1e-9
+
+
+def test_a_state_dependent_map_is_evaluated_at_the_state():
+    # cylinder_cars: H(q) = (X - x1 - d)/L (1, 1), L = sqrt((X - x1 - d)^2 + h^2), X = 0.4, h = 0.3.
+    s = Scene(str(scene_file("cylinder_cars")))
+    assert s.actuation_varies and s.actuators == [("cylinder", None)]
+    q0 = np.zeros(2)
+    assert np.array_equal(s.actuation_map_at(0.0, q0), s.actuation_map)
+    assert np.allclose(s.actuation_map, [[0.8], [0.8]], rtol=0, atol=1e-15)
+    q = np.array([0.1, 0.05])
+    c = (0.4 - 0.15) / np.hypot(0.4 - 0.15, 0.3)
+    assert np.allclose(s.actuation_map_at(1.0, q), [[c], [c]], rtol=0, atol=1e-15)
+    assert not Scene(str(scene_file("thruster_cars"))).actuation_varies
+    assert Scene(str(scene_file("double_pendulum"))).actuation_map_at(0.0, np.zeros(2)) is None
+    with pytest.raises(ValueError, match="q needs 2 entries"):
+        s.actuation_map_at(0.0, np.zeros(3))
+
+
+def test_unactuated_force_takes_one_map_per_sample():
+    # a direction turning with the samples: on it at every sample is 0, off it at one sample is not
+    H = np.array([[[1.0], [0.0]], [[0.0], [1.0]]])
+    assert unactuated_force(np.array([[2.0, 0.0], [0.0, -4.0]]), H) == 0.0
+    assert unactuated_force(np.array([[2.0, 0.0], [1e-3, -4.0]]), H) == pytest.approx(2.5e-4)
+
+
+@pytest.mark.parametrize("sim", BOTH)
+def test_a_cylinder_map_is_applied_at_the_simulators_own_state(sim, monkeypatch):
+    # cylinder_cars: the replay applies H(t, q_sim) tau(t) at every RK4 stage (counted here), stays
+    # on the programme, and a force off the cylinder's line (1e-6 N on d alone) fails the check.
+    from progmo.simulators import replay
+
+    calls = []
+    plain = replay.Reference.force_at
+
+    def counted(self, time, q):
+        if self.actuation is not None:
+            calls.append(np.array(q))
+        return plain(self, time, q)
+
+    monkeypatch.setattr(replay.Reference, "force_at", counted)
+    path = str(scene_file("cylinder_cars"))
+    r, _ = _run(path, sim, CheckOptions(horizon=1.0, step=1e-3))
+    assert r.status == "pass", (r.reason, r.metrics)
+    assert r.metrics["replay_unactuated"] < 1e-14 and r.metrics["replay_deviation"] < 1e-10
+    assert len(calls) >= 4 * 1000, len(calls)  # every stage of 1000 steps, at the stage's state
+    assert len({tuple(q) for q in calls}) > 1000
+    calls.clear()
+    d = Scene(path).v_names.index("d")
+    push = np.zeros(2)
+    push[d] = 1e-6
+    r, _ = _run(path, sim, CheckOptions(horizon=1.0, step=1e-3), corrupt_u=lambda t, u: u + push)
+    assert r.status == "fail", (r.reason, r.metrics)
+    assert "replay_unactuated" in r.reason

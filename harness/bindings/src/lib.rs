@@ -461,13 +461,42 @@ impl PyScene {
             .unwrap_or_default()
     }
 
-    /// The actuation map H (n x m; u = H tau), or None without actuators.
+    /// The actuation map H (n x m; u = H tau) at the initial state (H itself when constant), or
+    /// None without actuators.
     #[getter]
     fn actuation_map<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray2<f64>>> {
         self.actuation().map(|a| {
             let n = self.scene.v_names().len();
             Array2::from_shape_fn((n, a.len()), |(i, j)| a.column(j)[i]).into_pyarray(py)
         })
+    }
+
+    /// Does the actuation map depend on the state (a `direction` written as expressions of t and
+    /// the coordinates)? False without actuators.
+    #[getter]
+    fn actuation_varies(&self) -> bool {
+        self.actuation().is_some_and(|a| !a.is_constant())
+    }
+
+    /// H(t, q) (n x m), or None without actuators.
+    fn actuation_map_at<'py>(
+        &self,
+        py: Python<'py>,
+        t: f64,
+        q: PyReadonlyArray1<'py, f64>,
+    ) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
+        let q = q.as_slice()?.to_vec();
+        finite("t", [&t])?;
+        finite("q", &q)?;
+        let nq = self.scene.q_names().len();
+        if q.len() != nq {
+            return Err(PyValueError::new_err(format!("q needs {nq} entries")));
+        }
+        Ok(self.actuation().map(|a| {
+            let n = self.scene.v_names().len();
+            let cols = a.columns_at(t, &q);
+            Array2::from_shape_fn((n, a.len()), |(i, j)| cols[j][i]).into_pyarray(py)
+        }))
     }
 
     /// `[checks] not_checked` of the scene: {simulator: reason}.

@@ -199,7 +199,9 @@ class MujocoBackend:
         cur_q = [ref.q[0]]
 
         def control(model, data):
-            u = ref.u_at(data.time)
+            # a state-dependent actuation map is evaluated at this RK4 stage's own state
+            qs = cm.q_from_sim(data.qpos) if ref.actuation is not None else cur_q[0]
+            u = ref.force_at(data.time, qs)
             data.qfrc_applied[:] = cm.f_to_sim(cur_q[0], u) + self.harness() + self.expression(data.time)
 
         self._set(t0, ref.q[0], ref.v[0])

@@ -267,7 +267,7 @@ class PinocchioBackend:
     def _acc(self, t, qs, vs, ref):
         q = self.cm.q_from_sim(qs)
         fext, fc = self.expression(t, qs, vs)
-        tau = self.cm.f_to_sim(q, ref.u_at(t)) + self.harness(qs, vs) + fc
+        tau = self.cm.f_to_sim(q, ref.force_at(t, q)) + self.harness(qs, vs) + fc
         if len(self.cmodels):
             if fext is not None:  # point forces by Pinocchio's own mapping J^T f (rnea difference)
                 z = np.zeros(self.model.nv)

@@ -14,6 +14,7 @@ Conventions (see ``src/export/mod.rs`` and ``shared/notes/simulators.md``):
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -146,16 +147,36 @@ class Reference:
     #: multipliers and dg/dt of the rows (recordings; None when not kept)
     lam: np.ndarray | None = None
     residual_rate: np.ndarray | None = None
+    #: a state-dependent actuation map: H(t, q) (n x m) and tau at every stage time; the replay
+    #: then applies H at the simulator's own state, u_sim = H(t, q_sim) tau(t) (plus u - u_model,
+    #: a deliberate corruption of u by a negative control)
+    actuation: Callable[[float, np.ndarray], np.ndarray] | None = None
+    tau: np.ndarray | None = None
+    u_model: np.ndarray | None = None
+
+    def _at(self, x: np.ndarray, time: float) -> np.ndarray:
+        """x at a stage time (exact grid value; linear interpolation off the grid)."""
+        s = (time - self.t0) / (0.5 * self.h)
+        k = int(round(s))
+        if abs(s - k) < 1e-6 and 0 <= k < len(self.t):
+            return x[k]
+        k = min(max(int(np.floor(s)), 0), len(self.t) - 2)
+        f = s - k
+        return (1 - f) * x[k] + f * x[k + 1]
 
     def u_at(self, time: float) -> np.ndarray:
         """u at a stage time (exact grid value; linear interpolation off the grid)."""
-        x = (time - self.t0) / (0.5 * self.h)
-        k = int(round(x))
-        if abs(x - k) < 1e-6 and 0 <= k < len(self.t):
-            return self.u[k]
-        k = min(max(int(np.floor(x)), 0), len(self.t) - 2)
-        s = x - k
-        return (1 - s) * self.u[k] + s * self.u[k + 1]
+        return self._at(self.u, time)
+
+    def force_at(self, time: float, q: np.ndarray) -> np.ndarray:
+        """The generalized force to apply at a stage time and the simulator's state q (ours): u(t),
+        or with a state-dependent actuation map H(t, q) tau(t)."""
+        if self.actuation is None or self.tau is None:
+            return self.u_at(time)
+        f = self.actuation(time, q) @ self._at(self.tau, time)
+        if self.u_model is not None:
+            f = f + self._at(self.u, time) - self._at(self.u_model, time)
+        return f
 
 
 @dataclass
