@@ -170,8 +170,10 @@ class Run:
         segmented = sorted({f"{r.scene} ({r.info['replay_segments']:g})" for r in self.results
                             if r.info.get("replay_segments", 1) > 1 and r.status in ("pass", "fail")})
         if segmented:
-            rest.append("unstable, replayed over the whole span in segments restarted from the solver: "
-                        + ", ".join(segmented))
+            from .checks import SEGMENT_GROWTH
+
+            rest.append(f"replayed in segments restarted from the solver (open-loop growth beyond "
+                        f"x{SEGMENT_GROWTH:g}): " + ", ".join(segmented))
         warned = sorted({r.scene for r in self.results if r.warnings})
         if warned:
             rest.append("solver conditioning warnings: " + ", ".join(warned))

@@ -167,7 +167,7 @@ def test_conditioning_warnings_and_checked_span_reach_the_report(tmp_path):
     md = (tmp_path / "o" / "summary.md").read_text()
     assert "## Solver conditioning warnings" in md and "`precession`" in md
     assert "| chain_8 |" in md and "2 s" in md and "of 2 s" not in md
-    assert "replayed over the whole span in segments restarted from the solver: chain_8 (" in p.stdout
+    assert "replayed in segments restarted from the solver (open-loop growth beyond x1000): chain_8 (3)" in p.stdout
     assert "shortened span" not in p.stdout
     assert "solver conditioning warnings: precession_degenerate" in p.stdout
     html = (tmp_path / "o" / "report.html").read_text()
