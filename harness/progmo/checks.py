@@ -16,7 +16,8 @@ A check is a sequence of small steps over a typed back-end (``simulators.Backend
    system constraints) -> ``not_checked``; every force the back-end must apply itself is in the
    report, and a back-end that cannot apply one says so (``Unsupported``) -> ``not_checked``.
 3. **Budgets**: every metric gets one, the scene's ``[tolerances]`` entry or the documented default
-   of :func:`default_budgets`; ``replay_horizon`` shortens the replayed span (recorded in ``span``).
+   of :func:`default_budgets`; the replayed span is the scene's whole span (``span``; only the
+   ``horizon`` option shortens it, and the span then says so).
 4. **Reference solve** at every RK4 stage time (output_dt = h/2) with rtol <= 1e-12; the replay step
    from ``replay_step`` or a convergence check. Its conditioning warnings are kept.
 5. **Model parity** at ``options.samples`` states: the exported model's mass matrix and every
@@ -25,9 +26,12 @@ A check is a sequence of small steps over a typed back-end (``simulators.Backend
    ``parity_bias``. **Instantaneous u** from the simulator's own constrained/inverse dynamics:
    ``instant_u``. When parity breaches its budget the replay is not run: a model mismatch must not
    be blamed on the dynamics.
-6. **Open-loop replay** of the solver's u(t): ``replay_residual`` (max |row| of the core's own
-   evaluator on the replayed states) and ``replay_deviation`` (max |dq|, |dv| against the solver,
-   quaternions up to sign); the growth rate of the deviation is ``info``, not judged. With
+6. **Open-loop replay** of the solver's u(t) over the whole span, in segments when the dynamics
+   amplify errors (:func:`_probe`, :func:`_segments`): each segment restarts from the solver's state
+   and is judged; ``replay_residual`` (max |row| of the core's own evaluator on the replayed states)
+   and ``replay_deviation`` (max |dq|, |dv| against the solver, quaternions up to sign) are the
+   worst over the segments. The continuous open-loop replay, its growth rate and the finite-time
+   Lyapunov prediction of that growth are ``info``, not judged. With
    ``[[actuators]]`` also ``replay_unactuated``: the part of the replayed force no actuator can
    produce (outside range(H); on joint actuators the force on the other joints), relative to
    max |u| (:func:`unactuated_force`).
@@ -101,10 +105,10 @@ def default_budgets(settings: dict[str, Any]) -> dict[str, tuple[float, str]]:
                             "condition of B)"),
         "replay_residual": (1e-6, "default (cross-simulator): programme rows on the open-loop replay at "
                                   "the convergence-checked RK4 step (catalog 5e-14 .. 6e-9); an unstable "
-                                  "programme needs a replay_horizon and its own budget"),
+                                  "programme needs its own budget"),
         "replay_deviation": (1e-6, "default (cross-simulator): max |dq|, |dv| of the replay from the "
-                                   "solver (catalog 4e-13 .. 2e-9); an unstable programme needs a "
-                                   "replay_horizon and its own budget"),
+                                   "solver (catalog 4e-13 .. 2e-9); an unstable programme needs its "
+                                   "own budget"),
         "parity_closure": (1e-11, "default (algebraic identity): the simulator's closure Jacobian "
                                   "rows vs ours, both ways, as relative distances to the other's row "
                                   "space (frame and sign free; catalog <= 2e-15)"),
@@ -297,13 +301,29 @@ def _budgets(c: _Check) -> None:
     metrics = BUDGETED + (CLOSURE_BUDGETED if closures else ()) + (
         ACTUATOR_BUDGETED if c.scene.actuators else ())
     c.res.budgets = budgets_for(c.tol, dict(c.scene.settings), c.simulator, metrics)
+    if "replay_horizon" in c.tol:
+        raise _Stop("error", _refused_horizon(c.path))
     full = c.scene.t1 - c.scene.t0
-    horizon = c.options.horizon or (c.tol["replay_horizon"][0] if "replay_horizon" in c.tol else full)
-    c.horizon = min(horizon, full)
+    c.horizon = min(c.options.horizon or full, full)
     c.res.span = [c.horizon, full]
     if c.horizon < full:
-        why = c.tol["replay_horizon"][1] if "replay_horizon" in c.tol and not c.options.horizon else "given by the options"
-        c.res.notes.append(f"replay horizon {c.horizon:g} s of {full:g} s ({why})")
+        c.res.notes.append(f"replay horizon {c.horizon:g} s of {full:g} s (given by the options)")
+
+
+def _refused_horizon(path: str) -> str:
+    """The located error of a scene that still sets ``[tolerances] replay_horizon``."""
+    line = col = 0
+    try:
+        for i, text in enumerate(open(path, encoding="utf-8").read().splitlines(), 1):
+            if text.lstrip().startswith("replay_horizon"):
+                line, col = i, text.index("replay_horizon") + 1
+                break
+    except OSError:
+        pass
+    where = f"{path}:{line}:{col}: " if line else f"{path}: "
+    return (where + "tolerances.replay_horizon is not accepted: the segmented replay covers the whole "
+            "span (segments restart from the solver's state; their length follows from the "
+            "dynamics' growth, checks._segments); remove the entry")
 
 
 def _solve_reference(c: _Check, h: float):
@@ -341,8 +361,7 @@ def _solve_reference(c: _Check, h: float):
 
 
 def _replay_of(c: _Check, ref):
-    fe = c.frame_every if c.frame_every >= 0 else max(1, -(-ref.steps // 1000))  # -1: <= ~1000 samples
-    return c.backend.replay(ref, fe)
+    return c.backend.replay(ref, _frame_every(c, ref))
 
 
 def _replay_residual(c: _Check, ref, rp) -> np.ndarray:
@@ -494,52 +513,216 @@ def row_space_distance(ours: np.ndarray, sim: np.ndarray) -> float:
 Q_OVERLAY = 4
 
 
-def _replay(c: _Check) -> None:
-    """Open-loop replay of u in the simulator, its metrics and the verdict."""
+#: segmented replay (:func:`_segments`): within one segment the linearized dynamics along the
+#: reference may amplify a deviation at most this much (:func:`_probe`); a programme whose whole
+#: span stays below it is replayed in one piece, as a stable one always was
+SEGMENT_GROWTH = 1e3
+#: the Lyapunov probe (:func:`_probe`): chunks of the span, size of the perturbation (max-norm over
+#: q and v: well above the replay's own error once it cancels, well inside the linear range)
+PROBE_CHUNKS = 16
+PROBE_EPS = 1e-7
+#: the continuous open-loop replay says something about the forces while its deviation from the
+#: solver stays below this (m, rad; m/s, rad/s); beyond it the motion is no longer near the reference
+OPEN_LOOP_INFORMATIVE = 1e-3
+
+
+@dataclass
+class Probe:
+    """Finite-time Lyapunov estimate of the replay's flow along the reference (:func:`_probe`)."""
+
+    k: np.ndarray  # chunk boundaries (replay step indices)
+    t: np.ndarray  # their times
+    inc: np.ndarray  # ln of each chunk's amplification (len(k) - 1)
+
+    @property
+    def growth(self) -> np.ndarray:
+        """Lambda at the boundaries (Lambda[0] = 0): ln of the amplification from the start."""
+        return np.concatenate([[0.0], np.cumsum(self.inc)])
+
+
+def _frame_every(c: _Check, ref) -> int:
+    return c.frame_every if c.frame_every >= 0 else max(1, -(-ref.steps // 1000))  # -1: <= ~1000 samples
+
+
+def _probe(c: _Check, base, base_dev: np.ndarray) -> Probe:
+    """How much the simulator's own flow under u amplifies a small deviation along the reference,
+    by finite differences (Benettin's method): the span is cut into PROBE_CHUNKS chunks; on each the
+    simulator runs from a state x_a and from x_a + eps d (max-norm eps; quaternions renormalized),
+    both under the same u, and ln(|dx_b| / |dx_a|) is the chunk's growth; dx_b / |dx_b| is the next
+    chunk's direction d (it turns into the most amplified one; the first is random, fixed seed).
+    x_a is the continuous open-loop replay's state while it stays within OPEN_LOOP_INFORMATIVE of
+    the solver (its own run is then the unperturbed one), else the solver's state with a run of the
+    chunk from it. The cumulative Lambda(t) predicts that a deviation at s has grown by about
+    exp(Lambda(t) - Lambda(s)) at t; Lambda(T) / T is the finite-time Lyapunov exponent."""
     from .simulators import BlowUp
-    from .simulators.replay import downsample, growth_rate, quat_aware_diff
+
+    ref, be, cm = c.ref, c.backend, c.backend.cm
+    n, nq = ref.steps, ref.q.shape[1]
+    ks = np.unique(np.linspace(0, n, min(PROBE_CHUNKS, n) + 1).round().astype(int))
+    rng = np.random.default_rng(0)
+    d = rng.standard_normal(nq + ref.v.shape[1])
+    inc: list[float] = []  # ln amplification per chunk (inf: the perturbed run blew up; nan: both)
+    for a, b in zip(ks[:-1], ks[1:]):
+        if base is not None and len(base.t) > b and not (base_dev[: a + 1].max() > OPEN_LOOP_INFORMATIVE):
+            qa, va, qb, vb = base.q[a], base.v[a], base.q[b], base.v[b]
+        else:
+            qa, va = ref.q[2 * a], ref.v[2 * a]
+            try:
+                rb = be.replay(ref, 0, int(a), int(b))
+                qb, vb = rb.q[-1], rb.v[-1]
+            except BlowUp:  # the forces themselves blow up: no growth to measure (the replay fails)
+                inc.append(math.nan)
+                continue
+        dn = PROBE_EPS * d / np.abs(d).max()
+        qp, vp = qa + dn[:nq], va + dn[nq:]
+        for g in cm.quats:
+            qp[g] /= np.linalg.norm(qp[g])
+        dx0 = max(float(np.abs(qp - qa).max()), float(np.abs(vp - va).max()))
+        try:
+            rp = be.replay(ref, 0, int(a), int(b), x0=(qp, vp))
+        except BlowUp:
+            inc.append(math.inf)
+            continue
+        dx = np.concatenate([rp.q[-1] - qb, rp.v[-1] - vb])
+        dx1 = float(np.abs(dx).max())
+        inc.append(math.log(dx1 / dx0) if dx1 > 0 and dx0 > 0 else -math.inf)
+        if dx1 > 0 and np.all(np.isfinite(dx)):
+            d = dx
+    return Probe(ks, ref.t[2 * ks], np.array(inc))
+
+
+def _segments(p: Probe) -> tuple[list[tuple[int, int]], float]:
+    """Cut the span at the probe's chunk boundaries into the fewest segments, from the start on,
+    within which the predicted amplification max_{s <= t} exp(Lambda(t) - Lambda(s)) stays below
+    SEGMENT_GROWTH (a chunk above it alone is a segment of its own). Returns the segments (replay
+    step indices) and the largest predicted ln-amplification within one (Kadane's maximum sum of
+    consecutive chunk growths)."""
+    lim = math.log(SEGMENT_GROWTH)
+    inc, k = p.inc, p.k
+    segs: list[tuple[int, int]] = []
+    s0, cur, worst, most = 0, 0.0, 0.0, 0.0
+    for i, gi in enumerate(inc):  # chunk i: steps k[i] .. k[i + 1]
+        gi = 0.0 if math.isnan(gi) else float(gi)  # unmeasured (the unperturbed run blew up): no cut
+        c2 = max(cur, 0.0) + gi
+        w2 = max(worst, c2)
+        if w2 > lim and i > s0:  # close the segment before chunk i
+            segs.append((int(k[s0]), int(k[i])))
+            most = max(most, worst)
+            s0, c2, w2 = i, gi, max(0.0, gi)
+        cur, worst = c2, w2
+    segs.append((int(k[s0]), int(k[-1])))
+    return segs, max(most, worst)
+
+
+def _measure(c: _Check, rp, start: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The programme rows (R), their max (per sample) and the deviation from the solver of a replay
+    whose first sample is replay step ``start``."""
+    from .simulators.replay import quat_aware_diff
+
+    ref = c.ref
+    R = _replay_residual(c, ref, rp)
+    rabs = np.abs(R).max(axis=1) if R.shape[1] else np.zeros(len(rp.t))
+    rq, rv = ref.q[::2][start: start + len(rp.t)], ref.v[::2][start: start + len(rp.t)]
+    dev = np.maximum(quat_aware_diff(c.backend.cm, rp.q, rq).max(axis=1), np.abs(rp.v - rv).max(axis=1))
+    return R, rabs, dev
+
+
+def _joined(parts: list) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
+    """One replay of the segments, one sample per step: a segment's end is kept (the evidence) and
+    the next segment's restart at the solver's state left out (it is judged all the same)."""
+    from .simulators.replay import Replay
+
+    rps = [p[1] for p in parts]
+    cut = [0] + [1] * (len(parts) - 1)
+    cat = lambda xs: np.concatenate([x[k:] for x, k in zip(xs, cut)])  # noqa: E731
+    frames = list(rps[0].frames)
+    for rp in rps[1:]:
+        frames += [f for f in rp.frames if f[0] > frames[-1][0]] if frames else list(rp.frames)
+    joined = Replay(cat([r.t for r in rps]), cat([r.q for r in rps]), cat([r.v for r in rps]),
+                    cat([r.a for r in rps]), frames, rps[0].frame_every)
+    return joined, cat([p[2] for p in parts]), cat([p[3] for p in parts]), cat([p[4] for p in parts])
+
+
+def _replay(c: _Check) -> None:
+    """Open-loop replay of u in the simulator over the whole span, in segments where the dynamics
+    amplify errors (each restarted from the solver's state and judged), its metrics and the verdict;
+    the continuous replay and the Lyapunov prediction of its growth as info."""
+    from .simulators import BlowUp
+    from .simulators.replay import downsample
 
     scene, ref, be, res = c.scene, c.ref, c.backend, c.res
     t0r = _time.perf_counter()
-    blowup: BlowUp | None = None
+    fe = _frame_every(c, ref)
+    # the continuous open-loop replay: judged when the span is one segment, else information
+    cont_blowup: BlowUp | None = None
     try:
-        rp = _replay_of(c, ref)
+        cont = be.replay(ref, fe)
     except BlowUp as e:
-        # Keep the evidence: judge the replay up to its last finite sample, and report the blow-up
-        # as a breach with its time and quantity (a failure of the forces, not of the check).
-        if e.partial is None or len(e.partial.t) < 2:
-            res.breaches = [Breach("replay_blowup", e.value, e.limit, e.time)]
-            raise _Stop("fail", f"{c.simulator} replay: {e}") from None
-        blowup, rp = e, e.partial
+        cont_blowup, cont = e, e.partial
+    if cont is not None and len(cont.t) < 1:
+        cont = None
+    cont_m = _measure(c, cont, 0) if cont is not None else None
+    probe = _probe(c, cont, cont_m[2] if cont_m is not None else np.zeros(0))
+    segs, most = _segments(probe)
+    res.info["replay_segments"] = float(len(segs))
+    res.info["segment_amplification"] = math.exp(most)  # predicted, the largest within one segment
+    span = c.horizon
+    lam = float(probe.growth[-1]) / span if span > 0 else math.nan
+    res.info["lyapunov_exponent"] = lam
+    # parts: (start step, replay, R, rabs, dev, blow-up)
+    parts: list = []
+    if len(segs) == 1:
+        if cont is None or len(cont.t) < 2:
+            first = cont_blowup
+            assert first is not None
+            res.breaches = [Breach("replay_blowup", first.value, first.limit, first.time)]
+            raise _Stop("fail", f"{c.simulator} replay: {first}") from None
+        assert cont_m is not None
+        parts.append((0, cont, *cont_m, cont_blowup))
+    else:
+        for a, b in segs:
+            try:
+                rp, blow = be.replay(ref, fe, a, b), None
+            except BlowUp as e:
+                rp, blow = e.partial, e
+            if rp is None or len(rp.t) < 2:
+                if not parts:
+                    assert blow is not None
+                    res.breaches = [Breach("replay_blowup", blow.value, blow.limit, blow.time)]
+                    raise _Stop("fail", f"{c.simulator} replay (segment 1 of {len(segs)}): {blow}") from None
+                parts[-1] = (*parts[-1][:5], blow)
+                break
+            parts.append((a, rp, *_measure(c, rp, a), blow))
+            if blow is not None:
+                break
+    blowup = parts[-1][5]
+    rp, R, rabs, dev = _joined(parts)
+    if blowup is not None:
         res.span = [float(rp.t[-1]) - scene.t0, res.span[1] if res.span else c.horizon]
-        res.notes.append(f"{c.simulator} replay: {e}; the metrics cover the replay up to "
+        res.notes.append(f"{c.simulator} replay: {blowup}; the metrics cover the replay up to "
                          f"t = {rp.t[-1]:.6g}, the last finite sample")
-    res.notes.append(f"replay of {len(rp.t) - 1} of {ref.steps} steps took {_time.perf_counter() - t0r:.2f} s")
-    R = _replay_residual(c, ref, rp)
-    rabs = np.abs(R).max(axis=1) if R.shape[1] else np.zeros(len(rp.t))
-    rq, rv = ref.q[::2][: len(rp.t)], ref.v[::2][: len(rp.t)]
-    dev = np.maximum(quat_aware_diff(be.cm, rp.q, rq).max(axis=1), np.abs(rp.v - rv).max(axis=1))
-    if not np.all(np.isfinite(rabs)):
+    res.notes.append(f"replay of {len(rp.t) - 1} of {ref.steps} steps"
+                     + (f" in {len(segs)} segments" if len(segs) > 1 else "")
+                     + f" took {_time.perf_counter() - t0r:.2f} s (with the Lyapunov probe)")
+    all_rabs = np.concatenate([p[3] for p in parts])
+    if not np.all(np.isfinite(all_rabs)):
         raise _Stop("error", f"{c.simulator} replay: non-finite programme residual at "
                              f"t = {rp.t[np.argmax(~np.isfinite(rabs))]:.6g}")
-    res.metrics["replay_residual"] = float(rabs.max())
+    res.metrics["replay_residual"] = float(all_rabs.max())
     closures = be.report.get("closures", [])
     if closures and R.shape[1]:  # the closure rows alone (info: how well the simulator holds the loops)
         names = [r["name"] for r in scene.rows]
         ci = [names.index(r) for cl in closures for r in cl["rows"] if r not in cl["set_aside"]]
-        res.info["replay_closure_residual"] = float(np.abs(R[:, ci]).max())
-    res.metrics["replay_deviation"] = float(dev.max())
+        res.info["replay_closure_residual"] = float(max(np.abs(p[2][:, ci]).max() for p in parts))
+    res.metrics["replay_deviation"] = float(max(p[4].max() for p in parts))
     if scene.actuators:  # servo-constraints: the force fed to the simulator acts on actuated joints only
         H = (np.array([scene.actuation_map_at(tk, qk) for tk, qk in zip(ref.t, ref.q)])
              if scene.actuation_varies else scene.actuation_map)
         res.metrics["replay_unactuated"] = unactuated_force(ref.u, H)
-    g = growth_rate(rp.t, dev)
-    res.info["replay_growth_rate"] = g
-    if math.isfinite(g) and g * c.horizon > math.log(100):
-        res.notes.append(f"open-loop deviation grows like exp({g:.3g} t): x{math.exp(g * c.horizon):.2g} "
-                         f"over the replayed {c.horizon:g} s (unstable programme"
-                         + (f"; the scene's budgets are stated for {c.tol['replay_horizon'][0]:g} s)"
-                            if "replay_horizon" in c.tol else ")"))
+    _open_loop_info(c, cont, cont_m[2] if cont_m is not None else None, cont_blowup, probe, segs, most)
+    if len(segs) > 1:
+        res.notes.append("per segment (max replay_residual, replay_deviation): " + "; ".join(
+            f"{ref.t[2 * p[0]]:g} .. {p[1].t[-1]:g} s: {p[3].max():.2g}, {p[4].max():.2g}" for p in parts))
     c.first.update({"replay_residual": (rp.t, rabs), "replay_deviation": (rp.t, dev)})
     sel = downsample(len(rp.t))
     res.series.append(Series("replay_residual", rp.t[sel].tolist(), rabs[sel].tolist(),
@@ -566,11 +749,61 @@ def _replay(c: _Check) -> None:
         res.breaches.insert(0, Breach("replay_blowup", blowup.value, blowup.limit, blowup.time))
         res.status = "fail"
     if res.status == "fail":
+        def where(t: float | None) -> str:
+            if t is None or len(segs) == 1:
+                return ""
+            i = next((i for i, (a, b) in enumerate(segs) if t <= ref.t[2 * b] + 1e-12), len(segs) - 1)
+            a, b = segs[i]
+            return f" (segment {i + 1} of {len(segs)}: {ref.t[2 * a]:g} .. {ref.t[2 * b]:g} s)"
         res.reason = "; ".join(
-            (f"{c.simulator} replay: {blowup}" if b.metric == "replay_blowup" and blowup is not None else
+            (f"{c.simulator} replay: {blowup}{where(blowup.time)}" if b.metric == "replay_blowup" and blowup is not None else
              f"{b.metric} {b.value:.3g} > {b.budget:.3g}"
-             + (f" first at t = {b.first_time:.6g}" if b.first_time is not None else ""))
+             + (f" first at t = {b.first_time:.6g}{where(b.first_time)}" if b.first_time is not None else ""))
             for b in res.breaches)
+
+
+def _open_loop_info(c: _Check, cont, dev, blowup, probe: Probe, segs: list, most: float) -> None:
+    """Information, not judged: how long the continuous open-loop replay stays informative, its
+    growth rate, and its growth against the Lyapunov prediction exp(Lambda(t_b) - Lambda(t_a))."""
+    from .simulators.replay import growth_rate
+
+    res, span, t0 = c.res, c.horizon, c.scene.t0
+    L = probe.growth
+    lam = res.info["lyapunov_exponent"]
+    if len(segs) == 1:
+        res.notes.append(f"one replay segment: the linearized dynamics amplify a deviation at most "
+                         f"x{math.exp(most):.3g} over the span (segments start beyond x{SEGMENT_GROWTH:g}; "
+                         f"finite-time Lyapunov exponent {lam:.3g} 1/s, {len(probe.k) - 1} probe chunks)")
+    else:
+        res.notes.append(f"segmented replay: {len(segs)} segments, each restarted from the solver's state "
+                         "and judged (" + ", ".join(f"{c.ref.t[2 * a]:g} .. {c.ref.t[2 * b]:g} s" for a, b in segs)
+                         + f"): the linearized dynamics amplify a deviation at most x{math.exp(most):.3g} "
+                         f"within one (limit x{SEGMENT_GROWTH:g}), x{math.exp(L[-1]):.3g} over the span "
+                         f"(finite-time Lyapunov exponent {lam:.3g} 1/s, {len(probe.k) - 1} probe chunks)")
+    if cont is None or dev is None or len(cont.t) < 2:
+        res.info["open_loop_informative"] = 0.0
+        res.notes.append(f"continuous open-loop replay (info): {blowup}")
+        return
+    bad = ~(dev <= OPEN_LOOP_INFORMATIVE)
+    m = int(np.argmax(bad)) if bad.any() else len(dev)
+    informative = float(cont.t[m - 1] - t0) if m > 0 else 0.0
+    res.info["open_loop_informative"] = informative
+    g = growth_rate(cont.t[:m], dev[:m])
+    res.info["replay_growth_rate"] = g
+    # the growth measured from the end of the first probe chunk to the last informative boundary
+    ks = [i for i in range(1, len(probe.k)) if probe.k[i] < m and dev[probe.k[i]] > 0]
+    what = (f"continuous open-loop replay (info, not judged): deviation {float(dev[m - 1]):.2g} at "
+            f"t = {cont.t[m - 1]:.6g}; within {OPEN_LOOP_INFORMATIVE:g} of the solver for {informative:g} "
+            f"of {span:g} s" + (f" ({blowup})" if blowup is not None else ""))
+    if len(ks) >= 2 and math.isfinite(float(L[ks[-1]] - L[ks[0]])):
+        ia, ib = ks[0], ks[-1]
+        meas = math.log(dev[probe.k[ib]] / dev[probe.k[ia]])
+        pred = float(L[ib] - L[ia])
+        res.info["open_loop_growth"] = meas
+        res.info["lyapunov_growth"] = pred
+        what += (f"; from t = {probe.t[ia]:g} to {probe.t[ib]:g} s it grew x{math.exp(meas):.3g}, "
+                 f"the linearized dynamics predict x{math.exp(pred):.3g}")
+    res.notes.append(what)
 
 
 def unactuated_force(u: np.ndarray, H: np.ndarray) -> float:

@@ -266,7 +266,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{sim:9s} {r.status:7s} " + "  ".join(
             f"{k} {m[k]:.3g}" for k in ("parity_mass", "parity_bias", "replay_residual", "replay_deviation",
                                         "replay_growth_rate", "instant_u", "parity_closure", "reaction_closure",
-                                        "replay_closure_residual", "replay_step") if k in m)
+                                        "replay_closure_residual", "replay_step", "replay_segments",
+                                        "lyapunov_exponent") if k in m)
               + (f"  ({r.reason})" if r.reason else ""))
         for w in r.warnings:
             print(f"  solver warning: {w}")

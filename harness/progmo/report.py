@@ -150,7 +150,8 @@ class Run:
 
     def coverage(self) -> str:
         """What the verdict covers, in one line: counts of every (scene x simulator) cell, the
-        declared not_checked cells, shortened replay spans and conditioning warnings."""
+        declared not_checked cells, shortened replay spans (``--horizon``), segmented replays and
+        conditioning warnings."""
         t = self.totals()
         cells = sum(t.values())
         head = ("PASS" if self.ok() else "FAIL") + f": {t['pass']} of {cells} (scene x simulator) passed"
@@ -164,8 +165,15 @@ class Run:
             rest.append(f"{len(declared)} not checked as declared ({', '.join(declared)})")
         short = sorted({f"{r.scene} {r.span_text()}" for r in self.results
                         if r.span and r.span[0] < r.span[1] and r.status in ("pass", "fail")})
-        if short:
+        if short:  # only a run asked for it (`progmo check --horizon`): a scene's check covers its span
             rest.append("replayed over a shortened span: " + ", ".join(short))
+        segmented = sorted({f"{r.scene} ({r.info['replay_segments']:g})" for r in self.results
+                            if r.info.get("replay_segments", 1) > 1 and r.status in ("pass", "fail")})
+        if segmented:
+            from .checks import SEGMENT_GROWTH
+
+            rest.append(f"replayed in segments restarted from the solver (open-loop growth beyond "
+                        f"x{SEGMENT_GROWTH:g}): " + ", ".join(segmented))
         warned = sorted({r.scene for r in self.results if r.warnings})
         if warned:
             rest.append("solver conditioning warnings: " + ", ".join(warned))

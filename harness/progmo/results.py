@@ -16,8 +16,9 @@ Statuses (``status``); the run's verdict adds ``regression`` (a pass worse than 
 * ``error``: the check itself could not run (missing package, a solve that stopped, a simulator
   that blew up): a failure of the run, with ``reason``.
 
-``span`` is the replayed time span against the scene's (a shortened ``replay_horizon`` is visible
-in every verdict); ``warnings`` are the solver's conditioning warnings on the reference solve.
+``span`` is the replayed time span against the scene's (the whole span, in segments for an unstable
+programme; shorter only when a run asks for it with ``--horizon`` or the replay blew up, and then
+visible in every verdict); ``warnings`` are the solver's conditioning warnings on the reference solve.
 """
 
 from __future__ import annotations

@@ -18,7 +18,7 @@ Sweep file::
     simulators = ["mujoco", "pinocchio"]     # default: both
     initial_state = "refuse"       # or "assemble": a sample whose initial state leaves the
                                    # programme is refused and counted, or projected onto it
-    horizon = 1.0                  # optional: replay horizon of each check (s)
+    horizon = 1.0                  # optional: the span of each sample (s): [time] t1 = t0 + horizon
     step = 1e-3                    # optional: replay step
 
     [vary]                         # "where.name" = { distribution = [arguments] }
@@ -220,8 +220,14 @@ def sample_text(scene_text: str, scene_path: str, spec: Spec, i: int, values: di
             doc["solver"][v.name] = x  # type: ignore[index]
     if spec.initial_state == "assemble":
         doc["initial"]["assemble"] = True  # type: ignore[index]
-    # the check's settings travel in the reproducer, so `progmo check FILE` reruns the same check
-    for key, setting in (("replay_step", spec.step), ("replay_horizon", spec.horizon)):
+    # the check's settings travel in the reproducer, so `progmo check FILE` reruns the same check;
+    # a horizon is the sample's own span (a check always replays a scene's whole span)
+    if spec.horizon is not None:
+        if "time" not in doc:
+            doc["time"] = tomlkit.table()
+        t0 = float(doc["time"].get("t0", 0.0))  # type: ignore[union-attr]
+        doc["time"]["t1"] = t0 + spec.horizon  # type: ignore[index]
+    for key, setting in (("replay_step", spec.step),):
         if setting is not None:
             if "tolerances" not in doc:
                 doc["tolerances"] = tomlkit.table()
@@ -635,7 +641,7 @@ def main(argv: list[str] | None = None) -> int:
     _say(f"progmo sweep: {len(samples)} sample(s) ({sum(1 for s in samples if s.refused)} refused) x "
          f"{len(spec.simulators)} simulator(s): {total} check(s), {total - len(tasks)} already done, "
          f"{len(tasks)} to run on the {ns.executor} executor")
-    options = CheckOptions()  # replay step and horizon are in each sample's [tolerances]
+    options = CheckOptions()  # the replay step is in each sample's [tolerances], the horizon its [time] t1
     jobs = ns.jobs if ns.jobs is not None else default_jobs()
     interrupted = usage = False
     t0 = time.perf_counter()

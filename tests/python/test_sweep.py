@@ -110,7 +110,7 @@ def test_the_worst_sample_is_a_reproducer(tmp_path):
     row = next(m for m in agg["metrics"] if m["metric"] == "replay_deviation")
     path = next(s["path"] for s in agg["samples"] if s["index"] == row["worst_sample"])
     text = pathlib.Path(path).read_text()
-    assert "replay_horizon = {value = 0.2" in text and "# Rerun: progmo check" in text
+    assert "t1 = 0.2" in text and "replay_horizon" not in text and "# Rerun: progmo check" in text
     from progmo.checks import run_check
 
     r = run_check(path, "mujoco")

@@ -156,18 +156,19 @@ def test_refused_scene_gets_the_solve_diagnosis_and_exit_2_in_check_and_debug(tm
 
 def test_conditioning_warnings_and_checked_span_reach_the_report(tmp_path):
     """The precession programme through its degenerate point: the solver's row_gradient warning
-    is in the result, the report and summary.md; chain_8's shortened replay span is in the
-    verdict table and the overall line."""
+    is in the result, the report and summary.md; chain_8's whole span, replayed in segments, is in
+    the verdict table and the overall line (no shortened span)."""
     p = cli("check", "-s", "pinocchio", "--no-plots", "-o", str(tmp_path / "o"),
             str(TESTS / "precession_degenerate.toml"), "chain_8")
     res = {r["scene"]: r for r in json.loads((tmp_path / "o" / "results.json").read_text())}
     w = res["precession_degenerate"]["warnings"]
     assert w and "`precession`" in w[0] and "initial norm" in w[0], w
-    assert res["chain_8"]["span"] == [1.0, 2.0]
+    assert res["chain_8"]["span"] == [2.0, 2.0]
     md = (tmp_path / "o" / "summary.md").read_text()
     assert "## Solver conditioning warnings" in md and "`precession`" in md
-    assert "| chain_8 |" in md and "1 of 2 s" in md
-    assert "replayed over a shortened span: chain_8 1 of 2 s" in p.stdout
+    assert "| chain_8 |" in md and "2 s" in md and "of 2 s" not in md
+    assert "replayed in segments restarted from the solver (open-loop growth beyond x1000): chain_8 (3)" in p.stdout
+    assert "shortened span" not in p.stdout
     assert "solver conditioning warnings: precession_degenerate" in p.stdout
     html = (tmp_path / "o" / "report.html").read_text()
     assert "solver warning:" in html and "checked span" in html

@@ -12,7 +12,10 @@ scene itself (to evaluate its expression forces at the simulator's own states):
   rows ``B[programme]``);
 * ``closure_jacobian(t, q, v)`` the simulator's Jacobian of the scene's loop closures (rows in its
   own order and frame) in OUR v, and ``closure_forces(t, q, v, u)`` its closure multipliers under u;
-* ``replay(ref, record_frames) -> Replay`` open-loop replay of ``ref.u`` (u at each RK4 stage).
+* ``replay(ref, frame_every, start=0, stop=None, x0=None) -> Replay`` open-loop replay of ``ref.u``
+  (u at each RK4 stage) over the steps ``start`` .. ``stop`` (default: the whole span), from the
+  reference's state at ``start`` (a segment restarted from the solver's state) or from ``x0`` = (q, v)
+  (the checks' Lyapunov probe).
 
 A back-end that meets a harness force it cannot apply raises :class:`Unsupported` naming it, and
 the check becomes ``not_checked``: a model the simulator does not share never passes.
@@ -61,7 +64,8 @@ class Backend(Protocol):
 
     def closure_forces(self, t: float, q: np.ndarray, v: np.ndarray, u: np.ndarray) -> np.ndarray: ...
 
-    def replay(self, ref: Any, frame_every: int = 0) -> Any: ...
+    def replay(self, ref: Any, frame_every: int = 0, start: int = 0, stop: int | None = None,
+               x0: tuple[np.ndarray, np.ndarray] | None = None) -> Any: ...
 
 
 def attractor_force(point: np.ndarray, mu: float, mass: float, com: np.ndarray) -> np.ndarray:

@@ -185,18 +185,24 @@ class MujocoBackend:
         lam = np.linalg.lstsq(np.vstack([Jc, Bp]).T, total, rcond=None)[0]
         return Bp.T @ lam[len(Jc):]
 
-    def replay(self, ref: Reference, frame_every: int = 0) -> Replay:
+    def replay(self, ref: Reference, frame_every: int = 0, start: int = 0, stop: int | None = None,
+               x0: tuple[np.ndarray, np.ndarray] | None = None) -> Replay:
+        """Steps ``start`` .. ``stop`` (default: the whole reference) from the reference's state at
+        step ``start`` (``x0`` = (q, v): from that state instead: the Lyapunov probe)."""
         m, d, cm = self.m, self.d, self.cm
-        h, n, t0 = ref.h, ref.steps, ref.t0
+        h, t0 = ref.h, ref.t0
+        stop = ref.steps if stop is None else stop
+        n = stop - start
         m.opt.timestep = h
         if m.neq:  # closures: solref timeconst keeps its ratio to the step (MUJOCO_CLOSURES.md)
             m.eq_solref[:, 0] = self._solref0[:, 0] * h / self._h0
+        q0, v0 = (ref.q[2 * start], ref.v[2 * start]) if x0 is None else x0
         nq, nv = len(ref.q[0]), len(ref.v[0])
         Q = np.zeros((n + 1, nq))
         V = np.zeros((n + 1, nv))
         A = np.zeros((n + 1, nv))
         frames = []
-        cur_q = [ref.q[0]]
+        cur_q = [q0]
 
         def control(model, data):
             # a state-dependent actuation map is evaluated at this RK4 stage's own state
@@ -204,10 +210,12 @@ class MujocoBackend:
             u = ref.force_at(data.time, qs)
             data.qfrc_applied[:] = cm.f_to_sim(cur_q[0], u) + self.harness() + self.expression(data.time)
 
-        self._set(t0, ref.q[0], ref.v[0])
+        self._set(t0 + start * h, q0, v0)
         mujoco.set_mjcb_control(control)
+        times = ref.t[::2][start: stop + 1]
         try:
-            for k in range(n + 1):
+            for j in range(n + 1):
+                k = start + j
                 tk = t0 + k * h
                 d.time = tk
                 mujoco.mj_forward(m, d)
@@ -217,21 +225,20 @@ class MujocoBackend:
                 if not np.all(np.abs(d.qacc) < ACC_LIMIT):
                     big = float(np.abs(d.qacc).max())
                     raise BlowUp(tk, f"|qacc| = {big:.3g} > {ACC_LIMIT:g}", big, ACC_LIMIT)
-                Q[k] = qo
-                V[k] = cm.v_from_sim(qo, d.qvel)
-                A[k] = cm.a_from_sim(qo, V[k], d.qacc)
+                Q[j] = qo
+                V[j] = cm.v_from_sim(qo, d.qvel)
+                A[j] = cm.a_from_sim(qo, V[j], d.qacc)
                 if frame_every and k % frame_every == 0:
                     frames.append((tk, [(self.body_names[b], d.xpos[b].copy(), d.xquat[b].copy())
                                         for b in range(1, m.nbody)]))
-                if k == n:
+                if j == n:
                     break
                 cur_q[0] = qo
                 d.time = tk
                 mujoco.mj_step(m, d)
-        except BlowUp as e:  # keep the evidence: samples 0 .. k-1 are finite
-            e.partial = Replay(ref.t[::2][:k], Q[:k], V[:k], A[:k], frames, frame_every)
+        except BlowUp as e:  # keep the evidence: samples start .. k-1 are finite
+            e.partial = Replay(times[:j], Q[:j], V[:j], A[:j], frames, frame_every)
             raise
         finally:
             mujoco.set_mjcb_control(None)
-        return Replay(ref.t[::2][: n + 1], Q, V, A, frames, frame_every)
-
+        return Replay(times, Q, V, A, frames, frame_every)

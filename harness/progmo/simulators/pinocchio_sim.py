@@ -290,42 +290,51 @@ class PinocchioBackend:
         Jd = pin.dIntegrate(self.model, qs, th, pin.ArgumentPosition.ARG1)
         return np.linalg.solve(Jd, vs)
 
-    def replay(self, ref: Reference, frame_every: int = 0) -> Replay:
-        cm, n = self.cm, ref.steps
+    def replay(self, ref: Reference, frame_every: int = 0, start: int = 0, stop: int | None = None,
+               x0: tuple[np.ndarray, np.ndarray] | None = None) -> Replay:
+        """Steps ``start`` .. ``stop`` (default: the whole reference) from the reference's state at
+        step ``start`` (``x0`` = (q, v): from that state instead: the Lyapunov probe)."""
+        cm = self.cm
+        stop = ref.steps if stop is None else stop
+        n = stop - start
         nq, nv = cm.nq, cm.nv
         Q = np.zeros((n + 1, nq))
         V = np.zeros((n + 1, nv))
         A = np.zeros((n + 1, nv))
         frames: list = []
-        qs = cm.q_to_sim(ref.q[0])
-        vs = cm.v_to_sim(ref.q[0], ref.v[0])
+        q0, v0 = (ref.q[2 * start], ref.v[2 * start]) if x0 is None else x0
+        qs = cm.q_to_sim(q0)
+        vs = cm.v_to_sim(q0, v0)
+        times = ref.t[::2][start: stop + 1]
         try:
-            return self._steps(ref, frame_every, Q, V, A, frames, qs, vs)
+            return self._steps(ref, frame_every, Q, V, A, frames, qs, vs, start, times)
         except BlowUp as e:  # keep the evidence: the samples stored before the blow-up
-            k = self._stored
-            e.partial = Replay(ref.t[::2][:k], Q[:k], V[:k], A[:k], frames, frame_every)
+            j = self._stored
+            e.partial = Replay(times[:j], Q[:j], V[:j], A[:j], frames, frame_every)
             raise
 
-    def _steps(self, ref: Reference, frame_every, Q, V, A, frames, qs, vs) -> Replay:
+    def _steps(self, ref: Reference, frame_every, Q, V, A, frames, qs, vs, start, times) -> Replay:
         """The RKMK4 steps of ``replay``: Q, V, A filled in place, ``_stored`` of them so far."""
         model, data, cm = self.model, self.data, self.cm
-        h, n, t0 = ref.h, ref.steps, ref.t0
+        h, t0 = ref.h, ref.t0
+        n = len(times) - 1
         integ = pin.integrate
         self._stored = 0
-        for k in range(n + 1):
+        for j in range(n + 1):
+            k = start + j
             tk = t0 + k * h
             if not (np.all(np.isfinite(qs)) and np.all(np.isfinite(vs))):
                 raise BlowUp(tk, "non-finite state")
             a1 = self._acc(tk, qs, vs, ref)
             qo = cm.q_from_sim(qs)
-            Q[k], V[k] = qo, cm.v_from_sim(qo, vs)
-            A[k] = cm.a_from_sim(qo, V[k], a1)
-            self._stored = k + 1
+            Q[j], V[j] = qo, cm.v_from_sim(qo, vs)
+            A[j] = cm.a_from_sim(qo, V[j], a1)
+            self._stored = j + 1
             if frame_every and k % frame_every == 0:
                 pin.framesForwardKinematics(model, data, qs)
                 frames.append((tk, [(name, data.oMf[i].translation.copy(),
                                      _wxyz(data.oMf[i].rotation)) for name, i in self.body_frames]))
-            if k == n:
+            if j == n:
                 break
             d1 = vs
             th = 0.5 * h * d1
@@ -345,7 +354,7 @@ class PinocchioBackend:
             d4 = self._dth(qs, th, v4)
             qs = integ(model, qs, h / 6.0 * (d1 + 2 * d2 + 2 * d3 + d4))
             vs = vs + h / 6.0 * (a1 + 2 * a2 + 2 * a3 + a4)
-        return Replay(ref.t[::2][: n + 1], Q, V, A, frames, frame_every)
+        return Replay(times, Q, V, A, frames, frame_every)
 
 
 def _wxyz(R):
