@@ -280,7 +280,7 @@ def main(argv: list[str] | None = None) -> int:
         when = f"t = {b.first_time:.6g} s" if b.first_time is not None else "(no time)"
         there = f"value there {at:.3g}, " if at is not None else ""
         print(f"first tolerance breach: {sim} {b.metric} at {when}: {there}worst {b.value:.3g} "
-              f"vs budget {b.budget:.3g}")
+              f"vs budget {b.budget:.3g}" + (f" ({b.where})" if b.where else ""))
         for sim2, b2, _ in breaches:
             if b2 is not b:
                 ft = f"t = {b2.first_time:.6g} s" if b2.first_time is not None else "(no time)"
