@@ -10,6 +10,7 @@ Every function takes what a check step measured and returns a short phrase for `
   when the discrepancy is that force's generalized force times a factor (:func:`force_explaining`:
   a force the simulator misses reads "x -1");
 * replay_deviation: the coordinate (q) or velocity (v) that deviates most; replay_residual: the row;
+* replay_unactuated: the joint carrying most of the force no actuator produces;
 * parity_closure: the closure whose rows lie farthest from the simulator's closure row space;
   reaction_closure: the closure whose rows carry most of the reaction's discrepancy.
 """
@@ -65,6 +66,17 @@ def row(row_names: Sequence[str], R: np.ndarray) -> str:
     if not R.size:
         return ""
     return f"row {row_names[int(np.argmax(np.abs(R).max(axis=0)))]}"
+
+
+def unactuated(v_names: Sequence[str], u: np.ndarray, H: np.ndarray) -> str:
+    """The joint carrying the largest part of u outside range(H) (``H``: n x m, or one per sample
+    of ``u``): where the replayed force acts that no actuator can produce."""
+    u, H = np.asarray(u), np.asarray(H)
+    if not u.size:
+        return ""
+    Hs = H if H.ndim == 3 else np.broadcast_to(H, (len(u), *H.shape))
+    off = np.array([uk - Q @ (Q.T @ uk) for uk, Q in ((uk, np.linalg.qr(Hk)[0]) for uk, Hk in zip(u, Hs))])
+    return f"joint {v_names[int(np.argmax(np.abs(off).max(axis=0)))]}" if np.abs(off).max() > 0 else ""
 
 
 def _closure_rows(closures: list[dict], row_names: Sequence[str], closure_idx: Sequence[int]) -> dict[str, list[int]]:

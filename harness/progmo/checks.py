@@ -548,6 +548,7 @@ def _replay(c: _Check) -> None:
         H = (np.array([scene.actuation_map_at(tk, qk) for tk, qk in zip(ref.t, ref.q)])
              if scene.actuation_varies else scene.actuation_map)
         res.metrics["replay_unactuated"] = unactuated_force(ref.u, H)
+        c.where["replay_unactuated"] = attribution.unactuated(scene.v_names, ref.u, H)
     g = growth_rate(rp.t, dev)
     res.info["replay_growth_rate"] = g
     if math.isfinite(g) and g * c.horizon > math.log(100):
