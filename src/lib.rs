@@ -25,6 +25,7 @@
 /// Git revision of this build (empty outside a checkout): provenance of summaries and reports.
 pub const GIT_REVISION: &str = env!("PROGMO_GIT_REVISION");
 
+pub mod check;
 pub mod cli;
 pub mod export;
 pub mod expr;

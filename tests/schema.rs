@@ -607,3 +607,60 @@ quat = [1.0, 0.0, 0.0, 0.0]
 [time]
 t1 = 1.0
 "#;
+
+// ---------------------------------------------------------------------------------------------
+// FORMAT.md's "Default budgets" table against the check's vocabulary (`progmo::check`).
+
+const BUDGETS_MARKER: &str = "<!-- generated: progmo::check::default_budget_table -->";
+
+/// FORMAT.md with the table after `BUDGETS_MARKER` replaced by `table` (None: no marker).
+fn with_budget_table(page: &str, table: &str) -> Option<String> {
+    let at = page.find(BUDGETS_MARKER)? + BUDGETS_MARKER.len() + 1;
+    let rest = &page[at..];
+    let len: usize = rest
+        .split_inclusive('\n')
+        .take_while(|l| l.starts_with('|'))
+        .map(str::len)
+        .sum();
+    Some(format!("{}{table}{}", &page[..at], &rest[len..]))
+}
+
+#[test]
+fn format_md_default_budgets_are_the_cores() {
+    let path = root().join("src/scene/FORMAT.md");
+    let page = std::fs::read_to_string(&path).unwrap();
+    let generated = progmo::check::default_budget_table();
+    let want = with_budget_table(&page, &generated)
+        .unwrap_or_else(|| panic!("FORMAT.md lacks the marker {BUDGETS_MARKER}"));
+    if std::env::var_os("PROGMO_BLESS").is_some() {
+        std::fs::write(&path, &want).unwrap();
+        return;
+    }
+    assert!(
+        page == want,
+        "FORMAT.md's \"Default budgets\" table differs from progmo::check::METRICS; regenerate it \
+         with `PROGMO_BLESS=1 cargo test --release --test schema` and commit it"
+    );
+    // Every metric is in the table, and the table holds nothing else (a negative control of the
+    // comparison: a table missing a row is not the generated one).
+    for m in &progmo::check::METRICS {
+        assert!(generated.contains(&format!("| `{}`", m.name)), "{}", m.name);
+    }
+    let short = generated.lines().take(3).collect::<Vec<_>>().join("\n") + "\n";
+    assert_ne!(with_budget_table(&page, &short).unwrap(), page);
+}
+
+/// `file::SOLVER_NUMBERS` (what a sweep may vary in `[solver]`) are exactly the solver table's
+/// numeric keys.
+#[test]
+fn the_numeric_solver_keys_are_the_schemas() {
+    let s = json_schema();
+    let props = s["$defs"]["solver"]["properties"].as_object().unwrap();
+    let numeric: BTreeSet<&str> = props
+        .iter()
+        .filter(|(_, v)| v["type"] == "number")
+        .map(|(k, _)| k.as_str())
+        .collect();
+    let listed: BTreeSet<&str> = progmo::scene::file::SOLVER_NUMBERS.into_iter().collect();
+    assert_eq!(listed, numeric);
+}

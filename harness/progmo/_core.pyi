@@ -128,7 +128,8 @@ class Dynamics(TypedDict):
     gamma: F64  # (s,) B dv/dt = gamma
 
 __all__ = ["Scene", "Solution", "SceneError", "SettingsError", "SolveStopped", "ExportUnsupported", "FORMULATIONS", "INTEGRATORS", "DRIFTS", "version",
-           "chain_toml", "drift_cost", "cli"]
+           "chain_toml", "drift_cost", "cli", "REFERENCE_RTOL", "REFERENCE_ATOL", "SIMULATORS", "SOLVER_ONLY",
+           "CHECK_OPTIONS", "SOLVER_NUMBERS", "check_metrics", "default_budgets", "tolerance_keys", "nearest"]
 
 #: The core's method vocabulary (progmo::solve::FORMULATION_NAMES, ...); the Literal types below
 #: spell the same names (tests/python/test_bindings.py checks it).
@@ -252,3 +253,29 @@ def chain_toml(
     ValueError otherwise. The name is quoted and escaped."""
 def drift_cost(rounds: int = 5) -> dict[str, float]:
     """Projection on/off over 10^4 periods: minimum wall times and residuals (progmo::problems::hard)."""
+
+# The check's vocabulary (progmo::check): one definition for the loader, the schema, FORMAT.md and
+# progmo.checks.
+#: Tolerances of the check's reference solve.
+REFERENCE_RTOL: float
+REFERENCE_ATOL: float
+#: Simulators of the cross-simulator check (keys of `[checks] not_checked`).
+SIMULATORS: list[str]
+#: The checker of scenes no simulator document describes.
+SOLVER_ONLY: str
+#: `[tolerances]` entries that are options of the check, not budgets (replay_step, replay_horizon).
+CHECK_OPTIONS: list[str]
+#: The numeric keys of `[solver]` (what a sweep may vary there).
+SOLVER_NUMBERS: list[str]
+
+def check_metrics() -> list[dict[str, str]]:
+    """Every metric the check judges, in the order budgets are listed: name, table (its budget's
+    name in [tolerances]), simulators and solver_only (when those checks judge it: "always",
+    "closures", "actuators", "references" or "never"), class (the tolerance class) and reason."""
+def default_budgets(drift: dict[str, Any]) -> dict[str, tuple[float, str]]:
+    """Default budget and reason of every metric under a drift control as `Scene.settings["drift"]`
+    gives it; ValueError for an unknown kind."""
+def tolerance_keys() -> list[str]:
+    """Every name a scene's `[tolerances]` may hold."""
+def nearest(name: str, candidates: list[str]) -> str | None:
+    """The nearest candidate to a misspelt name (the rule of every "did you mean"), or None."""

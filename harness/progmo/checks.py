@@ -55,88 +55,53 @@ from typing import Any, Callable
 
 import numpy as np
 
+from . import _core, attribution
 from .results import SOLVER_ONLY, Breach, Budget, CheckResult, Series, judge
 
-SIMULATORS = ("mujoco", "pinocchio")
+#: the simulators of the cross-simulator check (``progmo::check::SIMULATORS``)
+SIMULATORS: tuple[str, ...] = tuple(_core.SIMULATORS)
 #: everything ``run_check`` can check in: the simulators and the solver-only check
 CHECKERS = (*SIMULATORS, SOLVER_ONLY)
 
+# The check's vocabulary is the core's (``progmo::check::METRICS``, one definition that the scene
+# loader, the schema and FORMAT.md read too): these names are views of it.
+_METRICS: list[dict[str, str]] = _core.check_metrics()
+
+
+def _judged(check: str, *when: str) -> tuple[str, ...]:
+    return tuple(m["name"] for m in _METRICS if m[check] in when)
+
+
 #: metrics with budgets (``programme_residual`` in a scene's table judges ``solver_residual``)
-BUDGETED = ("solver_residual", "parity_mass", "parity_bias", "instant_u", "replay_residual",
-            "replay_deviation")
+BUDGETED = _judged("simulators", "always")
 #: metrics of scenes with loop closures (``[[model.closures]]``), budgeted in addition
-CLOSURE_BUDGETED = ("parity_closure", "reaction_closure")
+CLOSURE_BUDGETED = _judged("simulators", "closures")
 #: metrics of scenes with ``[[actuators]]`` (servo-constraints), budgeted in addition
-ACTUATOR_BUDGETED = ("replay_unactuated",)
+ACTUATOR_BUDGETED = _judged("simulators", "actuators")
 #: metrics of the solver_only check (``reference_error`` only where the scene gives references)
-SOLVER_ONLY_BUDGETED = ("solver_residual", "formulation_deviation", "formulation_force_deviation",
-                        "reference_error")
+SOLVER_ONLY_BUDGETED = _judged("solver_only", "always") + _judged("solver_only", "references")
 #: the scene-table name of a metric's budget where it differs
-TABLE_NAME = {"solver_residual": "programme_residual"}
+TABLE_NAME = {m["name"]: m["table"] for m in _METRICS if m["table"] != m["name"]}
 
 #: the reference solve is tighter than the scene's settings, so that the replay measures the
 #: simulator and the per-stage feed of u rather than the solver's own tolerance
-REF_RTOL, REF_ATOL = 1e-12, 1e-14
+REF_RTOL, REF_ATOL = float(_core.REFERENCE_RTOL), float(_core.REFERENCE_ATOL)
 
 _PACKAGES = {"mujoco": ("mujoco", "mjcf"), "pinocchio": ("pinocchio", "urdf")}
 
 
 def default_budgets(settings: dict[str, Any]) -> dict[str, tuple[float, str]]:
-    """The budget of every metric a scene's ``[tolerances]`` does not give, with its reason
-    (documented in src/scene/FORMAT.md, "Default budgets"). ``settings`` is ``Scene.settings``."""
-    drift = settings.get("drift", {})
-    if drift.get("kind") == "projection":
-        tol = float(drift["tol"])
-        residual = (100 * tol, f"default: 100 x projection_tol ({tol:g}): the projection holds every "
-                               "state row to projection_tol after each step; x100 for samples between "
-                               "steps and acceleration rows solved to round-off")
-    else:
-        residual = (1e4 * REF_RTOL, f"default: drift control {drift.get('kind', '?')}: rows drift with "
-                                    f"the integration error of the reference solve (rtol {REF_RTOL:g}); "
-                                    "1e4 x rtol")
-    return {
-        "solver_residual": residual,
-        "parity_mass": (1e-11, "default (algebraic identity): exported M vs ours relative to max|A|: "
-                               "round-off (catalog <= 2e-15) plus MuJoCo's 1e-14 inertia floor"),
-        "parity_bias": (1e-11, "default (algebraic identity): every non-control force the simulator "
-                               "applies vs our G + Q, relative to max|G + Q|: round-off (catalog <= 3e-15)"),
-        "instant_u": (1e-9, "default (algebraic, through a constraint solve): u from the simulator's "
-                            "own dynamics vs ours, relative to max|u| (catalog <= 2e-14; room for the "
-                            "condition of B)"),
-        "replay_residual": (1e-6, "default (cross-simulator): programme rows on the open-loop replay at "
-                                  "the convergence-checked RK4 step (catalog 5e-14 .. 6e-9); an unstable "
-                                  "programme needs its own budget"),
-        "replay_deviation": (1e-6, "default (cross-simulator): max |dq|, |dv| of the replay from the "
-                                   "solver (catalog 4e-13 .. 2e-9); an unstable programme needs its "
-                                   "own budget"),
-        "parity_closure": (1e-11, "default (algebraic identity): the simulator's closure Jacobian "
-                                  "rows vs ours, both ways, as relative distances to the other's row "
-                                  "space (frame and sign free; catalog <= 2e-15)"),
-        "reaction_closure": (1e-9, "default (algebraic, through a constraint solve): the closures' "
-                                   "generalized reaction J^T f from the simulator's own multipliers under "
-                                   "the solver's u vs ours B_c^T lambda_c, relative to its max (Pinocchio "
-                                   "catalog <= 1e-13; MuJoCo's soft equalities need a scene budget)"),
-        "replay_unactuated": (1e-14, "default (algebraic identity): the part of the replayed force "
-                                     "outside range(H), relative to max|u|: u = H tau has exact zeros on "
-                                     "joints no actuator drives (along a direction: round-off of the "
-                                     "projection, ~1e-16)"),
-        "formulation_deviation": (1e-8, f"default (integrated): max |dq|, |dv| between two formulations "
-                                        f"solved at rtol {REF_RTOL:g}: both carry the integration error "
-                                        "(about 1e4 x rtol for non-stiff scenes) and the conditioning of B"),
-        "formulation_force_deviation": (1e-8, "default (integrated): u and reactions of two formulations, "
-                                              "relative to their largest value: the state difference "
-                                              "propagated through A, G and the multipliers"),
-        "reference_error": (1e-8, f"default (integrated): the reference solve (rtol {REF_RTOL:g}) against "
-                                  "values of independent origin, max |x - x_ref| / max(1, |x_ref|): the "
-                                  "global error of a tight solve; published values need the scene's own "
-                                  "budget (their digits)"),
-    }
+    """The budget of every metric a scene's ``[tolerances]`` does not give, with its reason: the
+    core's rule (``progmo::check::Metric::default_budget``; FORMAT.md, "Default budgets").
+    ``settings`` is ``Scene.settings`` (its drift control sets ``solver_residual``'s)."""
+    return {k: (float(v), str(why)) for k, (v, why) in
+            _core.default_budgets(dict(settings.get("drift") or {"kind": "none"})).items()}
 
 
 def budgets_for(tolerances: dict[str, tuple[float, str]], settings: dict[str, Any],
                 simulator: str, metrics: tuple[str, ...] = BUDGETED) -> list[Budget]:
     """One budget per metric of ``metrics``: ``<name>_<simulator>``, else ``<name>`` from the
-    scene's table, else the default."""
+    scene's table (the loader admits no other names), else the default."""
     defaults = default_budgets(settings)
     out = []
     for m in metrics:
@@ -198,6 +163,10 @@ class _Check:
     horizon: float = 0.0
     ref: Any = None
     first: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    #: the element each metric's worst value comes from (``attribution.py``), for its breach
+    where: dict[str, str] = field(default_factory=dict)
+    #: a fresh back-end of the same export withholding the given harness-force kinds
+    make_backend: Callable[[tuple[str, ...]], Any] | None = None
 
 
 class _Stop(Exception):
@@ -285,6 +254,7 @@ def _export(c: _Check) -> None:
     cls = mod.MujocoBackend if c.simulator == "mujoco" else mod.PinocchioBackend
     try:
         c.backend = cls(doc, report, c.scene, c.withhold)
+        c.make_backend = lambda withhold: cls(doc, report, c.scene, withhold)
     except Unsupported as e:
         raise _Stop("not_checked", str(e)) from None
     except Exception as e:
@@ -301,29 +271,11 @@ def _budgets(c: _Check) -> None:
     metrics = BUDGETED + (CLOSURE_BUDGETED if closures else ()) + (
         ACTUATOR_BUDGETED if c.scene.actuators else ())
     c.res.budgets = budgets_for(c.tol, dict(c.scene.settings), c.simulator, metrics)
-    if "replay_horizon" in c.tol:
-        raise _Stop("error", _refused_horizon(c.path))
     full = c.scene.t1 - c.scene.t0
     c.horizon = min(c.options.horizon or full, full)
     c.res.span = [c.horizon, full]
     if c.horizon < full:
         c.res.notes.append(f"replay horizon {c.horizon:g} s of {full:g} s (given by the options)")
-
-
-def _refused_horizon(path: str) -> str:
-    """The located error of a scene that still sets ``[tolerances] replay_horizon``."""
-    line = col = 0
-    try:
-        for i, text in enumerate(open(path, encoding="utf-8").read().splitlines(), 1):
-            if text.lstrip().startswith("replay_horizon"):
-                line, col = i, text.index("replay_horizon") + 1
-                break
-    except OSError:
-        pass
-    where = f"{path}:{line}:{col}: " if line else f"{path}: "
-    return (where + "tolerances.replay_horizon is not accepted: the segmented replay covers the whole "
-            "span (segments restart from the solver's state; their length follows from the "
-            "dynamics' growth, checks._segments); remove the entry")
 
 
 def _solve_reference(c: _Check, h: float):
@@ -426,6 +378,9 @@ def _parity(c: _Check) -> None:
     times = ref.t[idx]
     sM = sR = 0.0
     dmt, drt, dU, dJ, dR = [], [], [], [], []
+    diffs: dict[str, list[np.ndarray]] = {m: [] for m in ("parity_mass", "parity_bias", "instant_u",
+                                                          "reaction_closure")}
+    closure_jac: list[tuple[np.ndarray, np.ndarray]] = []
     sRc = 0.0
     names = [r["name"] for r in scene.rows]
     programme = [i for i, r in enumerate(scene.rows) if r["role"] == "programme"]
@@ -439,18 +394,23 @@ def _parity(c: _Check) -> None:
         Ms, rs = be.model_terms(tk, qk, vk)
         dmt.append(float(np.abs(Ms - A).max()))
         drt.append(float(np.abs(rs - rhs).max()))
+        diffs["parity_mass"].append(Ms - A)
+        diffs["parity_bias"].append(rs - rhs)
         sM, sR = max(sM, float(np.abs(A).max())), max(sR, float(np.abs(rhs).max()))
         B = np.asarray(dyn["B"])
         us = be.instant_u(tk, qk, vk, ak, B, np.asarray(dyn["gamma"]), programme,
                           actuated=bool(scene.actuators))
         dU.append(float(np.abs(us - ref.u[k]).max()))
+        diffs["instant_u"].append(us - ref.u[k])
         if closures:
             Jsim = be.closure_jacobian(tk, qk, vk)
             dJ.append(row_space_distance(B[closure_idx], Jsim))
+            closure_jac.append((B[closure_idx], Jsim))
             # closure reactions: ours B_c^T lambda_c; the simulator's J^T f under the same u
             ours_r = B[closure_idx].T @ np.asarray(ref.lam[k])[closure_idx]
             sim_r = Jsim.T @ be.closure_forces(tk, qk, vk, ref.u[k])
             dR.append(float(np.abs(sim_r - ours_r).max()))
+            diffs["reaction_closure"].append(sim_r - ours_r)
             sRc = max(sRc, float(np.abs(ours_r).max()))
     sR = sR if sR > 0 else 1.0
     # u relative to its own scale; without a programme (u = 0) relative to the forces.
@@ -471,6 +431,7 @@ def _parity(c: _Check) -> None:
         c.res.notes.append(f"closure reaction scale: max|B_c^T lambda_c| {sRc:.3g}")
         gate.append("parity_closure")
     bval = {b.metric: b.value for b in c.res.budgets}
+    _attribute_parity(c, times, diffs, closure_jac, closure_idx, bval)
     bad = [m for m in gate if not (c.res.metrics[m] <= bval[m])]
     if bad:
         c.res.notes.append("model parity failed (" + ", ".join(bad) + "): the exported model differs "
@@ -479,12 +440,45 @@ def _parity(c: _Check) -> None:
         budgets = c.res.budgets
         c.res.budgets = [b for b in budgets if b.metric in c.res.metrics]
         c.res.status = "pass"  # judge() decides
-        judge(c.res, _first_times(c.first, bval))
+        _judge(c, _first_times(c.first, bval))
         c.res.budgets = budgets
         c.res.reason = "model parity: " + "; ".join(
-            f"{b.metric} {b.value:.3g} > {b.budget:.3g}" for b in c.res.breaches
-            if b.metric in gate) + "; replay not run"
+            b.text() for b in c.res.breaches if b.metric in gate) + "; replay not run"
         raise _Stop(c.res.status, c.res.reason)
+
+
+def _judge(c: _Check, first_times: dict) -> None:
+    """``judge`` the result, each breach naming the element it comes from (``c.where``)."""
+    judge(c.res, first_times)
+    for b in c.res.breaches:
+        b.where = c.where.get(b.metric, "")
+
+
+def _attribute_parity(c: _Check, times: np.ndarray, diffs: dict[str, list[np.ndarray]],
+                      closure_jac: list[tuple[np.ndarray, np.ndarray]], closure_idx: list[int],
+                      bval: dict[str, float]) -> None:
+    """``c.where`` of the parity metrics: the worst entry's joint(s), the closure; for a
+    parity_bias beyond its budget also a harness force that explains the discrepancy."""
+    scene, be = c.scene, c.backend
+    v_names = list(scene.v_names)
+    c.where["parity_mass"] = attribution.mass_entry(v_names, diffs["parity_mass"])
+    c.where["instant_u"] = attribution.joint(v_names, diffs["instant_u"])
+    c.where["parity_bias"] = attribution.joint(v_names, diffs["parity_bias"])
+    if not (c.res.metrics["parity_bias"] <= bval.get("parity_bias", math.inf)):
+        k, _ = attribution.worst(diffs["parity_bias"])
+        i = int(np.argmin(np.abs(c.ref.t - times[k])))
+        forces = attribution.harness_forces(be.report, c.make_backend, float(c.ref.t[i]), c.ref.q[i], c.ref.v[i])
+        why = attribution.force_explaining(diffs["parity_bias"][k], forces)
+        if why:
+            c.where["parity_bias"] += f", {why}"
+    closures = be.report.get("closures", [])
+    if closures and closure_jac:
+        names = [r["name"] for r in scene.rows]
+        k = int(np.argmax([row_space_distance(o, s) for o, s in closure_jac]))
+        c.where["parity_closure"] = attribution.closure_parity(closures, names, closure_idx, *closure_jac[k])
+        k = int(np.argmax([float(np.abs(d).max()) for d in diffs["reaction_closure"]]))
+        c.where["reaction_closure"] = attribution.closure_reaction(
+            closures, names, closure_idx, closure_jac[k][0], diffs["reaction_closure"][k])
 
 
 def row_space_distance(ours: np.ndarray, sim: np.ndarray) -> float:
@@ -648,7 +642,7 @@ def _replay(c: _Check) -> None:
     amplify errors (each restarted from the solver's state and judged), its metrics and the verdict;
     the continuous replay and the Lyapunov prediction of its growth as info."""
     from .simulators import BlowUp
-    from .simulators.replay import downsample
+    from .simulators.replay import downsample, quat_aware_diff
 
     scene, ref, be, res = c.scene, c.ref, c.backend, c.res
     t0r = _time.perf_counter()
@@ -715,10 +709,15 @@ def _replay(c: _Check) -> None:
         ci = [names.index(r) for cl in closures for r in cl["rows"] if r not in cl["set_aside"]]
         res.info["replay_closure_residual"] = float(max(np.abs(p[2][:, ci]).max() for p in parts))
     res.metrics["replay_deviation"] = float(max(p[4].max() for p in parts))
+    rq, rv = ref.q[::2][: len(rp.t)], ref.v[::2][: len(rp.t)]  # the joined replay: a sample per step
+    c.where["replay_deviation"] = attribution.deviation(
+        scene.q_names, scene.v_names, quat_aware_diff(be.cm, rp.q, rq), rp.v - rv)
+    c.where["replay_residual"] = attribution.row([r["name"] for r in scene.rows], R)
     if scene.actuators:  # servo-constraints: the force fed to the simulator acts on actuated joints only
         H = (np.array([scene.actuation_map_at(tk, qk) for tk, qk in zip(ref.t, ref.q)])
              if scene.actuation_varies else scene.actuation_map)
         res.metrics["replay_unactuated"] = unactuated_force(ref.u, H)
+        c.where["replay_unactuated"] = attribution.unactuated(scene.v_names, ref.u, H)
     _open_loop_info(c, cont, cont_m[2] if cont_m is not None else None, cont_blowup, probe, segs, most)
     if len(segs) > 1:
         res.notes.append("per segment (max replay_residual, replay_deviation): " + "; ".join(
@@ -744,7 +743,7 @@ def _replay(c: _Check) -> None:
         rec.row_names = [r["name"] for r in scene.rows]
     res.status = "pass"
     bval = {b.metric: b.value for b in res.budgets}
-    judge(res, _first_times(c.first, bval))
+    _judge(c, _first_times(c.first, bval))
     if blowup is not None:
         res.breaches.insert(0, Breach("replay_blowup", blowup.value, blowup.limit, blowup.time))
         res.status = "fail"
@@ -756,9 +755,8 @@ def _replay(c: _Check) -> None:
             a, b = segs[i]
             return f" (segment {i + 1} of {len(segs)}: {ref.t[2 * a]:g} .. {ref.t[2 * b]:g} s)"
         res.reason = "; ".join(
-            (f"{c.simulator} replay: {blowup}{where(blowup.time)}" if b.metric == "replay_blowup" and blowup is not None else
-             f"{b.metric} {b.value:.3g} > {b.budget:.3g}"
-             + (f" first at t = {b.first_time:.6g}{where(b.first_time)}" if b.first_time is not None else ""))
+            (f"{c.simulator} replay: {blowup}{where(blowup.time)}" if b.metric == "replay_blowup" and blowup is not None
+             else b.text() + where(b.first_time))
             for b in res.breaches)
 
 
@@ -912,8 +910,10 @@ def _solver_only(c: _Check) -> None:
                          f"worst {worst[1]['field']} at t = {worst[1]['t']:g}: {worst[2]:.15g} against "
                          f"{worst[1]['value']:.15g}")
         res.series.append(Series("reference_error", [e[1]["t"] for e in errs], [e[0] for e in errs], "relative"))
+    c.where["formulation_deviation"] = attribution.deviation(
+        scene.q_names, scene.v_names, np.asarray(a.q) - np.asarray(b.q), np.asarray(a.v) - np.asarray(b.v))
     res.status = "pass"
     bval = {bd.metric: bd.value for bd in res.budgets}
-    judge(res, _first_times(first_series, bval))
+    _judge(c, _first_times(first_series, bval))
     if res.status == "fail":
-        res.reason = "; ".join(f"{br.metric} {br.value:.3g} > {br.budget:.3g}" for br in res.breaches)
+        res.reason = "; ".join(br.text() for br in res.breaches)

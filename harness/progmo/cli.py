@@ -337,7 +337,7 @@ def _accept(run: rp.Run, base_dir: Path, prov: dict) -> None:
 def _progress(i: int, n: int, r: CheckResult, run: rp.Run) -> str:
     v = run.verdict(r)
     line = f"[{i}/{n}] {r.scene} / {r.simulator}: {rp.label(v)} ({r.wall_seconds:.1f} s)"
-    why = r.reason or "; ".join(f"{b.metric} {rp.fmt(b.value)} > {rp.fmt(b.budget)}" for b in r.breaches)
+    why = r.reason or "; ".join(b.text(rp.fmt) for b in r.breaches)
     if v == "regression":
         why = "; ".join(f"{c['metric']} {rp.fmt(c['value'])} > {rp.fmt(c['threshold'])}" for c in run.regressed(r))
     if why and v != "pass":

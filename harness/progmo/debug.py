@@ -39,7 +39,8 @@ SCALAR_SCHEMA = {"type": "object", "properties": {"t": {"type": "number"}, "valu
 BREACH_SCHEMA = {
     "type": "object",
     "properties": {"metric": {"type": "string"}, "first_time": {"type": ["number", "null"]},
-                   "value": {"type": ["number", "null"]}, "budget": {"type": ["number", "null"]}},
+                   "value": {"type": ["number", "null"]}, "budget": {"type": ["number", "null"]},
+                   "where": {"type": "string"}},
 }
 
 #: most body-frame samples per simulator in the MCAP (the states are recorded at every step)
@@ -166,7 +167,7 @@ def _write_sim(mc: _Mcap, sim: str, rec: Recording, result) -> None:
     for b in result.breaches:
         t = b.first_time if b.first_time is not None else float(rp.t[-1])
         mc.write(cb, t, {"metric": b.metric, "first_time": b.first_time, "value": _num(b.value),
-                         "budget": _num(b.budget)})
+                         "budget": _num(b.budget), "where": b.where})
 
 
 def _write_csv(path: str, sim: str, rec: Recording) -> None:
@@ -281,7 +282,7 @@ def main(argv: list[str] | None = None) -> int:
         when = f"t = {b.first_time:.6g} s" if b.first_time is not None else "(no time)"
         there = f"value there {at:.3g}, " if at is not None else ""
         print(f"first tolerance breach: {sim} {b.metric} at {when}: {there}worst {b.value:.3g} "
-              f"vs budget {b.budget:.3g}")
+              f"vs budget {b.budget:.3g}" + (f" ({b.where})" if b.where else ""))
         for sim2, b2, _ in breaches:
             if b2 is not b:
                 ft = f"t = {b2.first_time:.6g} s" if b2.first_time is not None else "(no time)"

@@ -433,7 +433,7 @@ def _attention(run: Run) -> list[tuple[str, str, str, str]]:
             elif v == "regression":
                 why = "; ".join(f"{c['metric']} {fmt(c['value'])} > {fmt(c['threshold'])} (baseline {fmt(c['baseline'])})" for c in run.regressed(r))
             elif v == "fail":
-                why = "; ".join(f"{b.metric} {fmt(b.value)} > budget {fmt(b.budget)}" + (f" first at t = {b.first_time:.4g}" if b.first_time is not None else "") for b in r.breaches) or r.reason
+                why = "; ".join(f"{b.metric} {fmt(b.value)} > budget {fmt(b.budget)}" + (f" at {b.where}" if b.where else "") + (f" first at t = {b.first_time:.4g}" if b.first_time is not None else "") for b in r.breaches) or r.reason
             else:
                 why = r.reason
             since = history.streak_start(run.history, f"{s}/{m}") if run.history else None
@@ -611,7 +611,8 @@ def _sim_block(run: Run, s: str, m: str) -> str:
         h.append("</table>")
     for b in r.breaches:
         when = f" first at t = {b.first_time:.6g} s" if b.first_time is not None else ""
-        h.append(f"<div class='reason'>{_e(b.metric)} = {fmt(b.value)} exceeds its budget {fmt(b.budget)}{_e(when)}</div>")
+        at = f" at {b.where}" if b.where else ""
+        h.append(f"<div class='reason'>{_e(b.metric)} = {fmt(b.value)} exceeds its budget {fmt(b.budget)}{_e(at)}{_e(when)}</div>")
     if r.notes:
         h.append("<ul class='notes'>" + "".join(f"<li>{_e(n)}</li>" for n in r.notes) + "</ul>")
     try:

@@ -48,12 +48,23 @@ class Budget:
 
 @dataclass
 class Breach:
-    """A metric beyond its budget: the first time it happened and the worst value."""
+    """A metric beyond its budget: the first time it happened, the worst value, and the element
+    it comes from (``where``: "joint q2", "entry (q1, q2)", "closure loop", "row p1", ... set by the
+    check's attribution, ``attribution.py``; "" when nothing singles one out)."""
 
     metric: str
     value: float
     budget: float
     first_time: float | None = None
+    where: str = ""
+
+    def text(self, fmt: Any = None) -> str:
+        """"replay_deviation 3e-06 > 1e-06 at coordinate q2 first at t = 0.41" (``fmt`` formats
+        the numbers; default ``.3g``)."""
+        f = fmt or (lambda x: f"{x:.3g}")
+        return (f"{self.metric} {f(self.value)} > {f(self.budget)}"
+                + (f" at {self.where}" if self.where else "")
+                + (f" first at t = {self.first_time:.6g}" if self.first_time is not None else ""))
 
 
 @dataclass

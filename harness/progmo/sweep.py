@@ -27,7 +27,11 @@ Sweep file::
     "solver.rtol" = { grid = [1e-8, 1e-10] }        # every value, crossed with the draws
     "parameters.k" = { loguniform = [1e2, 1e4] }
 
-``where`` is ``parameters``, ``initial.q``, ``initial.v`` or ``solver``.
+``where`` is ``parameters``, ``initial.q``, ``initial.v`` or ``solver``. Every name is checked before
+any sample is made: a key of the file, a distribution, a numeric ``[solver]`` setting
+(``progmo::scene::file::SOLVER_NUMBERS``), and against the scene a parameter, a coordinate or a
+velocity with one value; a misspelt one is refused at its line and column with the nearest valid
+name ("did you mean `amp`?").
 """
 
 from __future__ import annotations
@@ -50,7 +54,7 @@ from typing import Any
 
 import numpy as np
 
-from . import cliutil, data, executors
+from . import _core, cliutil, data, executors
 from .parallel import Task, default_jobs, last_line
 from .results import CheckResult
 
@@ -110,10 +114,31 @@ class Spec:
 
 
 def _line_of(text: str, needle: str) -> int:
+    return _locate(text, needle)[0]
+
+
+def _locate(text: str, needle: str) -> tuple[int, int]:
+    """1-based (line, column) of the first occurrence of ``needle`` (a key, quoted or bare) in a
+    sweep file's text, (0, 0) if absent. A quoted key's column is that of its opening quote."""
     for k, line in enumerate(text.splitlines(), 1):
-        if needle in line:
-            return k
-    return 0
+        for q in ('"', "'", ""):
+            j = line.find(q + needle + q)
+            if j >= 0 and not line[:j].lstrip().startswith("#"):
+                return k, j + 1
+    return 0, 0
+
+
+def _did_you_mean(name: str, candidates: "list[str] | tuple[str, ...]") -> str:
+    """`` (did you mean `x`?)`` by the core's rule (``progmo::check::nearest``), or ""."""
+    from ._core import nearest
+
+    near = nearest(name, list(candidates))
+    return f" (did you mean `{near}`?)" if near else ""
+
+
+def _located(path: str | os.PathLike[str], text: str, key: str, msg: str, needle: str) -> SweepError:
+    line, col = _locate(text, needle)
+    return SweepError(f"{path}:{line}:{col}: {key}: {msg}" if line else f"{path}: {key}: {msg}")
 
 
 def load_spec(path: str | os.PathLike[str]) -> Spec:
@@ -131,12 +156,11 @@ def load_spec(path: str | os.PathLike[str]) -> Spec:
         raise SweepError(f"{p}: {e}") from None
 
     def err(key: str, msg: str, needle: str | None = None) -> SweepError:
-        line = _line_of(text, needle or key.split(".")[-1])
-        return SweepError(f"{p}:{line}: {key}: {msg}" if line else f"{p}: {key}: {msg}")
+        return _located(p, text, key, msg, needle or key.split(".")[-1])
 
     for k in d:
         if k not in KEYS:
-            raise err(k, f"unknown key (expected one of {', '.join(KEYS)})", k)
+            raise err(k, f"unknown key{_did_you_mean(k, KEYS)} (expected one of {', '.join(KEYS)})", k)
     samples, seed = d.get("samples", 10), d.get("seed", 0)
     if not isinstance(samples, int) or isinstance(samples, bool) or samples < 1:
         raise err("samples", f"must be an integer >= 1, got {samples!r}")
@@ -161,13 +185,19 @@ def load_spec(path: str | os.PathLike[str]) -> Spec:
     for key, dist in vary.items():
         where, _, name = key.rpartition(".")
         if where not in WHERE or not name:
-            raise err(f"vary.{key}", f"must be WHERE.NAME with WHERE one of {', '.join(WHERE)}", key)
+            near = _core.nearest(where, list(WHERE)) if name else None
+            raise err(f"vary.{key}", f"must be WHERE.NAME with WHERE one of {', '.join(WHERE)}"
+                      + (f" (did you mean `{near}.{name}`?)" if near else ""), key)
+        if where == "solver" and name not in _core.SOLVER_NUMBERS:
+            raise err(f"vary.{key}", f"unknown solver setting `{name}`{_did_you_mean(name, _core.SOLVER_NUMBERS)}: "
+                      f"a sweep varies the numeric ones ({', '.join(_core.SOLVER_NUMBERS)})", key)
         if not (isinstance(dist, dict) and len(dist) == 1):
             raise err(f"vary.{key}", "must be one distribution: { uniform = [a, b] }, { normal = [mean, sd] }, "
                       "{ loguniform = [a, b] } or { grid = [x1, x2, ...] }", key)
         (kind, args), = dist.items()
         if kind not in DISTRIBUTIONS:
-            raise err(f"vary.{key}", f"unknown distribution {kind!r} (one of {', '.join(DISTRIBUTIONS)})", key)
+            raise err(f"vary.{key}", f"unknown distribution {kind!r}{_did_you_mean(kind, list(DISTRIBUTIONS))} "
+                      f"(one of {', '.join(DISTRIBUTIONS)})", key)
         if not isinstance(args, list) or not args or not all(
                 isinstance(a, (int, float)) and not isinstance(a, bool) and math.isfinite(a) for a in args):
             raise err(f"vary.{key}", f"{kind} needs a list of finite numbers, got {args!r}", key)
@@ -186,6 +216,23 @@ def load_spec(path: str | os.PathLike[str]) -> Spec:
         raise err("scene", f"must be a scene name or path, got {scene!r}")
     return Spec(str(p), scene, samples, seed, list(dict.fromkeys(sims)), init, opt["horizon"], opt["step"],
                 variables)
+
+
+def check_names(spec: Spec, scene: Any) -> None:
+    """Every varied name exists in the scene (a loaded ``Scene``): a parameter, a coordinate or a
+    velocity with one value (hinge, slide, lagrangian); else a located :class:`SweepError` with the
+    nearest valid name. A misspelt name would otherwise refuse every sample, or vary nothing."""
+    text = Path(spec.path).read_text()
+    have = {"parameters": [n for n, _ in scene.parameters],
+            "initial.q": [n for n in scene.q_names if "." not in n],
+            "initial.v": [n for n in scene.v_names if "." not in n]}
+    what = {"parameters": "parameter", "initial.q": "coordinate", "initial.v": "velocity"}
+    for v in spec.variables:
+        names = have.get(v.where)
+        if names is not None and v.name not in names:
+            raise _located(spec.path, text, f"vary.{v.key}",
+                           f"the scene {scene.path} has no {what[v.where]} {v.name!r}"
+                           f"{_did_you_mean(v.name, names)} (have: {', '.join(names) or 'none'})", v.key)
 
 
 def bundled_spec(scene_name: str) -> Path | None:
@@ -253,6 +300,7 @@ def make_samples(scene_file: Path, spec: Spec, out: Path) -> list[Sample]:
     from . import Scene, SceneError
 
     base = Scene(str(scene_file))
+    check_names(spec, base)
     text = scene_file.read_text()
     d = out / "samples"
     d.mkdir(parents=True, exist_ok=True)

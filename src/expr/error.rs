@@ -168,7 +168,7 @@ pub(crate) fn edit_distance(a: &str, b: &str) -> usize {
 }
 
 /// The closest candidate within a length-dependent edit distance, first one on ties.
-pub(crate) fn closest<'a>(name: &str, candidates: impl Iterator<Item = &'a str>) -> Option<String> {
+pub fn closest<'a>(name: &str, candidates: impl Iterator<Item = &'a str>) -> Option<String> {
     let n = name.chars().count();
     let limit = (n / 3).max(1);
     let mut best: Option<(usize, &str)> = None;

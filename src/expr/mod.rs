@@ -91,7 +91,7 @@ mod tape;
 mod tests;
 
 pub use compile::Expr;
-pub use error::{ExprError, ExprErrorKind};
+pub use error::{closest, ExprError, ExprErrorKind};
 pub use parser::Func;
 
 use std::collections::HashMap;

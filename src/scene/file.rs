@@ -35,7 +35,7 @@ pub const JOINT_TYPES: [&str; 4] = ["hinge", "slide", "ball", "free"];
 /// Joint types that need an `axis`.
 pub const JOINTS_WITH_AXIS: [&str; 2] = ["hinge", "slide"];
 /// Simulators of the cross-simulator check (keys of `[checks] not_checked`).
-pub const SIMULATORS: [&str; 2] = ["mujoco", "pinocchio"];
+pub use crate::check::SIMULATORS;
 
 /// A number or an expression of parameters ("2*pi", "sqrt(mu/r0)").
 #[derive(Clone, Debug, JsonSchema)]
@@ -161,10 +161,11 @@ pub struct SceneFile {
     pub time: Spanned<TimeFile>,
     #[serde(default)]
     pub solver: SolverFile,
-    /// Check tolerances by name (programme_residual is required for catalog scenes), each with
-    /// a reason.
+    /// Check tolerances by name, each with a reason: the budgets of the check's metrics
+    /// (programme_residual is required for catalog scenes) and its replay options; an unknown
+    /// name is refused.
     #[serde(default)]
-    #[schemars(with = "BTreeMap<String, ToleranceFile>")]
+    #[schemars(with = "BTreeMap<String, ToleranceFile>", transform = schema::tolerance_names)]
     pub tolerances: BTreeMap<String, Spanned<ToleranceFile>>,
     #[serde(default)]
     pub checks: ChecksFile,
@@ -638,6 +639,19 @@ pub struct TimeFile {
     )]
     pub max_samples: Option<Spanned<i64>>,
 }
+
+/// The numeric keys of `[solver]` (those a sweep may vary; `tests/schema.rs` checks them
+/// against [`SolverFile`]).
+pub const SOLVER_NUMBERS: [&str; 8] = [
+    "step",
+    "rtol",
+    "atol",
+    "max_step",
+    "projection_tol",
+    "baumgarte_alpha",
+    "baumgarte_beta",
+    "max_drift",
+];
 
 /// Solver settings; every key optional, defaults those of `Settings::default()`.
 #[derive(Clone, Debug, Default, Deserialize, JsonSchema)]

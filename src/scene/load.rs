@@ -9,6 +9,7 @@ use super::rows::ExprConstraints;
 use super::signals::{Signals, Site};
 use super::tree_model::{PointForce, TreeSceneModel};
 use super::{Scene, SceneSystem, Tolerance};
+use crate::check;
 use crate::expr::{self, Expr, SymbolTable};
 use crate::model::Model;
 use crate::programme::{Constraints, Level, Role, RowSpec};
@@ -299,7 +300,8 @@ fn actuators<M: Model>(
                             x.span(),
                             &f,
                             format!(
-                                "`{key}` is not a velocity: the direction's entries are among {}",
+                                "`{key}` is not a velocity{}: the direction's entries are among {}",
+                                check::did_you_mean(key, v_names.iter().map(String::as_str)),
                                 and_list(&v_names.iter().map(String::as_str).collect::<Vec<_>>())
                             ),
                         ));
@@ -786,7 +788,8 @@ fn lagrangian(
                 s.span(),
                 &field,
                 format!(
-                    "`{name}` is not a coordinate (coordinates: {})",
+                    "`{name}` is not a coordinate{} (coordinates: {})",
+                    check::did_you_mean(name, names.iter().map(String::as_str)),
                     names.join(", ")
                 ),
             )
@@ -965,7 +968,8 @@ fn tree_scene(
                 s.span(),
                 &field,
                 format!(
-                    "`{name}` is not a velocity coordinate (have: {})",
+                    "`{name}` is not a velocity coordinate{} (have: {})",
+                    check::did_you_mean(name, v_names.iter().map(String::as_str)),
                     v_names.join(", ")
                 ),
             )
@@ -1448,7 +1452,11 @@ fn initial(
                 return Err(src.error(
                     s.span(),
                     &field,
-                    format!("`{key}` is not a coordinate (have: {})", names.join(", ")),
+                    format!(
+                        "`{key}` is not a coordinate{} (have: {})",
+                        check::did_you_mean(key, names.iter().map(String::as_str)),
+                        names.join(", ")
+                    ),
                 ));
             }
             let vals: Vec<f64> = match s.get_ref() {
@@ -1658,7 +1666,8 @@ fn expected_not_checked(src: &Source, file: &SceneFile) -> R<Vec<(String, String
                 reason.span(),
                 &field,
                 format!(
-                    "unknown simulator `{sim}`: expected one of {}",
+                    "unknown simulator `{sim}`{}: expected one of {}",
+                    check::did_you_mean(sim, SIMULATORS.iter().copied()),
                     SIMULATORS.join(", ")
                 ),
             ));
@@ -1675,11 +1684,38 @@ fn expected_not_checked(src: &Source, file: &SceneFile) -> R<Vec<(String, String
     Ok(out)
 }
 
+/// `[tolerances]`: names of the check's vocabulary ([`check::tolerance_keys`]: a misspelt budget
+/// would silently leave its metric at the default), positive values, reasons.
 fn tolerances(src: &Source, file: &SceneFile) -> R<Vec<Tolerance>> {
     let mut out = vec![];
+    let known = check::tolerance_keys();
     for (name, t) in &file.tolerances {
         let tf = t.get_ref();
         let field = format!("tolerances.{name}");
+        if let Some((_, why)) = check::RETIRED.iter().find(|(r, _)| r == name) {
+            return Err(src.error(
+                t.span(),
+                &field,
+                format!("`{name}` is no longer accepted: {why}"),
+            ));
+        }
+        if !known.contains(name) {
+            return Err(src.error(
+                t.span(),
+                &field,
+                format!(
+                    "unknown tolerance `{name}`{}: the check reads its metrics' budgets (the \
+                     metric's name, or with `_mujoco`, `_pinocchio`, `_solver_only` for a checker \
+                     that judges it) and the options {} (FORMAT.md, \"Tolerances\")",
+                    check::did_you_mean(name, known.iter().map(|k| k.as_str())),
+                    check::OPTIONS
+                        .iter()
+                        .map(|(o, _)| format!("`{o}`"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            ));
+        }
         if !(tf.value > 0.0) || !tf.value.is_finite() {
             return Err(src.error(
                 t.span(),

@@ -90,12 +90,13 @@ pub(super) fn references(
                         n.span(),
                         &field,
                         format!(
-                            "`{key}` is not a {} name (have: {})",
+                            "`{key}` is not a {} name{} (have: {})",
                             if quantity == "q" {
                                 "coordinate"
                             } else {
                                 "velocity"
                             },
+                            crate::check::did_you_mean(key, names.iter().map(String::as_str)),
                             names.join(", ")
                         ),
                     ));

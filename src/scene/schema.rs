@@ -131,6 +131,14 @@ pub(super) fn simulator_names(s: &mut Schema) {
     );
 }
 
+/// `[tolerances]`: the check's budgets and options (`crate::check::tolerance_keys`).
+pub(super) fn tolerance_names(s: &mut Schema) {
+    s.insert(
+        "propertyNames".into(),
+        json!({ "enum": crate::check::tolerance_keys() }),
+    );
+}
+
 /// `inertia`: 3 principal moments or 6 entries.
 pub(super) fn inertia_lengths(s: &mut Schema) {
     s.insert(

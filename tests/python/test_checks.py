@@ -79,6 +79,13 @@ def test_negative_control_corrupted_u_fails(name, sim):
     bad = {b.metric: b for b in r.breaches}
     assert "replay_residual" in bad and "replay_deviation" in bad
     assert bad["replay_deviation"].first_time is not None and bad["replay_deviation"].first_time < 0.5
+    # The failure names the coordinate that deviates most and the row (issue 28).
+    scene_ = ph.Scene(scene(name))
+    dev = bad["replay_deviation"].where
+    assert dev.split(" ", 1)[0] in ("coordinate", "velocity") and dev.split(" ", 1)[1] in (
+        scene_.q_names + scene_.v_names), dev
+    assert bad["replay_residual"].where in {f"row {r['name']}" for r in scene_.rows}
+    assert f"at {dev}" in r.reason
     if name == "knife_edge":
         ok = run_check(scene(name), sim, opts)
         assert ok.status == "pass", ok.reason

@@ -83,6 +83,10 @@ def test_moved_closure_point_fails_parity(name, site, sim):
     assert r.status == "fail", (r.reason, r.metrics)
     assert "parity_closure" in {b.metric for b in r.breaches}, r.reason
     assert r.metrics["parity_closure"] > 1e-5, r.metrics  # measured 1.1e-4 (six-bar) .. 9.8e-4
+    # The failure names the moved closure (watt_six_bar has two; issue 28).
+    closure = site.split("__")[0]
+    assert next(b for b in r.breaches if b.metric == "parity_closure").where == f"closure {closure}", r.reason
+    assert f"at closure {closure}" in r.reason
     assert "replay_residual" not in r.metrics
 
 
@@ -93,6 +97,7 @@ def test_wrong_control_fails_the_closure_reactions(sim):
     r, _ = _run(str(scene_file("four_bar")), sim, corrupt_u=lambda t, u: 1.01 * u)
     assert r.status == "fail"
     assert "reaction_closure" in {b.metric for b in r.breaches}, (r.reason, r.metrics)
+    assert next(b for b in r.breaches if b.metric == "reaction_closure").where == "closure joint_b"
 
 
 DISTANCE = """name = "distance_pendulum"

@@ -54,6 +54,7 @@ def test_a_force_on_the_unactuated_joint_fails_the_check(sim):
     assert r.status == "fail", (r.reason, r.metrics)
     assert r.metrics["replay_unactuated"] > 1e-7
     assert "replay_unactuated" in r.reason
+    assert next(b for b in r.breaches if b.metric == "replay_unactuated").where == "joint d", r.reason
 
 
 @pytest.mark.parametrize("sim", BOTH)

@@ -40,12 +40,19 @@ def run(*args, timeout=600):
 
 
 @pytest.mark.parametrize("text,where", [
-    ('samples = 0\n[vary]\n"parameters.amp" = { uniform = [0, 1] }\n', r":1: samples: must be an integer >= 1"),
-    ('sampels = 3\n[vary]\n"parameters.amp" = { uniform = [0, 1] }\n', r":1: sampels: unknown key"),
-    ('[vary]\n"parameters.amp" = { uniformm = [0, 1] }\n', r":2: vary.parameters.amp: unknown distribution 'uniformm'"),
-    ('[vary]\n"parameters.amp" = { uniform = [1, 0] }\n', r":2: vary.parameters.amp: uniform needs a < b"),
-    ('[vary]\n"param.amp" = { grid = [1, 2] }\n', r":2: vary.param.amp: must be WHERE.NAME"),
-    ('[vary]\n"parameters.amp" = { normal = [1, 0] }\n', r":2: vary.parameters.amp: normal needs a standard deviation > 0"),
+    ('samples = 0\n[vary]\n"parameters.amp" = { uniform = [0, 1] }\n', r":1:1: samples: must be an integer >= 1"),
+    ('sampels = 3\n[vary]\n"parameters.amp" = { uniform = [0, 1] }\n',
+     r":1:1: sampels: unknown key \(did you mean `samples`\?\)"),
+    ('[vary]\n"parameters.amp" = { uniformm = [0, 1] }\n',
+     r":2:1: vary.parameters.amp: unknown distribution 'uniformm' \(did you mean `uniform`\?\)"),
+    ('[vary]\n"parameters.amp" = { uniform = [1, 0] }\n', r":2:1: vary.parameters.amp: uniform needs a < b"),
+    ('[vary]\n"param.amp" = { grid = [1, 2] }\n', r":2:1: vary.param.amp: must be WHERE.NAME"),
+    ('[vary]\n"parameter.amp" = { grid = [1, 2] }\n',
+     r":2:1: vary.parameter.amp: must be WHERE.NAME .*\(did you mean `parameters.amp`\?\)"),
+    ('seed = 2\n[vary]\n  "solver.rtoll" = { grid = [1e-8, 1e-10] }\n',
+     r":3:3: vary.solver.rtoll: unknown solver setting `rtoll` \(did you mean `rtol`\?\)"),
+    ('[vary]\n"solver.formulation" = { grid = [1, 2] }\n', r":2:1: vary.solver.formulation: unknown solver setting"),
+    ('[vary]\n"parameters.amp" = { normal = [1, 0] }\n', r":2:1: vary.parameters.amp: normal needs a standard deviation > 0"),
     ('seed = 1\n', r": vary: a sweep needs a \[vary\] table"),
 ])
 def test_bad_sweep_files_are_located(tmp_path, text, where):
@@ -61,7 +68,19 @@ def test_a_parameter_the_scene_lacks_is_an_error(tmp_path):
     p = spec(tmp_path, vary='"parameters.nope" = { uniform = [0, 1] }\n')
     r = run("--spec", str(p), "-o", str(tmp_path / "o"))
     assert r.returncode == 2, r.stderr
-    assert re.search(r"s\.toml:\d+: vary\.parameters\.nope: the scene .*double_pendulum\.toml has no parameter 'nope'", r.stderr), r.stderr
+    assert re.search(r"s\.toml:10:1: vary\.parameters\.nope: the scene .*double_pendulum\.toml has no parameter 'nope'", r.stderr), r.stderr
+
+
+@pytest.mark.parametrize("key,near", [("parameters.ampp", "amp"), ("initial.q.q11", "q1"), ("initial.v.q22", "q2")])
+def test_a_misspelt_name_is_located_with_the_nearest(tmp_path, key, near):
+    """A varied name the scene lacks is refused before any sample is made, at its line and column
+    in the sweep file, with the scene's nearest name (not a sweep of refused samples)."""
+    p = spec(tmp_path, vary=f'"{key}" = {{ uniform = [0, 1] }}\n')
+    r = run("--spec", str(p), "-o", str(tmp_path / "o"))
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert re.search(rf"s\.toml:10:1: vary\.{re.escape(key)}: the scene .* has no .*\(did you mean `{near}`\?\)",
+                     r.stderr), r.stderr
+    assert not (tmp_path / "o" / "samples").exists() or not any((tmp_path / "o" / "samples").iterdir())
 
 
 def test_samples_depend_on_seed_and_index_only(tmp_path):

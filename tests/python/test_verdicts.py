@@ -51,6 +51,12 @@ def test_a_force_withheld_from_the_simulator_fails(sim, kind):
     assert r.status == "fail", (r.reason, r.metrics)
     assert "parity_bias" in {b.metric for b in r.breaches}
     assert r.metrics["parity_bias"] > 1e-3
+    # The failure names the joint and the force the simulator misses (issue 28).
+    b = next(b for b in r.breaches if b.metric == "parity_bias")
+    force = "the scene's point forces" if kind == "point_force" else "the coordinate force on q1"
+    assert re.fullmatch(rf"joint q[12], {force} \(discrepancy = -1 x its force: the simulator misses it\)",
+                        b.where), b.where
+    assert f"parity_bias {b.value:.3g} > {b.budget:.3g} at {b.where}" in r.reason, r.reason
 
 
 @pytest.mark.parametrize("sim,pattern", [("mujoco", r'mass="1\.0"'), ("pinocchio", r'<mass value="1\.0"/>')])
@@ -64,6 +70,10 @@ def test_budgetless_scene_with_a_wrong_mass_fails(sim, pattern):
     r, _ = _run(POINT, sim, SHORT, corrupt_export=wrong)
     assert r.status == "fail", (r.reason, r.metrics)
     assert "parity_mass" in {b.metric for b in r.breaches}
+    # The failure names the worst entry's joints; no harness force explains a wrong mass.
+    b = next(b for b in r.breaches if b.metric == "parity_mass")
+    assert re.fullmatch(r"joints? q[12](, q[12])?", b.where), b.where
+    assert f"at {b.where}" in r.reason and "force" not in r.reason, r.reason
     assert next(b for b in r.budgets if b.metric == "parity_mass").source == "default"
 
 

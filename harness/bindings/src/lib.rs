@@ -16,6 +16,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use std::path::PathBuf;
 
+mod check;
 mod solution;
 
 /// (body name, world position, orientation w x y z) as Python gets it.
@@ -767,6 +768,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(cli, m)?)?;
     m.add_function(wrap_pyfunction!(chain_toml, m)?)?;
     m.add_function(wrap_pyfunction!(drift_cost, m)?)?;
+    // The check's vocabulary (progmo::check): metrics, budgets, options.
+    check::register(m)?;
     Ok(())
 }
 
