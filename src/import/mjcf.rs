@@ -536,7 +536,7 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
             let collides = ["contype", "conaffinity"].iter().any(|a| {
                 defaults
                     .geom_attr(g, gclass, a)
-                    .map_or(true, |v| v.trim().parse::<i64>() != Ok(0)) // MuJoCo's default: 1
+                    .is_none_or(|v| v.trim().parse::<i64>() != Ok(0)) // MuJoCo's default: 1
             });
             if collides {
                 let gname = g.attribute("name").map_or(format!("{gi}"), String::from);

@@ -276,8 +276,17 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
     let mut ranges = vec![];
     let mut locked_values = vec![];
     for l in &link_order {
-        if let Some(c) = child(links[l], "collision") {
-            rec.push("contact", format!("link[{l}].collision"), c);
+        let collisions: Vec<Node> = links[l]
+            .children()
+            .filter(|c| c.has_tag_name("collision"))
+            .collect();
+        for (k, c) in collisions.iter().enumerate() {
+            let element = match (collisions.len(), c.attribute("name")) {
+                (_, Some(n)) => format!("link[{l}].collision[{n}]"),
+                (1, None) => format!("link[{l}].collision"),
+                (_, None) => format!("link[{l}].collision[{k}]"),
+            };
+            rec.push("contact", element, *c);
         }
     }
     for t in robot.children().filter(|c| c.has_tag_name("transmission")) {
