@@ -12,7 +12,11 @@ scene itself (to evaluate its expression forces at the simulator's own states):
   rows ``B[programme]``);
 * ``closure_jacobian(t, q, v)`` the simulator's Jacobian of the scene's loop closures (rows in its
   own order and frame) in OUR v, and ``closure_forces(t, q, v, u)`` its closure multipliers under u;
-* ``replay(ref, record_frames) -> Replay`` open-loop replay of ``ref.u`` (u at each RK4 stage).
+* ``replay(ref, record_frames) -> Replay`` open-loop replay of ``ref.u`` (u at each RK4 stage);
+* for a scene whose model is a robot file, the back-end reads that file itself (``robot_file``,
+  ``route = "user's file"``) and adds ``inverse_force(t, q, v, a)`` (the control force of its
+  inverse dynamics), ``unmodelled()`` (elements of its reading progmo does not model) and
+  ``joint_ranges()`` (its joint limits).
 
 A back-end that meets a harness force it cannot apply raises :class:`Unsupported` naming it, and
 the check becomes ``not_checked``: a model the simulator does not share never passes.
@@ -62,6 +66,15 @@ class Backend(Protocol):
     def closure_forces(self, t: float, q: np.ndarray, v: np.ndarray, u: np.ndarray) -> np.ndarray: ...
 
     def replay(self, ref: Any, frame_every: int = 0) -> Any: ...
+
+    # robot files (``route == "user's file"``, see ``robot_file``)
+    route: str
+
+    def inverse_force(self, t: float, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray: ...
+
+    def unmodelled(self) -> list[dict]: ...
+
+    def joint_ranges(self) -> dict[str, tuple[float, float]]: ...
 
 
 def attractor_force(point: np.ndarray, mu: float, mass: float, com: np.ndarray) -> np.ndarray:
