@@ -460,6 +460,9 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
     for n in &scene.import_notes {
         errln!("progmo solve: note: {n}");
     }
+    for line in unmodelled_lines(&scene) {
+        errln!("progmo solve: {line}");
+    }
     let out = a
         .out
         .clone()
@@ -499,6 +502,10 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
     let servo = scene
         .servo_report(&settings, true)
         .and_then(|r| serde_json::to_value(r).ok());
+    let robot_file = scene
+        .robot
+        .as_ref()
+        .and_then(|r| serde_json::to_value(r).ok());
     let summary = SummaryInput {
         scene: &scene.name,
         solution: &solution,
@@ -508,6 +515,7 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
         git_revision: (!GIT_REVISION.is_empty()).then_some(GIT_REVISION),
         command_line,
         servo: servo.as_ref(),
+        robot_file: robot_file.as_ref(),
     };
     write_errors.extend(write_summary_to_path(out.join("summary.json"), &summary).err());
     // --json: the summary's content (and where the files are) on stdout, the line on stderr.
@@ -597,6 +605,26 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
     }
 }
 
+/// One line per element of the robot file that is not modelled: `not modelled (declared: REASON)`
+/// or `not modelled, undeclared` with kind, element and location.
+fn unmodelled_lines(scene: &Scene) -> Vec<String> {
+    scene
+        .robot
+        .iter()
+        .flat_map(|r| &r.unmodelled)
+        .map(|u| match &u.declared {
+            Some(reason) => format!(
+                "not modelled ({}, declared ignorable: {reason}): {} at {}",
+                u.kind, u.element, u.location
+            ),
+            None => format!(
+                "not modelled ({}, UNDECLARED: the check reports it as not checked): {} at {}",
+                u.kind, u.element, u.location
+            ),
+        })
+        .collect()
+}
+
 fn validate(scenes: &[PathBuf], json: bool) -> ExitCode {
     let mut failed = false;
     let mut objects = vec![];
@@ -630,6 +658,8 @@ fn validate(scenes: &[PathBuf], json: bool) -> ExitCode {
                     "initial_correction": corr.map(|c| serde_json::json!({"position": c.position, "velocity": c.velocity})),
                     "set_aside": scene.set_aside.as_ref().map(|s| &s.0),
                     "servo": scene.servo_report(&scene.settings, false),
+                    "notes": scene.import_notes,
+                    "robot_file": scene.robot,
                 }));
             }
             Ok((traj, corr)) => {
@@ -663,6 +693,9 @@ fn validate(scenes: &[PathBuf], json: bool) -> ExitCode {
                 }
                 for n in &scene.import_notes {
                     say!("  note: {n}");
+                }
+                for line in unmodelled_lines(&scene) {
+                    say!("  {line}");
                 }
                 if let Some(r) = scene.servo_report(&scene.settings, false) {
                     let an = &r.analysis;

@@ -73,7 +73,77 @@ fn scenes() -> Vec<Scene> {
     for n in [2, 3, 7] {
         out.push(ChainSpec::uniform(n).scene().unwrap());
     }
+    // joint armature, damping, springs and reference positions, body gravity compensation: an
+    // MJCF robot with all of them (tests/robots/mjcf/dynamics.xml) and dressed random chains
+    out.push(
+        Scene::from_text(
+            &root.join("tests/robots/mjcf/fast_paths_dynamics.toml"),
+            DYNAMICS_MJCF,
+        )
+        .unwrap_or_else(|e| panic!("{e}")),
+    );
+    out.extend(dressed_chains(3, 0x9e37_79b9));
     out
+}
+
+/// An MJCF robot with armature, damping, springs, `ref` and gravcomp; its row holds at q0 = ref.
+const DYNAMICS_MJCF: &str = r#"
+name = "dynamics_mjcf"
+[model]
+kind = "mjcf"
+file = "dynamics.xml"
+gravity = [0.0, 0.0, -9.81]
+[[programme]]
+name = "lift"
+expr = "shoulder - 0.5235987755982988 - 0.1*(1 - cos(t))"
+[initial]
+v = { elbow = 0.3, slide = -0.2 }
+[time]
+t1 = 1.0
+"#;
+
+/// Random chains whose joints carry armature, damping and springs and whose bodies carry
+/// gravity compensation (from -0.5 to 1.5).
+fn dressed_chains(count: usize, seed: u64) -> Vec<Scene> {
+    let mut rng = Rng(seed);
+    (0..count)
+        .map(|i| {
+            let n = 3 + ((rng.next() + 1.0) * 3.49) as usize;
+            let spec = ChainSpec {
+                masses: Some((0..n).map(|_| 0.3 + 0.25 * rng.next()).collect()),
+                q0: Some(0.3 * rng.next()),
+                name: Some(format!("dressed_{i}")),
+                ..ChainSpec::uniform(n)
+            };
+            let mut text = String::new();
+            for line in spec.toml().lines() {
+                if line.starts_with("joints = ") {
+                    let extra = format!(
+                        ", armature = {:?}, damping = {:?}, stiffness = {:?}, spring_ref = {:?} }}]",
+                        0.05 * (1.0 + rng.next()),
+                        0.1 * (1.0 + rng.next()),
+                        2.0 * (1.0 + rng.next()),
+                        0.5 * rng.next()
+                    );
+                    text.push_str(&line.replacen(" }]", &extra, 1));
+                } else if line.starts_with("mass = ") {
+                    text.push_str(&format!("{line}\ngravcomp = {:?}", 0.5 + rng.next()));
+                } else {
+                    text.push_str(line);
+                }
+                text.push('\n');
+            }
+            let scene = Scene::from_text(std::path::Path::new(&format!("dressed_{i}.toml")), &text)
+                .unwrap_or_else(|e| panic!("{e}"));
+            let SceneSystem::Tree(p) = &scene.system else {
+                panic!("a tree scene")
+            };
+            let tree = p.model.tree();
+            assert!(tree.joints().iter().all(|j| j.armature > 0.0 && j.stiffness > 0.0));
+            assert!(tree.bodies().iter().all(|b| b.gravcomp != 0.0));
+            scene
+        })
+        .collect()
 }
 
 /// A double pendulum as a lagrangian scene: full mass matrix in q, a potential, one programme row.
@@ -368,6 +438,7 @@ fn shared_sweep_equals_the_plain_computation_bit_for_bit() {
     let mut compared = 0;
     let mut all = scenes();
     all.extend(random_chains(6, 0x2545f4914f6cdd1d));
+    all.extend(dressed_chains(3, 0x7f4a_7c15));
     for scene in all {
         with_problem!(&scene.system, p => {
             let states = walk(&states(&p.model, &p.q0, &p.v0, 6, 11));

@@ -33,16 +33,138 @@ fn a_small_robot_loads_with_notes_and_body_signals() {
     use progmo::model::Model;
     assert_eq!(p.model.q_names(), ["shoulder", "elbow", "slide"]);
     let notes = s.import_notes.join("\n");
-    for phrase in [
-        "limits not enforced (the programme decides the motion): shoulder",
-        "damping ignored: shoulder, elbow, slide", // from the default class
-        "armature ignored (MuJoCo adds it to the mass matrix): shoulder, elbow, slide",
-        "friction loss ignored: elbow",
-        "stiffness (springs) ignored: slide",
-        "<equality> not modelled",
-        "<option gravity> not read",
+    assert!(notes.contains("<option gravity> not read"), "{notes}");
+    // damping and armature (from the default class) and the slide's spring are modelled
+    let tree = p.model.tree();
+    for j in tree.joints() {
+        assert_eq!((j.damping, j.armature), (0.1, 0.01), "{}", j.name);
+    }
+    assert_eq!(tree.joints()[2].stiffness, 3.0);
+    // what is not modelled: one record per element, located, undeclared
+    let r = s.robot.as_ref().expect("an mjcf scene has a robot file");
+    let got: Vec<(&str, &str, bool)> = r
+        .unmodelled
+        .iter()
+        .map(|u| (u.kind.as_str(), u.element.as_str(), u.declared.is_none()))
+        .collect();
+    assert_eq!(
+        got,
+        [
+            ("equality", "equality.joint[0]", true),
+            ("joint_limit", "joint[shoulder].range", true),
+            ("frictionloss", "joint[elbow].frictionloss", true),
+        ]
+    );
+    let file = std::path::absolute(robots().join("two_link.xml")).unwrap();
+    assert_eq!(r.unmodelled[1].location, format!("{}:9", file.display()));
+    assert_eq!(r.path, file);
+    assert_eq!(r.ranges.len(), 1);
+    assert_eq!((r.ranges[0].lower, r.ranges[0].upper), (-1.0, 1.0)); // radians here
+}
+
+/// Every modelled attribute read with MuJoCo's meaning (degrees for a hinge's ref and springref),
+/// every unmodelled kind an MJCF file can hold recorded once per element, and the scene's
+/// declarations: checked against the closed vocabulary (an unknown kind names the nearest), a
+/// reason required, a kind absent from the file refused.
+#[test]
+fn dynamics_attributes_and_unmodelled_elements() {
+    let f = robots().join("dynamics.xml");
+    let s = load(&scene_text(&f, "")).unwrap_or_else(|e| panic!("{e}"));
+    let SceneSystem::Tree(p) = &s.system else {
+        panic!()
+    };
+    let tree = p.model.tree();
+    let deg = std::f64::consts::PI / 180.0;
+    let j: Vec<_> = tree
+        .joints()
+        .iter()
+        .map(|j| {
+            (
+                j.damping,
+                j.armature,
+                j.stiffness,
+                j.spring_ref,
+                j.reference,
+            )
+        })
+        .collect();
+    assert_eq!(
+        j,
+        [
+            (0.1, 0.05, 2.0, 10.0 * deg, 30.0 * deg),
+            (0.1, 0.0, 0.0, 0.0, 0.0),
+            (0.3, 0.2, 0.0, 0.0, 0.1),
+        ]
+    );
+    let gc: Vec<_> = tree.bodies().iter().map(|b| b.gravcomp).collect();
+    assert_eq!(gc, [1.0, 0.25, 0.0]);
+    // q0 defaults to MuJoCo's qpos0: the refs
+    use progmo::model::Model;
+    assert_eq!(p.q0, [30.0 * deg, 0.0, 0.1]);
+    let r = s.robot.as_ref().unwrap();
+    let kinds: Vec<(&str, &str)> = r
+        .unmodelled
+        .iter()
+        .map(|u| (u.kind.as_str(), u.element.as_str()))
+        .collect();
+    assert_eq!(
+        kinds,
+        [
+            ("fluid", "option.density"),
+            ("contact", "contact.exclude[0]"),
+            ("tendon", "tendon.fixed[coupling]"),
+            ("actuator", "actuator.motor[m1]"),
+            ("joint_limit", "joint[shoulder].range"),
+            ("contact", "body[lower].geom[bumper]"),
+            ("effort_limit", "joint[elbow].actuatorfrcrange"),
+            ("frictionloss", "joint[elbow].frictionloss"),
+        ]
+    );
+    assert_eq!(
+        (
+            r.ranges[0].joint.as_str(),
+            r.ranges[0].lower,
+            r.ranges[0].upper
+        ),
+        ("shoulder", -90.0 * deg, 90.0 * deg)
+    );
+    assert!(r.undeclared().count() == kinds.len());
+    let _ = p.model.nv();
+    // declarations
+    let all = "ignore = { fluid = \"a\", contact = \"b\", tendon = \"c\", actuator = \"d\", \
+               joint_limit = \"e\", effort_limit = \"f\", frictionloss = \"g\" }";
+    let s = load(&scene_text(&f, all)).unwrap_or_else(|e| panic!("{e}"));
+    let r = s.robot.as_ref().unwrap();
+    assert_eq!(r.undeclared().count(), 0);
+    assert_eq!(r.unmodelled[7].declared.as_deref(), Some("g"));
+    // negative controls: frictionloss undeclared stays listed; an unknown kind, an empty reason
+    // and a kind the file lacks are refused where they are written
+    let s = load(&scene_text(&f, &all.replace(", frictionloss = \"g\"", ""))).unwrap();
+    let und: Vec<_> = s
+        .robot
+        .as_ref()
+        .unwrap()
+        .undeclared()
+        .map(|u| u.element.clone())
+        .collect();
+    assert_eq!(und, ["joint[elbow].frictionloss"]);
+    for (extra, phrase) in [
+        (
+            "ignore = { frictionlos = \"x\" }",
+            "unknown kind `frictionlos`: did you mean `frictionloss`?",
+        ),
+        ("ignore = { frictionloss = \"  \" }", "needs a reason"),
+        (
+            "ignore = { mimic = \"x\" }",
+            "has no element of kind `mimic`",
+        ),
     ] {
-        assert!(notes.contains(phrase), "{phrase}\n{notes}");
+        let Err(e) = load(&scene_text(&f, extra)) else {
+            panic!("{extra} accepted")
+        };
+        assert_eq!(e.line, 6, "{e}");
+        assert!(e.field.starts_with("model.ignore."), "{e}");
+        assert!(e.message.contains(phrase), "{e}");
     }
 }
 

@@ -424,7 +424,8 @@ quat = [1.0, 0.0, 0.0, 0.0]
 mass = 1.0
 com = [0.0, 0.0, -0.5]
 inertia = [0.01, 0.01, 0.01, 0.0, 0.0, 0.0]
-joints = [{ name = "q1", type = "hinge", axis = [0.0, 1.0, 0.0], anchor = [0.0, 0.0, 0.0], stiffness = 1.0, spring_ref = 0.1, damping = 0.05 }]
+joints = [{ name = "q1", type = "hinge", axis = [0.0, 1.0, 0.0], anchor = [0.0, 0.0, 0.0], stiffness = 1.0, spring_ref = 0.1, damping = 0.05, armature = 0.01 }]
+gravcomp = 0.5
 shape = { capsule = [0.05, 1.0], pos = [0.0, 0.0, -0.5], quat = [1.0, 0.0, 0.0, 0.0], color = [0.2, 0.2, 0.8, 1.0] }
 
 [[model.bodies]]
@@ -595,6 +596,7 @@ file = "tests/robots/two_link.urdf"
 root_joint = "free"
 locked_joints = ["slide"]
 gravity = [0.0, 0.0, -9.81]
+ignore = { joint_limit = "the motion stays inside the ranges", effort_limit = "u is compared with the file's limits by hand" }
 
 [[model.frames]]
 name = "tip"
@@ -607,3 +609,77 @@ quat = [1.0, 0.0, 0.0, 0.0]
 [time]
 t1 = 1.0
 "#;
+
+/// The rows of the table after `marker` in FORMAT.md: (first cell, second cell).
+fn table_after(page: &str, marker: &str) -> Vec<(String, String)> {
+    let mut lines = page
+        .lines()
+        .skip_while(|l| l.trim() != marker)
+        .skip(1)
+        .skip_while(|l| l.trim().is_empty());
+    let mut rows = vec![];
+    for (k, row) in lines
+        .by_ref()
+        .take_while(|l| l.starts_with('|'))
+        .enumerate()
+    {
+        if k < 2 {
+            continue; // header and separator
+        }
+        let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+        rows.push((cells[1].to_string(), cells[2].to_string()));
+    }
+    assert!(!rows.is_empty(), "FORMAT.md: no table after `{marker}`");
+    rows
+}
+
+/// FORMAT.md's robot-file tables and the closed vocabulary of unmodelled kinds
+/// (`progmo::import::unmodelled::KINDS`) are in step: the kinds table lists exactly its kinds;
+/// the URDF and MJCF tables give every row one of the four statuses, name only kinds of the
+/// vocabulary, and together use every kind. Negative control: a page missing a kind is caught.
+#[test]
+fn format_md_robot_tables_use_the_closed_vocabulary() {
+    use progmo::import::unmodelled::KINDS;
+    let page = std::fs::read_to_string(root().join("src/scene/FORMAT.md")).unwrap();
+    let check = |page: &str| -> Result<(), String> {
+        let vocab: BTreeSet<&str> = KINDS.iter().map(|k| k.0).collect();
+        let listed: BTreeSet<String> = table_after(page, "<!-- unmodelled kinds -->")
+            .into_iter()
+            .map(|(k, _)| k.trim_matches('`').to_string())
+            .collect();
+        let listed: BTreeSet<&str> = listed.iter().map(|s| s.as_str()).collect();
+        if listed != vocab {
+            return Err(format!("kinds table {listed:?} vs KINDS {vocab:?}"));
+        }
+        let mut used = BTreeSet::new();
+        for fmt in ["urdf", "mjcf"] {
+            for (what, status) in table_after(page, &format!("<!-- robot elements: {fmt} -->")) {
+                if let Some(rest) = status.strip_prefix("ignorable (`") {
+                    let kind = rest.trim_end_matches("`)");
+                    if !vocab.contains(kind) {
+                        return Err(format!("{fmt}: {what}: `{kind}` is not a kind"));
+                    }
+                    used.insert(kind.to_string());
+                } else if !["modelled", "refused", "not read"]
+                    .iter()
+                    .any(|s| status.starts_with(s))
+                {
+                    return Err(format!("{fmt}: {what}: status `{status}`"));
+                }
+            }
+        }
+        let unused: Vec<_> = vocab.iter().filter(|k| !used.contains(**k)).collect();
+        if !unused.is_empty() {
+            return Err(format!("kinds no element table uses: {unused:?}"));
+        }
+        Ok(())
+    };
+    check(&page).unwrap_or_else(|e| panic!("FORMAT.md: {e}"));
+    let without = page.replace(
+        "| `mimic` | URDF `<mimic>`: a joint that follows another. |\n",
+        "",
+    );
+    assert!(check(&without).is_err(), "a missing kind went unnoticed");
+    let wrong = page.replace("ignorable (`mimic`)", "ignorable (`mimics`)");
+    assert!(check(&wrong).is_err(), "an unknown kind went unnoticed");
+}

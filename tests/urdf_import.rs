@@ -33,12 +33,24 @@ fn a_small_robot_loads_with_notes_and_link_signals() {
     };
     use progmo::model::Model;
     assert_eq!(p.model.q_names(), ["shoulder", "elbow", "slide"]);
-    let notes = s.import_notes.join("\n");
-    assert!(notes.contains("mimic of joint `slide`"), "{notes}");
-    assert!(
-        notes.contains("limits not enforced") && notes.contains("shoulder"),
-        "{notes}"
+    assert!(s.import_notes.is_empty(), "{:?}", s.import_notes);
+    let r = s.robot.as_ref().expect("a urdf scene has a robot file");
+    let got: Vec<(&str, &str)> = r
+        .unmodelled
+        .iter()
+        .map(|u| (u.kind.as_str(), u.element.as_str()))
+        .collect();
+    assert_eq!(
+        got,
+        [
+            ("joint_limit", "joint[shoulder].limit"),
+            ("effort_limit", "joint[shoulder].limit.effort"),
+            ("velocity_limit", "joint[shoulder].limit.velocity"),
+            ("mimic", "joint[slide].mimic"),
+        ]
     );
+    assert_eq!(r.kind, "urdf");
+    assert!(r.path.is_absolute() && r.path.ends_with("tests/robots/two_link.urdf"));
     // a link name that is not a signal source is refused in a row (located in the scene)
     let bad = "[[programme]]\nname = \"h\"\nexpr = \"nolink.z\"\n";
     let Err(e) = load(&scene_text(&robots().join("two_link.urdf"), "", bad)) else {
@@ -135,4 +147,58 @@ fn every_bad_robot_fails_where_its_header_says() {
         }
     }
     assert!(failures.is_empty(), "\n{}", failures.join("\n"));
+}
+
+/// `<dynamics damping>` is modelled (a viscous damper on the joint); friction, limits, the safety
+/// controller, collisions and transmissions are recorded one per element, with the file's line,
+/// and a scene declares the kinds it ignores. Negative control: without the declaration of
+/// `frictionloss` the friction stays undeclared.
+#[test]
+fn dynamics_damping_is_modelled_and_the_rest_recorded() {
+    let f = robots().join("dynamics.urdf");
+    let s = load(&scene_text(&f, "", "")).unwrap_or_else(|e| panic!("{e}"));
+    let SceneSystem::Tree(p) = &s.system else {
+        panic!()
+    };
+    assert_eq!(p.model.tree().joints()[0].damping, 0.7);
+    let r = s.robot.as_ref().unwrap();
+    let got: Vec<(&str, &str, usize)> = r
+        .unmodelled
+        .iter()
+        .map(|u| {
+            let line = u.location.rsplit(':').next().unwrap().parse().unwrap();
+            (u.kind.as_str(), u.element.as_str(), line)
+        })
+        .collect();
+    assert_eq!(
+        got,
+        [
+            ("contact", "link[arm].collision", 8),
+            ("actuator", "transmission[t_pivot]", 17),
+            ("joint_limit", "joint[pivot].limit", 13),
+            ("effort_limit", "joint[pivot].limit.effort", 13),
+            ("velocity_limit", "joint[pivot].limit.velocity", 13),
+            ("joint_limit", "joint[pivot].safety_controller", 14),
+            ("frictionloss", "joint[pivot].dynamics.friction", 15),
+        ]
+    );
+    assert_eq!(
+        (
+            r.ranges[0].joint.as_str(),
+            r.ranges[0].lower,
+            r.ranges[0].upper
+        ),
+        ("pivot", -1.5, 2.0)
+    );
+    let decl = "ignore = { contact = \"c\", actuator = \"a\", joint_limit = \"l\", \
+                effort_limit = \"e\", velocity_limit = \"v\" }";
+    let s = load(&scene_text(&f, decl, "")).unwrap_or_else(|e| panic!("{e}"));
+    let und: Vec<_> = s
+        .robot
+        .as_ref()
+        .unwrap()
+        .undeclared()
+        .map(|u| u.kind.as_str())
+        .collect();
+    assert_eq!(und, ["frictionloss"]);
 }

@@ -45,6 +45,17 @@ class Row(TypedDict):
     level: Literal["position", "velocity", "acceleration"]
     role: Literal["programme", "system"]
 
+class RobotFile(TypedDict):
+    kind: Literal["urdf", "mjcf"]
+    path: str  # the resolved absolute path of the robot file
+    locked_joints: list[tuple[str, float]]  # (joint, q value it is welded at)
+
+class Unmodelled(TypedDict):
+    kind: str  # one of Scene.unmodelled_kinds()
+    element: str  # e.g. "joint[elbow].frictionloss", "tendon.fixed[t1]", "link[hand].collision"
+    location: str  # "file:line" of the element in the robot file
+    declared: str | None  # the scene's reason ([model] ignore), None: undeclared
+
 class Code(TypedDict, total=False):
     code: str  # the return code's name; other keys: its fields (t, rows, values)
 
@@ -201,6 +212,21 @@ class Scene:
         """Does H depend on the state (a `direction` of expressions of t and the coordinates)?"""
     def actuation_map_at(self, t: float, q: F64) -> F64 | None:
         """H(t, q) (n x m); None without actuators."""
+    @property
+    def robot_file(self) -> RobotFile | None:
+        """The robot file of a urdf/mjcf scene (kind, resolved absolute path, locked joints with
+        the q value each is welded at); None for other models."""
+    @property
+    def unmodelled(self) -> list[Unmodelled]:
+        """Every element of the robot file read and not modelled, in file order; [] for other
+        models."""
+    @property
+    def joint_ranges(self) -> dict[str, tuple[float, float]]:
+        """Position limits the robot file states for the modelled hinge/slide joints: {joint:
+        (lower, upper)} in q's units; {} for other models."""
+    @staticmethod
+    def unmodelled_kinds() -> list[tuple[str, str]]:
+        """The closed vocabulary of unmodelled kinds: (kind, what it covers)."""
     @property
     def expected_not_checked(self) -> list[tuple[str, str]]:
         """[checks] not_checked of the scene: (simulator, reason)."""

@@ -11,7 +11,10 @@ use std::fmt::Write;
 ///
 /// Radians; RK4; contact, limit, equality, frictionloss and autoreset disabled; spring/damper
 /// disabled unless a joint has a stiffness/damping (then `stiffness`/`springref`/`damping` are on the
-/// joints); actuation left enabled (`mjcb_control` needs it); armature 0; explicit `<inertial>`
+/// joints; a body's gravcomp keeps the damper flag enabled: MuJoCo skips gravcomp with both off); actuation left enabled (`mjcb_control` needs it); `armature` as ours (written 0
+/// otherwise), hinge/slide `ref` when nonzero (MuJoCo's meaning is ours: the joint moves by
+/// qpos - ref), body `gravcomp` when nonzero (MuJoCo's passive force -gravcomp m g at the CoM, as
+/// ours); explicit `<inertial>`
 /// (mass floor: see the module doc); joints of a body in sequence in one `<body>` (MuJoCo composes
 /// them like our model); hinge/ball `pos` = our anchor. MuJoCo's qpos/qvel use our conventions
 /// (ball/free quaternion w, x, y, z; free linear velocity world-frame), so the maps are
@@ -82,7 +85,11 @@ pub fn mjcf_closed(
         sites[b].push(site(&c.site_b, &c.point_b, &c.quat_b));
     }
     let has_spring = tree.joints().iter().any(|j| j.stiffness != 0.0);
-    let has_damper = tree.joints().iter().any(|j| j.damping != 0.0);
+    // MuJoCo 4.0 computes gravcomp in its passive forces, skipped when both the spring and the
+    // damper flags are disabled (measured: qfrc_gravcomp = 0 then); the damper flag stays enabled
+    // for it (with no joint damping it adds nothing).
+    let has_gravcomp = tree.bodies().iter().any(|b| b.gravcomp != 0.0);
+    let has_damper = tree.joints().iter().any(|j| j.damping != 0.0) || has_gravcomp;
     let g = tree.fields().gravity;
     let mut x = String::new();
     let _ = writeln!(x, "<mujoco model=\"{}\">", esc(&options.name));
@@ -128,6 +135,7 @@ pub fn mjcf_closed(
         gravity: g,
         root_joint: None,
         closures: vec![],
+        armature: vec![],
         notes: vec![
             "qpos/qvel conventions equal ours (quaternions w, x, y, z; free joint linear velocity \
              world-frame, angular body-frame)"
@@ -150,9 +158,14 @@ pub fn mjcf_closed(
             continue;
         }
         let body = &tree.bodies()[b];
+        let gravcomp = if body.gravcomp != 0.0 {
+            format!(" gravcomp=\"{}\"", num(body.gravcomp))
+        } else {
+            String::new()
+        };
         let _ = writeln!(
             x,
-            "{ind}<body name=\"{}\" pos=\"{}\" quat=\"{}\">",
+            "{ind}<body name=\"{}\" pos=\"{}\" quat=\"{}\"{gravcomp}>",
             esc(&body.name),
             nums(body.pos.as_slice()),
             nums(&body.quat)
@@ -200,7 +213,10 @@ pub fn mjcf_closed(
                 JointType::Ball => ("ball", format!(" pos=\"{}\"", nums(jt.anchor.as_slice()))),
                 JointType::Free => ("free", String::new()),
             };
-            let mut dyn_ = String::from(" armature=\"0\"");
+            let mut dyn_ = format!(" armature=\"{}\"", armature(jt.armature));
+            if jt.reference != 0.0 {
+                let _ = write!(dyn_, " ref=\"{}\"", num(jt.reference));
+            }
             if jt.damping != 0.0 {
                 let _ = write!(dyn_, " damping=\"{}\"", num(jt.damping));
             }
@@ -263,6 +279,16 @@ pub fn mjcf_closed(
     }
     report.closures = closures.to_vec();
     Ok((x, report))
+}
+
+/// The armature attribute: `0` as before armature was modelled (documents stay byte-identical),
+/// otherwise the shortest round-trip decimal.
+fn armature(a: f64) -> String {
+    if a == 0.0 {
+        "0".into()
+    } else {
+        num(a)
+    }
 }
 
 /// `<equality>` elements of the closures (point: `connect`, weld: `weld`, both over sites).

@@ -27,6 +27,13 @@
 //!   [`ExportReport::gravity`].
 //! - **Attractors** have no element in either format: they are listed in
 //!   [`ExportReport::harness_forces`] with their formula.
+//! - **Armature, gravity compensation, reference positions.** MJCF carries them (joint
+//!   `armature`, body `gravcomp`, hinge/slide `ref`, with our meaning). URDF has none of them:
+//!   armature goes to [`ExportReport::armature`] (the harness sets Pinocchio's `model.armature`),
+//!   gravity compensation to a [`HarnessForce::Gravcomp`], and a reference position is folded
+//!   into the joint's `<origin>` (a hinge turning by `q - ref` about its axis is the origin
+//!   rotated by `-ref` about that axis followed by a turn by `q`; a slide, the origin moved by
+//!   `-ref` along the axis), so the simulator coordinate is q itself.
 //!
 //! Parity check: `tests/python/test_export_parity.py` loads both documents of every bundled tree
 //! scene in MuJoCo and Pinocchio (through the harness back-ends and the reports' q/v maps) and
@@ -141,6 +148,22 @@ pub struct ExportReport {
     /// Loop closures of the scene and how the document carries them (see [`ClosureExport`]).
     #[serde(default)]
     pub closures: Vec<ClosureExport>,
+    /// URDF only: joint armature (URDF has no element for it; Pinocchio 4.1's `buildModelFromUrdf`
+    /// leaves `model.armature` at 0 and its `crba`, `rnea` and `aba` add `model.armature` to the
+    /// mass matrix diagonal): the harness sets `model.armature[sim_v..sim_v + nv] = armature`.
+    /// MJCF carries it as the joints' `armature`. Absent from the JSON when empty.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub armature: Vec<ArmatureExport>,
+}
+
+/// Armature of one joint the harness must set on the simulator model (URDF only).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ArmatureExport {
+    pub joint: String,
+    pub armature: f64,
+    /// First simulator dof of the joint and its dof count.
+    pub sim_v: usize,
+    pub nv: usize,
 }
 
 /// MuJoCo equality softness of exported closures (measured in `MUJOCO_CLOSURES.md`): solref
@@ -221,6 +244,15 @@ pub enum HarnessForce {
         mu: f64,
         /// Bodies with their (original, unfloored) masses.
         bodies: Vec<(String, f64)>,
+        formula: String,
+    },
+    /// Gravity compensation of a body (URDF only; MJCF carries it as the body's `gravcomp`):
+    /// world-frame force `-gravcomp m g` at the body's CoM (`g` the report's gravity, `m` the
+    /// body's unfloored mass), applied like an attractor's force.
+    Gravcomp {
+        body: String,
+        gravcomp: f64,
+        mass: f64,
         formula: String,
     },
     /// Joint spring `-k (q - spring_ref)` on the simulator coordinate `sim_q` (URDF only).
@@ -377,6 +409,23 @@ pub(crate) fn attractor_forces(tree: &Model) -> Vec<HarnessForce> {
                       (com_world from the simulator's own state: MuJoCo d.xipos, Pinocchio \
                       data.oMi * com); generalized force J_com^T f"
                     .into(),
+        })
+        .collect()
+}
+
+/// Gravity compensation as harness forces (URDF has no element for it).
+pub(crate) fn gravcomp_forces(tree: &Model) -> Vec<HarnessForce> {
+    tree.bodies()
+        .iter()
+        .filter(|b| b.gravcomp != 0.0 && !b.massless)
+        .map(|b| HarnessForce::Gravcomp {
+            body: b.name.clone(),
+            gravcomp: b.gravcomp,
+            mass: b.mass,
+            formula: "world-frame force f = -gravcomp m g at the body's CoM (g: the report's \
+                      gravity; com_world from the simulator's state: MuJoCo d.xipos, Pinocchio \
+                      data.oMi * com); generalized force J_com^T f"
+                .into(),
         })
         .collect()
 }

@@ -259,6 +259,59 @@ fn complex() -> tree::Model {
     tree::Model::new(&bodies, fields).unwrap()
 }
 
+/// [`complex`] with armature (hinge, slide, free), reference positions (hinges and a slide, on
+/// first and later joints of a body) and gravity compensation (full, partial, and on a body
+/// whose joints' link frames sit at an anchor).
+fn complex_extras() -> tree::Model {
+    let m = complex();
+    let mut specs: Vec<BodySpec> = vec![];
+    for b in m.bodies() {
+        let mut s = if b.massless {
+            BodySpec::massless(&b.name, "")
+        } else {
+            BodySpec::new(
+                &b.name,
+                "",
+                b.mass,
+                b.com.into(),
+                super::to_rows(&b.inertia),
+            )
+        };
+        s.parent = b
+            .parent
+            .map_or(WORLD.to_string(), |p| m.bodies()[p].name.clone());
+        s = s.at(b.pos.into()).rotated(b.quat);
+        s.gravcomp = match b.name.as_str() {
+            "base" => 1.0,
+            "pod" => 0.4,
+            "tip<&>" => -0.5,
+            _ => 0.0,
+        };
+        for j in b.joints.clone() {
+            let jt = &m.joints()[j];
+            let (arm, r) = match jt.name.as_str() {
+                "z_yaw" => (0.2, 0.3),
+                "lift" => (0.05, -0.25),
+                "pitch" => (0.0, 0.8),
+                "a_g2" => (0.01, -1.1),
+                "extend" => (0.3, 0.15),
+                "fly" => (0.07, 0.0),
+                _ => (0.0, 0.0),
+            };
+            s = s.joint(
+                JointSpec::new(&jt.name, jt.joint_type())
+                    .with_anchor(jt.anchor.into())
+                    .with_spring(jt.stiffness, jt.spring_ref)
+                    .with_damping(jt.damping)
+                    .with_armature(arm)
+                    .with_reference(r),
+            );
+        }
+        specs.push(s);
+    }
+    tree::Model::new(&specs, m.fields().clone()).unwrap()
+}
+
 fn particle() -> tree::Model {
     let body = BodySpec::point_mass("p", WORLD, 2.0, [0.0; 3])
         .joint(JointSpec::hinge("phi", [0.0, 0.0, 1.0]))
@@ -363,16 +416,18 @@ fn mjcf_poses(
             let mut r = rot * rot_wxyz(&b.f("quat"));
             for j in b.children.iter().filter(|c| c.name == "joint") {
                 let anchor = |j: &El| j.attr("pos").map(|_| j.v3("pos")).unwrap_or_default();
+                // MuJoCo: hinges and slides move by qpos - ref
+                let r0 = j.attr("ref").map_or(0.0, |_| j.f("ref")[0]);
                 match j.attr("type").unwrap() {
                     "hinge" => {
                         let a = anchor(j);
                         let xa = p + r * a;
-                        r *= rot_axis(j.v3("axis"), qpos[*k]);
+                        r *= rot_axis(j.v3("axis"), qpos[*k] - r0);
                         p = xa - r * a;
                         *k += 1;
                     }
                     "slide" => {
-                        p += r * j.v3("axis").normalize() * qpos[*k];
+                        p += r * j.v3("axis").normalize() * (qpos[*k] - r0);
                         *k += 1;
                     }
                     "ball" => {
@@ -421,7 +476,8 @@ fn check_mjcf(m: &tree::Model) -> ExportReport {
     }
     assert_eq!(flag.attr("actuation"), None, "actuation must stay enabled");
     let spring = m.joints().iter().any(|j| j.stiffness != 0.0);
-    let damper = m.joints().iter().any(|j| j.damping != 0.0);
+    let damper =
+        m.joints().iter().any(|j| j.damping != 0.0) || m.bodies().iter().any(|b| b.gravcomp != 0.0);
     assert_eq!(flag.attr("spring") == Some("enable"), spring);
     assert_eq!(flag.attr("damper") == Some("enable"), damper);
     assert!(doc.find("actuator").is_empty());
@@ -434,6 +490,8 @@ fn check_mjcf(m: &tree::Model) -> ExportReport {
         let b = &m.bodies()[m.body_id(name).expect("body name")];
         assert_eq!(be.v3("pos"), b.pos);
         assert_eq!(be.f("quat"), b.quat.to_vec());
+        let gc = be.attr("gravcomp").map_or(0.0, |_| be.f("gravcomp")[0]);
+        assert_eq!(gc, b.gravcomp, "{name}");
         let ine = be.child("inertial").expect("explicit inertial");
         assert_eq!(ine.v3("pos"), b.com);
         let change = r.mass_changes.iter().find(|c| c.body == name);
@@ -463,7 +521,7 @@ fn check_mjcf(m: &tree::Model) -> ExportReport {
         for (e, j) in je.iter().zip(b.joints.clone()) {
             let jt = &m.joints()[j];
             assert_eq!(e.attr("name"), Some(jt.name.as_str()));
-            assert_eq!(e.attr("armature"), Some("0"));
+            assert_eq!(e.f("armature"), vec![jt.armature]);
             match jt.joint_type() {
                 tree::JointType::Hinge { axis } => {
                     assert_eq!(e.attr("type"), Some("hinge"));
@@ -481,6 +539,7 @@ fn check_mjcf(m: &tree::Model) -> ExportReport {
             assert_eq!(get("damping"), jt.damping);
             assert_eq!(get("stiffness"), jt.stiffness);
             assert_eq!(get("springref"), jt.spring_ref);
+            assert_eq!(get("ref"), jt.reference);
         }
     }
     assert_map_consistent(m, &r);
@@ -530,6 +589,71 @@ fn mjcf_complex_model() {
         .unwrap()
         .0
         .contains("name=\"tip&lt;&amp;&gt;\""));
+}
+
+/// Armature, reference positions and gravity compensation: MJCF carries them as attributes (and
+/// the document's MuJoCo-semantics kinematics, qpos - ref, equal ours); URDF folds ref into the
+/// joint origins (the document's kinematics equal ours with q itself as Pinocchio's coordinate),
+/// lists armature for `model.armature` and gravity compensation as harness forces. Negative
+/// control: the document of the same tree without ref, read at the same q, puts the links
+/// elsewhere.
+#[test]
+fn armature_ref_gravcomp_exported() {
+    let m = complex_extras();
+    let r = check_mjcf(&m);
+    assert!(r.armature.is_empty());
+    assert!(!r
+        .harness_forces
+        .iter()
+        .any(|f| matches!(f, HarnessForce::Gravcomp { .. })));
+    let r = check_urdf(&m);
+    let arm: Vec<_> = r
+        .armature
+        .iter()
+        .map(|a| (a.joint.as_str(), a.armature, a.sim_v, a.nv))
+        .collect();
+    // Pinocchio order: fly, z_yaw, lift, pitch, elbow, g1, a_g2, extend
+    assert_eq!(
+        arm,
+        [
+            ("fly", 0.07, 0, 6),
+            ("z_yaw", 0.2, 6, 1),
+            ("lift", 0.05, 7, 1),
+            ("a_g2", 0.01, 11, 1),
+            ("extend", 0.3, 12, 1)
+        ]
+    );
+    let gc: Vec<_> = r
+        .harness_forces
+        .iter()
+        .filter_map(|f| match f {
+            HarnessForce::Gravcomp {
+                body,
+                gravcomp,
+                mass,
+                ..
+            } => Some((body.as_str(), *gravcomp, *mass)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        gc,
+        [("base", 1.0, 3.0), ("tip<&>", -0.5, 0.8), ("pod", 0.4, 1.2)]
+    );
+    // negative control: without the fold the links are elsewhere
+    let (xml0, r0) = urdf(&complex(), &ExportOptions::default()).unwrap();
+    let doc0 = parse_xml(&xml0).unwrap();
+    let q = random_q(&m, &mut Rng(3));
+    let frames = urdf_links(&doc0, &m, &r0, &q);
+    let (rot, _) = tree::body_pose(&m, &mut m.data(), &q, m.body_id("pod").unwrap());
+    assert!((frames["pod"].0 - rot).norm() > 1e-2);
+    // existing documents are unchanged by the new fields: no gravcomp, ref or nonzero armature
+    let (xml, r) = mjcf(&complex(), &ExportOptions::default()).unwrap();
+    assert!(!xml.contains("gravcomp") && !xml.contains(" ref="));
+    assert!(serde_json::to_string(&r)
+        .unwrap()
+        .find("\"armature\"")
+        .is_none());
 }
 
 #[test]
@@ -782,6 +906,7 @@ fn urdf_complex_model() {
         .iter()
         .map(|f| match f {
             HarnessForce::Attractor { .. } => "attractor".to_string(),
+            HarnessForce::Gravcomp { body, .. } => format!("gravcomp {body}"),
             HarnessForce::Spring { joint, sim_q, .. } => format!("spring {joint} {sim_q}"),
             HarnessForce::Damper {
                 joint, sim_v, nv, ..

@@ -1,8 +1,9 @@
 //! URDF writer (for Pinocchio 4.1).
 
 use super::{
-    attractor_forces, check_options, children, esc, num, nums, ClosureExport, Conversion, CoordMap,
-    ExportError, ExportOptions, ExportReport, Format, HarnessForce, RootJoint,
+    attractor_forces, check_options, children, esc, gravcomp_forces, num, nums, ArmatureExport,
+    ClosureExport, Conversion, CoordMap, ExportError, ExportOptions, ExportReport, Format,
+    HarnessForce, RootJoint,
 };
 use crate::tree::{JointType, Model};
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
@@ -50,8 +51,9 @@ pub(crate) fn rpy(r: &Matrix3<f64>) -> [f64; 3] {
 /// Pinocchio numbers the joints depth-first from the root link, the child joints of a link in
 /// byte order of their names (urdfdom keeps joints in a name-sorted map); fixed joints add no
 /// coordinates. The maps in the report follow that order and reorder quaternions to Pinocchio's
-/// (x, y, z, w). Springs and dampers are not part of URDF dynamics: they are listed as
-/// [`HarnessForce`]s.
+/// (x, y, z, w). Springs, dampers and gravity compensation are not part of URDF dynamics: they
+/// are listed as [`HarnessForce`]s; armature in [`ExportReport::armature`]; reference positions
+/// are folded into the joint origins.
 pub fn urdf(tree: &Model, options: &ExportOptions) -> Result<(String, UrdfReport), ExportError> {
     urdf_closed(tree, &[], options)
 }
@@ -142,6 +144,8 @@ pub fn urdf_closed(
     // URDF child joints per link name: (joint name, child link, Some(our joint) or None if fixed)
     let mut child_joints: ChildJoints = HashMap::new();
     let mut harness_forces = attractor_forces(tree);
+    harness_forces.extend(gravcomp_forces(tree));
+    let mut armature = vec![];
     for (b, body) in bodies.iter().enumerate() {
         let nj = body.joints.len();
         let nlinks = nj.max(1);
@@ -187,7 +191,7 @@ pub fn urdf_closed(
             };
             let clink = link_of(b, k);
             // origin = T(-off_parent) P T(a_0) for the first joint, T(a_k - a_{k-1}) after.
-            let (xyz, rot) = if nj == 0 {
+            let (mut xyz, mut rot) = if nj == 0 {
                 (body.pos - parent_off, body.rot)
             } else if k == 0 {
                 if joints[j].joint_type() == JointType::Free {
@@ -199,6 +203,18 @@ pub fn urdf_closed(
             } else {
                 (anchor(j) - anchor(j - 1), Matrix3::identity())
             };
+            // reference position: J(q - ref) = J(-ref) J(q) (same axis), J(-ref) into the origin
+            if nj > 0 && joints[j].reference != 0.0 {
+                let r = joints[j].reference;
+                match joints[j].joint_type() {
+                    JointType::Hinge { axis } => {
+                        let u = nalgebra::Unit::new_normalize(Vector3::from(axis));
+                        rot *= nalgebra::Rotation3::from_axis_angle(&u, -r).into_inner();
+                    }
+                    JointType::Slide { axis } => xyz -= rot * Vector3::from(axis) * r,
+                    _ => unreachable!("the model refuses ref on ball and free joints"),
+                }
+            }
             let jname = if nj == 0 {
                 format!("{}__fixed", body.name)
             } else {
@@ -297,6 +313,14 @@ pub fn urdf_closed(
                 spring_ref: jt.spring_ref,
                 sim_q: sq,
                 sim_v: sv,
+            });
+        }
+        if jt.armature != 0.0 {
+            armature.push(ArmatureExport {
+                joint: jt.name.clone(),
+                armature: jt.armature,
+                sim_v: sv,
+                nv: jt.nv,
             });
         }
         if jt.damping != 0.0 {
@@ -400,6 +424,7 @@ pub fn urdf_closed(
         root_joint,
         notes,
         closures: closures.to_vec(),
+        armature,
     };
     Ok((x, report))
 }

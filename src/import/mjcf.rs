@@ -6,10 +6,16 @@
 //! Joint attributes may come from `<default>` classes (`class`, a body's `childclass`, nested
 //! defaults inherit). Mass properties only from an explicit `<inertial>` (`pos`, orientation,
 //! `mass`, `diaginertia` or `fullinertia`): inertia from geoms is refused with a located error.
-//! Limits, damping, armature, friction loss, springs, equality constraints, tendons and actuators
-//! are not modelled and are reported in the notes; geoms, sites, cameras, lights and assets are not
-//! read. Errors are located in the MJCF file (line, column, element).
+//! Modelled with MuJoCo's meaning: joint `damping`, `armature`, `stiffness` with `springref`
+//! (hinge and slide), `ref` (hinge and slide; `ref` and `springref` of hinges in degrees under
+//! `<compiler angle="degree">`, as MuJoCo converts them) and body `gravcomp`. Read and not
+//! modelled, one [`Unmodelled`] record per element (kinds of [`super::unmodelled::KINDS`]): joint
+//! limits (with their ranges), `actuatorfrcrange`, `frictionloss`, tendons, equality constraints,
+//! colliding geoms and `<contact>` pairs/excludes, actuators, fluid options. Refused (located
+//! errors): springs on ball and free joints, `springdamper`, and what changes the stated model
+//! (see [`compiler`]). Sites, cameras, lights, sensors and assets are not read (no dynamics).
 
+use super::unmodelled::{JointRange, Recorder, Unmodelled};
 use super::urdf::Robot;
 use crate::scene::{SceneError, Source};
 use crate::tree::{BodySpec, JointSpec, WORLD};
@@ -242,10 +248,12 @@ fn orientation(src: &Source, c: &Compiler, n: Node, what: &str) -> R<[f64; 4]> {
     Ok(quat_of(q))
 }
 
-/// `<default>` classes: class -> (parent class, its `<joint>` element).
+/// `<default>` classes: class -> (parent class, its `<joint>` element, its `<geom>` element).
 struct Defaults<'a, 'i> {
-    classes: HashMap<String, (Option<String>, Option<Node<'a, 'i>>)>,
+    classes: HashMap<String, DefaultClass<'a, 'i>>,
 }
+
+type DefaultClass<'a, 'i> = (Option<String>, Option<Node<'a, 'i>>, Option<Node<'a, 'i>>);
 
 const MAIN: &str = "main";
 
@@ -276,8 +284,9 @@ impl<'a, 'i> Defaults<'a, 'i> {
             ));
         }
         let joint = elements(n).find(|c| c.has_tag_name("joint"));
+        let geom = elements(n).find(|c| c.has_tag_name("geom"));
         self.classes
-            .insert(name.to_string(), (parent.map(String::from), joint));
+            .insert(name.to_string(), (parent.map(String::from), joint, geom));
         for c in elements(n).filter(|c| c.has_tag_name("default")) {
             self.add(src, c, Some(name))?;
         }
@@ -286,16 +295,31 @@ impl<'a, 'i> Defaults<'a, 'i> {
 
     /// Attribute `attr` of joint `j` in class `class`: the element's own, else the class chain's.
     fn joint_attr(&self, j: Node<'a, 'i>, class: &str, attr: &str) -> Option<&'a str> {
-        if let Some(v) = j.attribute(attr) {
+        self.attr(j, class, attr, |d| d.1)
+    }
+
+    /// The same for a geom.
+    fn geom_attr(&self, g: Node<'a, 'i>, class: &str, attr: &str) -> Option<&'a str> {
+        self.attr(g, class, attr, |d| d.2)
+    }
+
+    fn attr(
+        &self,
+        e: Node<'a, 'i>,
+        class: &str,
+        attr: &str,
+        pick: impl Fn(&DefaultClass<'a, 'i>) -> Option<Node<'a, 'i>>,
+    ) -> Option<&'a str> {
+        if let Some(v) = e.attribute(attr) {
             return Some(v);
         }
         let mut c = Some(class.to_string());
         while let Some(name) = c {
-            let (parent, node) = self.classes.get(&name)?;
-            if let Some(v) = node.and_then(|n| n.attribute(attr)) {
+            let d = self.classes.get(&name)?;
+            if let Some(v) = pick(d).and_then(|n| n.attribute(attr)) {
                 return Some(v);
             }
-            c = parent.clone();
+            c = d.0.clone();
         }
         None
     }
@@ -387,17 +411,8 @@ fn inertial(src: &Source, c: &Compiler, body: Node, name: &str, parent: &str) ->
     Ok(BodySpec::new(name, parent, mass, pos, inertia))
 }
 
-/// What the importer reads but does not model, by kind (one note line each).
-#[derive(Default)]
-struct Ignored {
-    limits: Vec<String>,
-    damping: Vec<String>,
-    armature: Vec<String>,
-    friction: Vec<String>,
-    springs: Vec<String>,
-}
-
-/// Read an MJCF document (`src` is the file and its text); `locked` joints are welded at q = 0.
+/// Read an MJCF document (`src` is the file and its text); `locked` joints are welded at the
+/// file's pose (q = their `ref`, the value reported in [`Robot::locked`]).
 pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
     let doc = super::parse_xml(src)?;
     let root = doc.root_element();
@@ -412,28 +427,50 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
     let c = compiler(src, root)?;
     let defaults = Defaults::read(src, root)?;
     let mut notes = vec![];
+    let mut rec = Recorder::new(src);
     for n in elements(root) {
-        match n.tag_name().name() {
+        let tag = n.tag_name().name();
+        match tag {
             "include" | "replicate" | "frame" | "attach" => {
-                return Err(err(src, n, n.tag_name().name(), format!("<{}> is not supported (write the file out, e.g. with MuJoCo's mj_saveLastXML)", n.tag_name().name())))
+                return Err(err(src, n, tag, format!("<{tag}> is not supported (write the file out, e.g. with MuJoCo's mj_saveLastXML)")))
             }
-            "option" if n.attribute("gravity").is_some() => {
-                notes.push("<option gravity> not read: gravity comes from the scene's model.gravity".to_string());
+            "deformable" => {
+                return Err(err(src, n, tag, "<deformable> (flexes, skins) is not supported: progmo models rigid bodies"))
             }
-            "equality" | "tendon" | "actuator" | "contact" => notes.push(format!(
-                "<{}> not modelled (the programme's rows and the scene's forces are the only constraints and forces)",
-                n.tag_name().name()
-            )),
+            "option" => {
+                if n.attribute("gravity").is_some() {
+                    notes.push("<option gravity> not read: gravity comes from the scene's model.gravity".to_string());
+                }
+                for a in ["density", "viscosity", "wind"] {
+                    if n.attribute(a).is_some_and(|v| v.split_whitespace().any(|x| x.parse::<f64>() != Ok(0.0))) {
+                        rec.push("fluid", format!("option.{a}"), n);
+                    }
+                }
+            }
+            "equality" | "tendon" | "actuator" => {
+                let kind = if tag == "tendon" { "tendon" } else if tag == "equality" { "equality" } else { "actuator" };
+                for (k, e) in elements(n).filter(|e| !e.has_tag_name("default")).enumerate() {
+                    let name = e.attribute("name").map_or(format!("{k}"), String::from);
+                    rec.push(kind, format!("{tag}.{}[{name}]", e.tag_name().name()), e);
+                }
+            }
+            "contact" => {
+                for (k, e) in elements(n).enumerate() {
+                    let name = e.attribute("name").map_or(format!("{k}"), String::from);
+                    rec.push("contact", format!("contact.{}[{name}]", e.tag_name().name()), e);
+                }
+            }
             _ => {}
         }
     }
+    let mut ranges: Vec<JointRange> = vec![];
+    let mut locked_values: Vec<(String, f64)> = vec![];
     let worldbodies: Vec<Node> = elements(root)
         .filter(|n| n.has_tag_name("worldbody"))
         .collect();
     let mut bodies = vec![];
     let mut joints = vec![];
     let mut used_locked = vec![false; locked.len()];
-    let mut ign = Ignored::default();
     let mut names: HashMap<String, Node> = HashMap::new();
     // depth-first, parents first: (element, parent body name, inherited childclass)
     let mut stack: Vec<(Node, String, String)> = vec![];
@@ -490,6 +527,22 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         let pos = attr_k::<3>(src, b, &format!("{what}.pos"), "pos", [0.0; 3])?;
         let quat = orientation(src, &c, b, &what)?;
         let mut spec = inertial(src, &c, b, &name, &parent)?.at(pos).rotated(quat);
+        if let Some(t) = b.attribute("gravcomp") {
+            spec = spec
+                .with_gravcomp(fixed::<1>(src, b, &format!("{what}.gravcomp"), "gravcomp", t)?[0]);
+        }
+        for (gi, g) in elements(b).filter(|e| e.has_tag_name("geom")).enumerate() {
+            let gclass = g.attribute("class").unwrap_or(&class);
+            let collides = ["contype", "conaffinity"].iter().any(|a| {
+                defaults
+                    .geom_attr(g, gclass, a)
+                    .map_or(true, |v| v.trim().parse::<i64>() != Ok(0)) // MuJoCo's default: 1
+            });
+            if collides {
+                let gname = g.attribute("name").map_or(format!("{gi}"), String::from);
+                rec.push("contact", format!("{what}.geom[{gname}]"), g);
+            }
+        }
         for e in elements(b) {
             let tag = e.tag_name().name();
             if tag == "frame" || tag == "replicate" || tag == "attach" || tag == "include" {
@@ -585,41 +638,95 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
                     ))
                 }
             };
-            if let Some(r) = get("ref") {
-                if r.trim().parse::<f64>() != Ok(0.0) {
-                    return Err(err(src, e, &format!("{jwhat}.ref"), format!("`ref=\"{r}\"` is not supported (q would be measured from another pose than MuJoCo's qpos)")));
+            // one number (`default` when absent); angles of hinges in the compiler's unit
+            let scalar = |a: &str, default: f64| -> R<f64> {
+                match get(a) {
+                    None => Ok(default),
+                    Some(t) => Ok(fixed::<1>(src, e, &format!("{jwhat}.{a}"), a, t)?[0]),
                 }
-            }
+            };
+            let hinge = kind == "hinge";
+            let angle = |x: f64| {
+                if hinge && c.degrees {
+                    x.to_radians()
+                } else {
+                    x
+                }
+            };
             let nonzero = |a: &str| {
                 get(a).is_some_and(|v| v.split_whitespace().any(|x| x.parse::<f64>() != Ok(0.0)))
             };
+            if get("springdamper").is_some() && nonzero("springdamper") {
+                return Err(err(src, e, &format!("{jwhat}.springdamper"), "`springdamper` (stiffness and damping from a time constant and the mass matrix at qpos0) is not supported: give stiffness and damping"));
+            }
+            let damping = scalar("damping", 0.0)?;
+            let armature = scalar("armature", 0.0)?;
+            let stiffness = scalar("stiffness", 0.0)?;
+            let (reference, springref) = if hinge || kind == "slide" {
+                (angle(scalar("ref", 0.0)?), angle(scalar("springref", 0.0)?))
+            } else {
+                (0.0, 0.0) // MuJoCo reads ref and springref of hinges and slides only
+            };
+            if stiffness != 0.0 && !(hinge || kind == "slide") {
+                return Err(err(src, e, &format!("{jwhat}.stiffness"), format!("a spring on a {kind} joint is not supported (springs on hinge and slide joints only)")));
+            }
+            for (a, v) in [
+                ("damping", damping),
+                ("armature", armature),
+                ("stiffness", stiffness),
+            ] {
+                if v < 0.0 {
+                    return Err(err(
+                        src,
+                        e,
+                        &format!("{jwhat}.{a}"),
+                        format!("`{a}` must be >= 0, got {v}"),
+                    ));
+                }
+            }
+            let js = js
+                .with_damping(damping)
+                .with_armature(armature)
+                .with_spring(stiffness, springref)
+                .with_reference(reference);
+            let is_locked = locked.iter().position(|l| l == jname);
+            if let Some(k) = is_locked {
+                used_locked[k] = true;
+                locked_values.push((jname.to_string(), reference));
+                continue; // welded: its limits, friction and forces act on no coordinate
+            }
             let limited = match get("limited") {
                 Some("true") => true,
                 Some("false") => false,
                 _ => get("range").is_some(), // autolimits (MuJoCo's default)
             };
             if limited && kind != "free" {
-                ign.limits.push(jname.into());
-            }
-            if nonzero("damping") {
-                ign.damping.push(jname.into());
-            }
-            if nonzero("armature") {
-                ign.armature.push(jname.into());
-            }
-            if nonzero("frictionloss") {
-                ign.friction.push(jname.into());
-            }
-            if nonzero("stiffness") {
-                ign.springs.push(jname.into());
-            }
-            match locked.iter().position(|l| l == jname) {
-                Some(k) => used_locked[k] = true,
-                None => {
-                    spec = spec.joint(js);
-                    joints.push(jname.to_string());
+                rec.push("joint_limit", format!("{jwhat}.range"), e);
+                if hinge || kind == "slide" {
+                    let r = match get("range") {
+                        None => [0.0, 0.0],
+                        Some(t) => fixed::<2>(src, e, &format!("{jwhat}.range"), "range", t)?,
+                    };
+                    ranges.push(JointRange {
+                        joint: jname.to_string(),
+                        lower: angle(r[0]),
+                        upper: angle(r[1]),
+                    });
                 }
             }
+            let frc_limited = match get("actuatorfrclimited") {
+                Some("true") => true,
+                Some("false") => false,
+                _ => get("actuatorfrcrange").is_some(),
+            };
+            if frc_limited {
+                rec.push("effort_limit", format!("{jwhat}.actuatorfrcrange"), e);
+            }
+            if nonzero("frictionloss") {
+                rec.push("frictionloss", format!("{jwhat}.frictionloss"), e);
+            }
+            spec = spec.joint(js);
+            joints.push(jname.to_string());
         }
         bodies.push(spec);
         for ch in elements(b)
@@ -641,26 +748,13 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
             format!("locked joint `{}` is not a joint of this file", locked[k]),
         ));
     }
-    for (list, text) in [
-        (
-            &ign.limits,
-            "joint limits not enforced (the programme decides the motion)",
-        ),
-        (&ign.damping, "joint damping ignored"),
-        (
-            &ign.armature,
-            "joint armature ignored (MuJoCo adds it to the mass matrix)",
-        ),
-        (&ign.friction, "joint friction loss ignored"),
-        (&ign.springs, "joint stiffness (springs) ignored"),
-    ] {
-        if !list.is_empty() {
-            notes.push(format!("{text}: {}", list.join(", ")));
-        }
-    }
+    let unmodelled: Vec<Unmodelled> = rec.out;
     Ok(Robot {
         bodies,
         joints,
         notes,
+        unmodelled,
+        ranges,
+        locked: locked_values,
     })
 }

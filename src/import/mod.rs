@@ -2,9 +2,12 @@
 //! the same structure a tree scene builds from `[[model.bodies]]`.
 //!
 //! - [`urdf`]: URDF (ROS) files: links, inertials, revolute / continuous / prismatic / fixed /
-//!   floating joints; visuals, collisions and meshes are not read.
-//! - [`mjcf`]: MuJoCo MJCF files: bodies, explicit inertials, hinge / slide / ball / free joints,
-//!   joint defaults; geoms, sites and assets are not read.
+//!   floating joints, joint damping; visuals and meshes are not read.
+//! - [`mjcf`]: MuJoCo MJCF files: bodies, explicit inertials, hinge / slide / ball / free joints
+//!   with damping, armature, springs and `ref`, body `gravcomp`, joint defaults; sites and assets
+//!   are not read.
+//! - [`unmodelled`]: what either file holds that is read and not modelled (limits, friction,
+//!   tendons, contacts, actuators, ...): a closed vocabulary of kinds, one record per element.
 //! - [`resolve`]: where `package://PKG/...` paths are found (`$PROGMO_ROBOT_PATH`, then
 //!   `$ROS_PACKAGE_PATH`).
 //!
@@ -12,6 +15,7 @@
 //! line, column, element).
 
 pub mod mjcf;
+pub mod unmodelled;
 pub mod urdf;
 
 use nalgebra::Matrix3;

@@ -4,9 +4,13 @@
 //! its own frame and its inertia stays with it; the tree adds it to the parent's composite
 //! inertia exactly), floating -> free. The root link is welded to the world or gets a free joint
 //! (`root_joint`). Inertials: mass, the CoM `origin` and the inertia tensor rotated by the
-//! origin's rpy into the link frame. Limits, mimic, dynamics, safety controllers, transmissions,
-//! visuals and collisions are not used: limits, mimic and dynamics are reported in the notes.
+//! origin's rpy into the link frame. `<dynamics damping>` is modelled (a viscous damper on the
+//! joint, as in the tree model). Read and not modelled, one [`Unmodelled`] record per element
+//! (kinds of [`super::unmodelled::KINDS`]): `<limit>` lower/upper (with the ranges), effort and
+//! velocity, `<safety_controller>`, `<dynamics friction>`, `<mimic>`, links' `<collision>`,
+//! `<transmission>`. Visuals, calibration and materials are not read (no dynamics).
 
+use super::unmodelled::{JointRange, Recorder, Unmodelled};
 use crate::scene::{SceneError, Source};
 use crate::tree::{BodySpec, JointSpec, WORLD};
 use roxmltree::Node;
@@ -19,8 +23,14 @@ pub struct Robot {
     pub bodies: Vec<BodySpec>,
     /// Coordinate (joint) names, in body order.
     pub joints: Vec<String>,
-    /// What was read but not modelled (limits, mimic, dynamics), one line each.
+    /// Remarks on how the file was read (e.g. MJCF gravity replaced by the scene's), one line each.
     pub notes: Vec<String>,
+    /// Every element read and not modelled (closed vocabulary of kinds).
+    pub unmodelled: Vec<Unmodelled>,
+    /// Position limits the file states for the (unlocked) hinge and slide joints.
+    pub ranges: Vec<JointRange>,
+    /// Locked joints with the value of q they are welded at.
+    pub locked: Vec<(String, f64)>,
 }
 
 /// How the root link is attached to the world.
@@ -259,11 +269,21 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
             ))
         }
     };
-    let mut notes = vec![];
+    let notes = vec![];
     let mut bodies = vec![];
     let mut joints = vec![];
-    let mut limited = vec![];
-    let mut dynamics = vec![];
+    let mut rec = Recorder::new(src);
+    let mut ranges = vec![];
+    let mut locked_values = vec![];
+    for l in &link_order {
+        if let Some(c) = child(links[l], "collision") {
+            rec.push("contact", format!("link[{l}].collision"), c);
+        }
+    }
+    for t in robot.children().filter(|c| c.has_tag_name("transmission")) {
+        let name = t.attribute("name").unwrap_or("");
+        rec.push("actuator", format!("transmission[{name}]"), t);
+    }
     // The root: a link named `world` without inertia is the world frame itself.
     let root_is_world = root == WORLD && child(links[root], "inertial").is_none();
     if !root_is_world {
@@ -302,6 +322,7 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
             let is_locked = match locked.iter().position(|l| l == name) {
                 Some(k) => {
                     used_locked[k] = true;
+                    locked_values.push((name.to_string(), 0.0));
                     true
                 }
                 None => false,
@@ -342,17 +363,48 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
                 if !id_ok || name == "t" || name == "pi" {
                     return Err(err(src, *j, &what, format!("joint name `{name}` is not an identifier (letters, digits, _): it names a coordinate in rows")));
                 }
+                let mut s = s;
                 if let Some(m) = child(*j, "mimic") {
-                    notes.push(format!(
-                        "mimic of joint `{name}` (follows `{}`) ignored: `{name}` is an independent coordinate (lock it with model.locked_joints, or write the mimic law as a row)",
-                        m.attribute("joint").unwrap_or("?")
-                    ));
+                    rec.push("mimic", format!("{what}.mimic"), m);
                 }
-                if child(*j, "limit").is_some() && kind != "continuous" {
-                    limited.push(name);
+                if let Some(l) = child(*j, "limit") {
+                    let bounded = kind == "revolute" || kind == "prismatic";
+                    if bounded && (l.attribute("lower").is_some() || l.attribute("upper").is_some())
+                    {
+                        let [lower] = numbers::<1>(src, l, "lower", Some([0.0]))?;
+                        let [upper] = numbers::<1>(src, l, "upper", Some([0.0]))?;
+                        rec.push("joint_limit", format!("{what}.limit"), l);
+                        ranges.push(JointRange {
+                            joint: name.to_string(),
+                            lower,
+                            upper,
+                        });
+                    }
+                    if l.attribute("effort").is_some() {
+                        rec.push("effort_limit", format!("{what}.limit.effort"), l);
+                    }
+                    if l.attribute("velocity").is_some() {
+                        rec.push("velocity_limit", format!("{what}.limit.velocity"), l);
+                    }
                 }
-                if child(*j, "dynamics").is_some() {
-                    dynamics.push(name);
+                if let Some(sc) = child(*j, "safety_controller") {
+                    rec.push("joint_limit", format!("{what}.safety_controller"), sc);
+                }
+                if let Some(d) = child(*j, "dynamics") {
+                    let [damping] = numbers::<1>(src, d, "damping", Some([0.0]))?;
+                    let [friction] = numbers::<1>(src, d, "friction", Some([0.0]))?;
+                    if damping < 0.0 {
+                        return Err(err(
+                            src,
+                            d,
+                            &format!("{what}.dynamics.damping"),
+                            format!("damping must be >= 0, got {damping}"),
+                        ));
+                    }
+                    s = s.with_damping(damping);
+                    if friction != 0.0 {
+                        rec.push("frictionloss", format!("{what}.dynamics.friction"), d);
+                    }
                 }
                 b = b.joint(s);
                 joints.push(name.to_string());
@@ -370,22 +422,13 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
             format!("locked joint `{}` is not a joint of this file", locked[k]),
         ));
     }
-    if !limited.is_empty() {
-        notes.push(format!(
-            "joint limits not enforced (the programme decides the motion): {}",
-            limited.join(", ")
-        ));
-    }
-    if !dynamics.is_empty() {
-        notes.push(format!(
-            "<dynamics> (damping, friction) ignored: {}",
-            dynamics.join(", ")
-        ));
-    }
     Ok(Robot {
         bodies,
         joints,
         notes,
+        unmodelled: rec.out,
+        ranges,
+        locked: locked_values,
     })
 }
 

@@ -98,6 +98,7 @@ fn check<M: Model, C: Constraints>(problem: Problem<M, C>) {
         git_revision: None,
         command_line: &[],
         servo: None,
+        robot_file: None,
     })
     .unwrap();
     assert_eq!(v["code_name"], sol.code.name());

@@ -144,6 +144,13 @@
 //!   {`samples`, `max_real`, `t_max_real`, `eigenvalues_at_max`, `min_max_real`}), `growth` (null,
 //!   or {`initial_separation`, `final_separation`, `max_separation`, `rate`, `t_end`}),
 //!   `stability` (`"stable"`, `"unstable"`, `"marginal"` or null), `horizon` (s, or null)}.
+//! - `robot_file` (only for `urdf` and `mjcf` scenes; written by `progmo solve` and by Python's
+//!   `Solution.write_summary`): the `crate::scene::RobotFile`: `kind` (`"urdf"`/`"mjcf"`),
+//!   `path` (absolute), `locked` [[joint, q value]], `ranges` [{`joint`, `lower`, `upper`}] (q's
+//!   units), `unmodelled` [{`kind` (the closed vocabulary `crate::import::unmodelled::KINDS`),
+//!   `element`, `location` ("file:line"), `declared` (the scene's reason from `[model] ignore`, or
+//!   null: undeclared)}]. `progmo validate` prints the same entries (and `--json` gives this object
+//!   as `robot_file`, with the import `notes`).
 
 mod csv_sink;
 #[cfg(test)]

@@ -32,6 +32,9 @@ pub struct SummaryInput<'a> {
     pub command_line: &'a [String],
     /// With `[[actuators]]`: the servo analysis (`Scene::servo_report`), written as `servo`.
     pub servo: Option<&'a serde_json::Value>,
+    /// A `urdf`/`mjcf` scene's robot file (`Scene::robot`: path, locked joints, ranges, what
+    /// is not modelled and whether the scene declares it), written as `robot_file`.
+    pub robot_file: Option<&'a serde_json::Value>,
 }
 
 #[derive(Serialize)]
@@ -77,6 +80,8 @@ struct SummaryOut<'a> {
     command_line: &'a [String],
     #[serde(skip_serializing_if = "Option::is_none")]
     servo: Option<&'a serde_json::Value>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    robot_file: Option<&'a serde_json::Value>,
 }
 
 /// Largest value; NaN if any is NaN; 0 for none.
@@ -147,6 +152,7 @@ fn build<'a>(input: &SummaryInput<'a>, file: &str) -> Result<SummaryOut<'a>, Out
         },
         command_line: input.command_line,
         servo: input.servo,
+        robot_file: input.robot_file,
     })
 }
 
@@ -256,6 +262,7 @@ mod tests {
             git_revision: Some("abc123"),
             command_line: &cmd,
             servo: None,
+            robot_file: None,
         };
         let mut buf = Vec::new();
         write_summary(&mut buf, &input).unwrap();
@@ -308,6 +315,7 @@ mod tests {
             git_revision: None,
             command_line: &[],
             servo: None,
+            robot_file: None,
         };
         let v = summary_json(&input).unwrap();
         assert_eq!(v["success"], true);
@@ -343,6 +351,7 @@ mod tests {
             git_revision: None,
             command_line: &[],
             servo: None,
+            robot_file: None,
         };
         write_summary_to_path(&path, &input).unwrap();
         let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();

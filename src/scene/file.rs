@@ -14,7 +14,7 @@ use toml::Spanned;
 /// Model kinds (`model.kind`).
 pub const MODEL_KINDS: [&str; 4] = ["lagrangian", "tree", "urdf", "mjcf"];
 /// Keys of `[model]` only an imported (urdf or mjcf) model has (mjcf: not root_joint).
-pub const URDF_ONLY: [&str; 4] = ["file", "root_joint", "frames", "locked_joints"];
+pub const URDF_ONLY: [&str; 5] = ["file", "root_joint", "frames", "locked_joints", "ignore"];
 /// Root joints of a urdf model (`model.root_joint`).
 pub const ROOT_JOINTS: [&str; 2] = ["fixed", "free"];
 /// Keys of `[model]` only a lagrangian model has.
@@ -354,10 +354,19 @@ pub struct ModelFile {
     #[serde(default)]
     #[schemars(schema_with = "schema::root_joint")]
     pub root_joint: Option<Spanned<String>>,
-    /// urdf, mjcf: joints welded at q = 0 (e.g. a gripper's fingers), by name.
+    /// urdf, mjcf: joints welded at the file's pose (q = 0; an MJCF joint's `ref`), e.g. a
+    /// gripper's fingers, by name.
     #[serde(default)]
     #[schemars(with = "Vec<String>")]
     pub locked_joints: Vec<Spanned<String>>,
+    /// urdf, mjcf: the kinds of elements of the file that the scene knowingly leaves unmodelled,
+    /// each with its reason (non-empty), e.g. { frictionloss = "...", joint_limit = "..." }.
+    /// Kinds: joint_limit, effort_limit, velocity_limit, frictionloss, tendon, equality, contact,
+    /// actuator, mimic, fluid (FORMAT.md, "Robot files"); each declared kind must occur in the
+    /// file. Elements of an undeclared kind are reported by the check as not checked.
+    #[serde(default)]
+    #[schemars(schema_with = "schema::ignore_kinds")]
+    pub ignore: BTreeMap<String, Spanned<String>>,
     /// urdf, mjcf: extra frames fixed in links (bodies); like every link, each is a signal
     /// source (name.x, name.qw, ...).
     #[serde(default)]
@@ -470,6 +479,10 @@ pub struct BodyFile {
     #[serde(default)]
     #[schemars(with = "Vec<JointFile>")]
     pub joints: Vec<Spanned<JointFile>>,
+    /// Gravity compensation (MuJoCo's body `gravcomp`): a force -gravcomp m g at the centre of
+    /// mass (1: the body feels no gravity; 0: none).
+    #[serde(default)]
+    pub gravcomp: f64,
     /// Shape drawn in 3D views; absent: a box with the body's mass and inertia.
     #[serde(default)]
     #[schemars(with = "Option<ShapeFile>")]
@@ -511,6 +524,11 @@ pub struct JointFile {
     #[serde(default)]
     #[schemars(range(min = 0.0))]
     pub damping: f64,
+    /// Armature (kg m^2 or kg), >= 0: rotor inertia reflected on the joint, added to the mass
+    /// matrix's diagonal on each of its dofs (MuJoCo's `armature`).
+    #[serde(default)]
+    #[schemars(range(min = 0.0))]
+    pub armature: f64,
 }
 
 /// A point fixed in a body.

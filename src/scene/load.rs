@@ -84,6 +84,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
     let model = file.model.get_ref();
     let kind = model.kind.get_ref().as_str();
     let mut import_notes = vec![];
+    let mut robot = None;
     let mut extra: (Vec<Closure>, SetAsideRows) = (vec![], None);
     let (system, spans) = match kind {
         "lagrangian" => {
@@ -116,8 +117,10 @@ pub(super) fn load(src: Source) -> R<Scene> {
             (SceneSystem::Lagrangian(p), spans)
         }
         "tree" | "urdf" | "mjcf" => {
-            let (m, mut sym, notes, (closures, closure_rows)) = tree_scene(&src, model, &params)?;
+            let (m, mut sym, (notes, rf), (closures, closure_rows)) =
+                tree_scene(&src, model, &params)?;
             import_notes = notes;
+            robot = rf;
             let (c, mut spans) = rows(&src, &file, &mut sym, &closure_rows)?;
             let neutral = tree::neutral(m.tree());
             let (q0, v0) = initial(
@@ -189,6 +192,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
         set_aside: extra.1,
         view: Arc::new(view),
         import_notes,
+        robot,
     })
 }
 
@@ -649,6 +653,14 @@ fn lagrangian(
             format!("{} belong to `tree` models", and_list(&TREE_ONLY)),
         ));
     }
+    if let Some((_, r)) = m.ignore.iter().next() {
+        return Err(src.error(
+            r.span(),
+            "model.ignore",
+            "`ignore` belongs to `urdf` and `mjcf` models (it declares what of the robot file is \
+             not modelled)",
+        ));
+    }
     if m.coordinates.is_empty() {
         return Err(src.error(
             m.kind.span(),
@@ -807,17 +819,20 @@ fn lagrangian(
     Ok((model, sym))
 }
 
+/// Notes of an imported robot file and its [`RobotFile`] (None for a `tree` model).
+type ImportInfo = (Vec<String>, Option<super::RobotFile>);
+
 fn tree_scene(
     src: &Source,
     m: &ModelFile,
     params: &[(String, f64)],
-) -> R<(TreeSceneModel, Symbols, Vec<String>, ClosureRows)> {
+) -> R<(TreeSceneModel, Symbols, ImportInfo, ClosureRows)> {
     let imported = matches!(m.kind.get_ref().as_str(), "urdf" | "mjcf");
     let (specs, joint_names, link_sites, notes) = if imported {
         import_specs(src, m, params)?
     } else {
         let (specs, joint_names) = tree_specs(src, m, params)?;
-        (specs, joint_names, vec![], vec![])
+        (specs, joint_names, vec![], (vec![], None))
     };
     let joint_names: Vec<&str> = joint_names.iter().map(|s| s.as_str()).collect();
     let fields = Fields {
@@ -984,8 +999,9 @@ fn tree_scene(
     Ok((model, sym, notes, closures))
 }
 
-/// Bodies, joint names, link and frame names (sites) and notes of a `urdf` or `mjcf` model.
-type Imported = (Vec<BodySpec>, Vec<String>, Vec<String>, Vec<String>);
+/// Bodies, joint names, link and frame names (sites), notes and robot file of a `urdf` or `mjcf`
+/// model.
+type Imported = (Vec<BodySpec>, Vec<String>, Vec<String>, ImportInfo);
 
 /// The bodies of a `urdf` or `mjcf` model: the file's links or bodies ([`crate::import::urdf`],
 /// [`crate::import::mjcf`]) plus `frames` as massless welded bodies.
@@ -1053,6 +1069,7 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
         .iter()
         .map(|l| l.get_ref().clone())
         .collect();
+    let usrc_path = path.clone();
     let usrc = Source { file: path, text };
     let robot = if kind == "mjcf" {
         mjcf::import(&usrc, &locked)
@@ -1120,7 +1137,63 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
             ));
         }
     }
-    Ok((specs, robot.joints, sites, robot.notes))
+    let unmodelled = declared(src, m, &robot.unmodelled)?;
+    let info = super::RobotFile {
+        kind: kind.to_string(),
+        path: std::path::absolute(&usrc_path).unwrap_or(usrc_path),
+        locked: robot.locked,
+        ranges: robot.ranges,
+        unmodelled,
+    };
+    Ok((specs, robot.joints, sites, (robot.notes, Some(info))))
+}
+
+/// `[model] ignore` checked against the closed vocabulary and the file's records: each key a
+/// kind of [`crate::import::unmodelled::KINDS`] (else a located error naming the nearest), each
+/// reason non-empty, each kind present in the file; the records with their declarations.
+fn declared(
+    src: &Source,
+    m: &ModelFile,
+    found: &[crate::import::unmodelled::Unmodelled],
+) -> R<Vec<super::UnmodelledEntry>> {
+    use crate::import::unmodelled::{is_kind, nearest_kind, KINDS};
+    for (k, reason) in &m.ignore {
+        let field = format!("model.ignore.{k}");
+        if !is_kind(k) {
+            return Err(src.error(
+                reason.span(),
+                &field,
+                format!(
+                    "unknown kind `{k}`: did you mean `{}`? (kinds: {})",
+                    nearest_kind(k),
+                    KINDS.iter().map(|x| x.0).collect::<Vec<_>>().join(", ")
+                ),
+            ));
+        }
+        if reason.get_ref().trim().is_empty() {
+            return Err(src.error(
+                reason.span(),
+                &field,
+                format!("ignoring `{k}` needs a reason (a non-empty string)"),
+            ));
+        }
+        if !found.iter().any(|u| u.kind == k) {
+            return Err(src.error(
+                reason.span(),
+                &field,
+                format!("the robot file has no element of kind `{k}` (or only on locked joints): remove this declaration"),
+            ));
+        }
+    }
+    Ok(found
+        .iter()
+        .map(|u| super::UnmodelledEntry {
+            kind: u.kind.to_string(),
+            element: u.element.clone(),
+            location: u.location(),
+            declared: m.ignore.get(u.kind).map(|r| r.get_ref().clone()),
+        })
+        .collect())
 }
 
 /// The bodies of a `tree` model as written in `[[model.bodies]]`, and its joint names.
@@ -1139,7 +1212,11 @@ fn tree_specs(
             ),
         ));
     }
-    if m.root_joint.is_some() || !m.frames.is_empty() || !m.locked_joints.is_empty() {
+    if m.root_joint.is_some()
+        || !m.frames.is_empty()
+        || !m.locked_joints.is_empty()
+        || !m.ignore.is_empty()
+    {
         return Err(src.error(
             m.kind.span(),
             "model",
@@ -1258,7 +1335,7 @@ fn tree_specs(
                 ));
             }
         }
-        spec = spec.at(pos).rotated(quat);
+        spec = spec.at(pos).rotated(quat).with_gravcomp(bf.gravcomp);
         for (ji, j) in bf.joints.iter().enumerate() {
             let jf = j.get_ref();
             let jfield = format!("{field}.joints[{ji}]");
@@ -1304,6 +1381,9 @@ fn tree_specs(
             }
             if jf.damping != 0.0 {
                 js = js.with_damping(jf.damping);
+            }
+            if jf.armature != 0.0 {
+                js = js.with_armature(jf.armature);
             }
             spec = spec.joint(js);
         }

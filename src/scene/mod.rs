@@ -95,9 +95,49 @@ pub struct Scene {
     pub set_aside: Option<(Vec<closures::SetAside>, ExprConstraints)>,
     /// What 3D views draw besides the mechanism: body shapes, targets, traced sites.
     pub view: std::sync::Arc<crate::output::View>,
-    /// What an imported robot file had that the model does not use (joint limits, mimic,
-    /// dynamics), one line each; shown by `progmo solve` (stderr) and `progmo validate`.
+    /// Remarks on how an imported robot file was read (e.g. MJCF gravity replaced by the
+    /// scene's), one line each; shown by `progmo solve` (stderr) and `progmo validate`.
     pub import_notes: Vec<String>,
+    /// The robot file of a `urdf` or `mjcf` scene and what it holds that is not modelled (None
+    /// for other models).
+    pub robot: Option<RobotFile>,
+}
+
+/// The robot file of a `urdf`/`mjcf` scene ([`crate::import`]).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct RobotFile {
+    /// `urdf` or `mjcf`.
+    pub kind: String,
+    /// The file, resolved (package:// through the robot path) and absolute.
+    pub path: PathBuf,
+    /// `model.locked_joints` with the value of q each is welded at (URDF 0, MJCF the joint's
+    /// `ref`).
+    pub locked: Vec<(String, f64)>,
+    /// Position limits the file states for the modelled hinge and slide joints (q's units).
+    pub ranges: Vec<crate::import::unmodelled::JointRange>,
+    /// Every element read and not modelled, in file order, with the scene's declaration.
+    pub unmodelled: Vec<UnmodelledEntry>,
+}
+
+/// One element of the robot file that is not modelled, and whether the scene declares its kind
+/// ignorable (`[model] ignore`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct UnmodelledEntry {
+    /// A kind of [`crate::import::unmodelled::KINDS`].
+    pub kind: String,
+    /// The element, e.g. `joint[elbow].frictionloss`.
+    pub element: String,
+    /// `file:line` (the file absolute).
+    pub location: String,
+    /// The scene's reason for ignoring this kind, or None (undeclared).
+    pub declared: Option<String>,
+}
+
+impl RobotFile {
+    /// The entries whose kind the scene does not declare.
+    pub fn undeclared(&self) -> impl Iterator<Item = &UnmodelledEntry> {
+        self.unmodelled.iter().filter(|u| u.declared.is_none())
+    }
 }
 
 impl Scene {

@@ -69,6 +69,20 @@ fn tidy(s: &mut Schema) {
     }
 }
 
+/// `[model] ignore`: keys from the closed vocabulary of unmodelled kinds, non-empty reasons.
+pub(super) fn ignore_kinds(_: &mut SchemaGenerator) -> Schema {
+    let kinds: Vec<&str> = crate::import::unmodelled::KINDS
+        .iter()
+        .map(|k| k.0)
+        .collect();
+    json_schema!({
+        "type": "object",
+        "propertyNames": { "enum": kinds },
+        "additionalProperties": { "type": "string", "minLength": 1, "pattern": "\\S" },
+        "default": {}
+    })
+}
+
 fn string_enum(names: &[&str]) -> Schema {
     json_schema!({ "type": "string", "enum": names })
 }

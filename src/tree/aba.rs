@@ -9,11 +9,12 @@
 //! caller (F = G + Q from [`super::natural_forces`]).
 //!
 //! - factor (Table 7.1, third loop): `I^A_i = I_i + sum_children I^a_c`, `U_i = I^A_i S_i`,
-//!   `D_i = S_i^T U_i`, `I^a_i = I^A_i - U_i D_i^-1 U_i^T`.
+//!   `D_i = S_i^T U_i + diag(armature_i)`, `I^a_i = I^A_i - U_i D_i^-1 U_i^T` (armature as in
+//!   MuJoCo and Pinocchio: added to A's diagonal, hence to the joint's own pivot block).
 //! - solve: backward `u_i = x_i - S_i^T p_i`, `p_λ += p_i + U_i D_i^-1 u_i`; forward
 //!   `qdd_i = D_i^-1 (u_i - U_i^T a_λ)`, `a_i = a_λ + S_i qdd_i` (a_0 = 0).
 //! - product (RNEA, Table 5.1, with v = 0 and no gravity): `a_i = a_λ + S_i x_i`, `f_i = I_i a_i`,
-//!   `(A x)_i = S_i^T (f_i + sum of descendants' f)`.
+//!   `(A x)_i = S_i^T (f_i + sum of descendants' f) + armature_i x_i`.
 //!
 //! The pivots D_i are the Schur complements of a block elimination of A from the leaves to the root,
 //! so they are positive definite exactly when A is; a pivot that is not is reported as [`Singular`].
@@ -191,6 +192,13 @@ pub fn aba_factor<S: Scalar>(
                     d[c][r] = dot6(&ab.s[r], &ab.u[c]);
                 }
             }
+            // armature: A gains it on the joint's diagonal, so does the pivot D_i (A's block
+            // elimination from the leaves sees the joint's own diagonal block last)
+            if jt.armature != 0.0 {
+                for (c, dc) in d.iter_mut().enumerate().take(k) {
+                    dc[c] += S::from(jt.armature);
+                }
+            }
             ab.dinv = spd_inverse(&d, k, &mut pivot).map_err(|c| Singular {
                 column: jt.iv + c,
                 rcond: 0.0,
@@ -326,6 +334,11 @@ pub fn mass_mul<S: Scalar>(model: &Model, data: &mut TreeData<S>, x: &[S], out: 
             let jt = &model.joints[j];
             for c in 0..jt.nv {
                 out[jt.iv + c] = dot6(&data.aba[i].s[c], &f);
+            }
+            if jt.armature != 0.0 {
+                for c in 0..jt.nv {
+                    out[jt.iv + c] += x[jt.iv + c] * S::from(jt.armature);
+                }
             }
         }
         if let Some(p) = link.parent {

@@ -12,7 +12,9 @@ use nalgebra::{DMatrix, DVector, Vector3};
 
 /// Recursive Newton-Euler inverse dynamics (Featherstone Table 5.1):
 /// `tau = M(q) a + C(q, v) v + g(q)` for uniform gravity `gravity` (world frame, e.g. (0,0,-9.81)),
-/// without joint springs/dampers, attractions or external forces. The result lives in `data`.
+/// without joint springs/dampers, gravity compensation, attractions or external forces. `M`
+/// includes the joints' armature: `tau_k += armature a_k` on each dof (MuJoCo's `mj_rne` plus
+/// the armature term of `mj_inverse`). The result lives in `data`.
 pub fn rnea<'d, S: Scalar>(
     model: &Model,
     data: &'d mut TreeData<S>,
@@ -45,6 +47,11 @@ pub fn rnea<'d, S: Scalar>(
             for k in 0..jt.nv {
                 data.tau[jt.iv + k] = data.links[i].s[k].dot(&f);
             }
+            if jt.armature != 0.0 {
+                for k in 0..jt.nv {
+                    data.tau[jt.iv + k] += a[jt.iv + k] * c::<S>(jt.armature);
+                }
+            }
         }
         if let Some(p) = link.parent {
             let fp = data.links[i].x.transpose_force(&f);
@@ -55,7 +62,7 @@ pub fn rnea<'d, S: Scalar>(
 }
 
 /// Composite-rigid-body algorithm (Featherstone Table 6.2): joint-space inertia matrix `M(q)`
-/// (the paper's `A(q)`), symmetric `nv x nv`. Written in world coordinates (as Pinocchio does):
+/// (the paper's `A(q)`), symmetric `nv x nv`, plus each joint's armature on its dofs' diagonal. Written in world coordinates (as Pinocchio does):
 /// composite inertias `Ic_i` and motion subspace columns `S_i` are expressed in the world frame,
 /// so `M[j, i] = S_j . (Ic_i S_i)` for every ancestor joint j needs no transform along the way.
 pub fn crba<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &[S], m: &mut DMatrix<S>) {
@@ -99,6 +106,11 @@ pub fn crba<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &[S], m: &mut D
             m[(r, col)] = val;
             m[(col, r)] = val;
             d = model.dof_parent[r];
+        }
+    }
+    for jt in model.joints.iter().filter(|j| j.armature != 0.0) {
+        for k in jt.iv..jt.iv + jt.nv {
+            m[(k, k)] += c::<S>(jt.armature);
         }
     }
 }
@@ -206,8 +218,9 @@ pub fn body_torque<S: Scalar>(
 
 /// `Q(t, q, v)` of the paper from the model's fields and joints (time-independent; `t` is accepted
 /// for the interface): uniform gravity, Newtonian attraction of each body's CoM to fixed points
-/// (`-mu m r/|r|^3`, by the CoM Jacobian transpose), joint springs `-k (q - q_ref)` and dampers
-/// `-d v`. User forces are added by the caller with [`body_point_force`].
+/// (`-mu m r/|r|^3`, by the CoM Jacobian transpose), gravity compensation (`-gravcomp m g` at each
+/// body's CoM, by the CoM Jacobian transpose: MuJoCo's passive `gravcomp` force), joint springs
+/// `-k (q - q_ref)` and dampers `-d v`. User forces are added by the caller with [`body_point_force`].
 pub fn applied_forces<S: Scalar>(
     model: &Model,
     data: &mut TreeData<S>,
@@ -222,7 +235,8 @@ pub fn applied_forces<S: Scalar>(
 }
 
 /// `G + Q` of the paper in one inverse-dynamics sweep: `-rnea(q, v, 0)` with the model's gravity
-/// (Coriolis, centrifugal and gravity together) plus attractors, springs and dampers.
+/// (Coriolis, centrifugal and gravity together) plus attractors, gravity compensation, springs and
+/// dampers.
 pub fn natural_forces<S: Scalar>(
     model: &Model,
     data: &mut TreeData<S>,
@@ -236,8 +250,8 @@ pub fn natural_forces<S: Scalar>(
     add_field_forces(model, data, q, v, out);
 }
 
-/// Adds attraction, spring and damper forces (the part of [`applied_forces`] beyond gravity);
-/// needs `forward_kinematics(q)` done on `data`.
+/// Adds attraction, gravity compensation, spring and damper forces (the part of
+/// [`applied_forces`] beyond gravity); needs `forward_kinematics(q)` done on `data`.
 fn add_field_forces<S: Scalar>(
     model: &Model,
     data: &mut TreeData<S>,
@@ -262,6 +276,14 @@ fn add_field_forces<S: Scalar>(
             }
         }
     }
+    for (b, body) in model.bodies.iter().enumerate() {
+        if body.gravcomp != 0.0 && !body.massless {
+            // -gravcomp m g at the CoM (world frame)
+            let f =
+                lift3::<S>(&(Vector3::from(model.fields.gravity) * (-body.gravcomp * body.mass)));
+            add_point_force(model, data, b, &lift3::<S>(&body.com), &f, out);
+        }
+    }
     for jt in &model.joints {
         if jt.stiffness != 0.0 {
             if let JointKind::Hinge(_) | JointKind::Slide(_) = jt.kind {
@@ -276,7 +298,8 @@ fn add_field_forces<S: Scalar>(
     }
 }
 
-/// Kinetic energy `T = Σ ½ v_i · I_i v_i` from the body velocities (equals `½ vᵀ A(q) v`).
+/// Kinetic energy `T = Σ ½ v_i · I_i v_i + Σ ½ armature v_k²` from the body velocities and the
+/// joints' armature (equals `½ vᵀ A(q) v`).
 pub fn kinetic_energy<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &[S], v: &[S]) -> S {
     forward_kinematics(model, data, q);
     forward_velocity(model, data, v);
@@ -287,11 +310,17 @@ pub fn kinetic_energy<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &[S],
             t += vi.dot(&Inertia::<S>::lift(inr).mul_motion(&vi)) * c::<S>(0.5);
         }
     }
+    for jt in model.joints.iter().filter(|j| j.armature != 0.0) {
+        for k in jt.iv..jt.iv + jt.nv {
+            t += v[k] * v[k] * c::<S>(0.5 * jt.armature);
+        }
+    }
     t
 }
 
-/// Potential energy of the conservative parts of `Q`: gravity `-Σ m g·c`, attraction `-Σ mu m/|r|`,
-/// springs `Σ ½ k (q - q_ref)²`, so that `Q_conservative = -∂V/∂q` on hinge/slide coordinates.
+/// Potential energy of the conservative parts of `Q`: gravity and its compensation
+/// `-Σ (1 - gravcomp) m g·c`, attraction `-Σ mu m/|r|`, springs `Σ ½ k (q - q_ref)²`, so that
+/// `Q_conservative = -∂V/∂q` on hinge/slide coordinates.
 pub fn potential_energy<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &[S]) -> S {
     forward_kinematics(model, data, q);
     let g = lift3::<S>(&Vector3::from(model.fields.gravity));
@@ -303,6 +332,9 @@ pub fn potential_energy<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &[S
         let ld = &data.links[model.body_link[b]];
         let cw = ld.pos + ld.rot * lift3::<S>(&body.com);
         e -= g.dot(&cw) * c::<S>(body.mass);
+        if body.gravcomp != 0.0 {
+            e += g.dot(&cw) * c::<S>(body.gravcomp * body.mass);
+        }
         for at in &model.fields.attractors {
             let r = cw - lift3::<S>(&Vector3::from(at.point));
             e -= c::<S>(at.mu * body.mass) / r.dot(&r).sqrt();

@@ -139,8 +139,9 @@ fn check_len(what: &str, got: usize, want: usize) {
 }
 
 /// Forward position kinematics: link transforms `^i X_λ`, world poses and motion subspaces.
-/// Joint transforms (post-joint frame in pre-joint frame, `x_pre = R x_post + p`):
-/// hinge `R = Rot(u, q)`, `p = a - R a` (anchor a); slide `R = 1`, `p = u q`; ball
+/// Joint transforms (post-joint frame in pre-joint frame, `x_pre = R x_post + p`), with the
+/// displacement `d = q - ref` of hinges and slides (MuJoCo `ref`, 0 by default):
+/// hinge `R = Rot(u, d)`, `p = a - R a` (anchor a); slide `R = 1`, `p = u d`; ball
 /// `R = R(quat)`, `p = a - R a`; free `R = R(quat)`, `p = position`. Motion subspaces in the
 /// post-joint frame: hinge `(u, a x u)`, slide `(0, u)`, ball `(e_k, a x e_k)`, free
 /// `[(0, R^T e_k) | (e_k, 0)]` (world linear velocity, body angular velocity).
@@ -165,9 +166,17 @@ pub fn forward_kinematics<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &
                 let jt = &model.joints[j];
                 let a = lift3::<S>(&jt.anchor);
                 let iq = jt.iq;
+                // displacement q - ref (MuJoCo `ref`; hinge and slide only)
+                let disp = || {
+                    if jt.reference != 0.0 {
+                        q[iq] - c::<S>(jt.reference)
+                    } else {
+                        q[iq]
+                    }
+                };
                 match jt.kind {
                     JointKind::Hinge(u) => {
-                        let r = rot_axis_angle(&u, q[iq]);
+                        let r = rot_axis_angle(&u, disp());
                         let ul = lift3::<S>(&u);
                         s[0] = Motion::new(ul, cross(&a, &ul));
                         Xform::from_pose(r, a - r * a)
@@ -175,7 +184,7 @@ pub fn forward_kinematics<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &
                     JointKind::Slide(u) => {
                         let ul = lift3::<S>(&u);
                         s[0] = Motion::new(zero, ul);
-                        Xform::from_pose(Matrix3::identity(), ul * q[iq])
+                        Xform::from_pose(Matrix3::identity(), ul * disp())
                     }
                     JointKind::Ball => {
                         let r = rot_quat(q[iq], q[iq + 1], q[iq + 2], q[iq + 3]);
@@ -311,14 +320,15 @@ pub fn qdot<S: Scalar>(model: &Model, q: &[S], v: &[S], out: &mut DVector<S>) {
     }
 }
 
-/// Neutral configuration: hinge/slide 0, ball identity (1, 0, 0, 0), free = the body's placement
-/// (position, quaternion) as given in its [`super::BodySpec`] (MuJoCo's qpos0).
+/// Neutral configuration (MuJoCo's qpos0): hinge/slide their reference position `ref` (0 by
+/// default: the pose the placements describe), ball identity (1, 0, 0, 0), free = the body's
+/// placement (position, quaternion) as given in its [`super::BodySpec`].
 pub fn neutral(model: &Model) -> DVector<f64> {
     let mut q = DVector::zeros(model.nq());
     for jt in &model.joints {
         let iq = jt.iq;
         match jt.kind {
-            JointKind::Hinge(_) | JointKind::Slide(_) => {}
+            JointKind::Hinge(_) | JointKind::Slide(_) => q[iq] = jt.reference,
             JointKind::Ball => q[iq] = 1.0,
             JointKind::Free => {
                 let b = &model.bodies[jt.body];

@@ -18,9 +18,12 @@
 //!   `A` = [`mass_matrix`], `G` = [`velocity_terms`] `= -C(q,v) v`, `Q` = [`applied_forces`]
 //!   (+ [`body_point_force`] for user forces). In simulator terms `bias = C v + g = -G - Q_gravity`.
 //! - Names of q/v entries: [`Model::q_names`], [`Model::v_names`].
-//! - MuJoCo correspondence: body `pos`/`quat`, joint `axis`/`pos` (our `anchor`), `stiffness`,
-//!   `springref`, `damping` map one to one; a hinge/slide joint `ref` must be folded into q by the
-//!   caller (here the joint angle is q itself).
+//! - MuJoCo correspondence: body `pos`/`quat`/`gravcomp`, joint `axis`/`pos` (our `anchor`),
+//!   `stiffness`, `springref`, `damping`, `armature` and hinge/slide `ref` (our `reference`) map
+//!   one to one, with MuJoCo's meaning: q is MuJoCo's qpos, a hinge/slide turns/moves by
+//!   `q - ref` (so `q = ref`, [`neutral`], is the pose the placements describe), `springref` is a
+//!   value of q, armature adds to `A`'s diagonal (and to `T = ½ vᵀ A v`), gravcomp is a passive
+//!   force `-gravcomp m g` at the CoM.
 //!
 //! ```
 //! use progmo::tree::*;

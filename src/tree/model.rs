@@ -64,6 +64,15 @@ pub struct JointSpec {
     /// Viscous damping d: generalized force `-d v` on every dof of the joint.
     #[serde(default)]
     pub damping: f64,
+    /// Armature (rotor inertia reflected on the joint, MuJoCo `armature`), >= 0: added to the
+    /// diagonal of `A(q)` on every dof of the joint.
+    #[serde(default)]
+    pub armature: f64,
+    /// Reference position (MuJoCo `ref`, hinge and slide only): the joint's displacement is
+    /// `q - reference`, so `q = reference` is the pose the body's placement describes. The spring
+    /// reference `spring_ref` is a value of q (absolute), as in MuJoCo.
+    #[serde(default)]
+    pub reference: f64,
 }
 
 impl JointSpec {
@@ -87,6 +96,8 @@ impl JointSpec {
             stiffness: 0.0,
             spring_ref: 0.0,
             damping: 0.0,
+            armature: 0.0,
+            reference: 0.0,
         }
     }
     pub fn with_anchor(mut self, anchor: [f64; 3]) -> Self {
@@ -100,6 +111,15 @@ impl JointSpec {
     }
     pub fn with_damping(mut self, damping: f64) -> Self {
         self.damping = damping;
+        self
+    }
+    pub fn with_armature(mut self, armature: f64) -> Self {
+        self.armature = armature;
+        self
+    }
+    /// MuJoCo `ref`: the joint's displacement is `q - reference`.
+    pub fn with_reference(mut self, reference: f64) -> Self {
+        self.reference = reference;
         self
     }
 }
@@ -133,6 +153,10 @@ pub struct BodySpec {
     /// Joints applied in sequence (parent placement, then joint 1, joint 2, ...; MuJoCo semantics).
     #[serde(default)]
     pub joints: Vec<JointSpec>,
+    /// Gravity compensation (MuJoCo body `gravcomp`): a passive world-frame force
+    /// `-gravcomp m g` at the CoM (1: the body feels no gravity).
+    #[serde(default)]
+    pub gravcomp: f64,
 }
 
 fn unit_quat() -> [f64; 4] {
@@ -152,6 +176,7 @@ impl BodySpec {
             inertia,
             massless: false,
             joints: Vec::new(),
+            gravcomp: 0.0,
         }
     }
     /// A point mass at `com`.
@@ -174,6 +199,10 @@ impl BodySpec {
     }
     pub fn joint(mut self, j: JointSpec) -> Self {
         self.joints.push(j);
+        self
+    }
+    pub fn with_gravcomp(mut self, gravcomp: f64) -> Self {
+        self.gravcomp = gravcomp;
         self
     }
 }
@@ -232,6 +261,10 @@ pub struct Joint {
     pub stiffness: f64,
     pub spring_ref: f64,
     pub damping: f64,
+    /// Added to `A(q)`'s diagonal on each dof of the joint.
+    pub armature: f64,
+    /// Hinge/slide: the displacement is `q - reference` (MuJoCo `ref`); 0 for ball/free.
+    pub reference: f64,
     /// First index in q.
     pub iq: usize,
     /// First index in v.
@@ -268,6 +301,8 @@ pub struct Body {
     pub com: Vector3<f64>,
     pub inertia: Matrix3<f64>,
     pub massless: bool,
+    /// Gravity compensation: passive force `-gravcomp m g` at the CoM.
+    pub gravcomp: f64,
     /// Indices of this body's joints (consecutive, in order of application).
     pub joints: Range<usize>,
 }
@@ -405,6 +440,9 @@ impl Model {
                 }
                 check_inertia(&inertia).map_err(|m| berr(name, m))?;
             }
+            if !s.gravcomp.is_finite() {
+                return Err(berr(name, "gravcomp is not finite".into()));
+            }
             // joints
             let j0 = joints.len();
             let b = bodies.len();
@@ -420,11 +458,17 @@ impl Model {
                     || !js.stiffness.is_finite()
                     || !js.spring_ref.is_finite()
                     || !js.damping.is_finite()
+                    || !js.armature.is_finite()
+                    || !js.reference.is_finite()
                 {
                     return Err(jerr(name, jn, "parameters are not finite".into()));
                 }
-                if js.stiffness < 0.0 || js.damping < 0.0 {
-                    return Err(jerr(name, jn, "stiffness and damping must be >= 0".into()));
+                if js.stiffness < 0.0 || js.damping < 0.0 || js.armature < 0.0 {
+                    return Err(jerr(
+                        name,
+                        jn,
+                        "stiffness, damping and armature must be >= 0".into(),
+                    ));
                 }
                 let unit = |a: &[f64; 3]| -> Result<Vector3<f64>, ModelError> {
                     let u = Vector3::from(*a);
@@ -460,6 +504,14 @@ impl Model {
                         "springs are supported on hinge and slide joints only".into(),
                     ));
                 }
+                if js.reference != 0.0 && matches!(kind, JointKind::Ball | JointKind::Free) {
+                    return Err(jerr(
+                        name,
+                        jn,
+                        "a reference position (ref) is supported on hinge and slide joints only"
+                            .into(),
+                    ));
+                }
                 let (jnq, jnv) = (js.kind.nq(), js.kind.nv());
                 match kind {
                     JointKind::Hinge(_) | JointKind::Slide(_) => {
@@ -491,6 +543,8 @@ impl Model {
                     stiffness: js.stiffness,
                     spring_ref: js.spring_ref,
                     damping: js.damping,
+                    armature: js.armature,
+                    reference: js.reference,
                     iq: nq,
                     iv: nv,
                     nq: jnq,
@@ -545,6 +599,7 @@ impl Model {
                 com,
                 inertia,
                 massless: s.massless,
+                gravcomp: s.gravcomp,
                 joints: j0..joints.len(),
             });
         }

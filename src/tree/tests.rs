@@ -30,7 +30,39 @@ fn inr(a: f64, b: f64, c: f64, off: f64) -> [[f64; 3]; 3] {
 /// A tree exercising every joint type, several joints per body, anchors, a massless coordinate
 /// body, a welded body and two roots.
 fn zoo(fields: Fields) -> Model {
-    let bodies = vec![
+    Model::new(&zoo_specs(), fields).unwrap()
+}
+
+/// [`zoo`] with armature on every joint type, reference positions on hinges and slides and
+/// gravity compensation (partial, full, over-compensating and negative).
+fn zoo_extras(fields: Fields) -> Model {
+    let mut specs = zoo_specs();
+    for b in specs.iter_mut() {
+        b.gravcomp = match b.name.as_str() {
+            "base" => 0.5,
+            "arm2" => 1.0,
+            "tip" => 2.0,
+            "pend" => -0.3,
+            _ => 0.0,
+        };
+        for j in b.joints.iter_mut() {
+            (j.armature, j.reference) = match j.name.as_str() {
+                "float" => (0.02, 0.0),
+                "shoulder" => (0.03, 0.0),
+                "elbow" => (0.05, 0.3),
+                "extend" => (0.1, -0.2),
+                "roll" => (0.0, 0.4),
+                "push" => (0.07, 0.0),
+                "swing" => (0.2, -0.5),
+                _ => (0.0, 0.0),
+            };
+        }
+    }
+    Model::new(&specs, fields).unwrap()
+}
+
+fn zoo_specs() -> Vec<BodySpec> {
+    vec![
         BodySpec::new(
             "base",
             WORLD,
@@ -96,8 +128,7 @@ fn zoo(fields: Fields) -> Model {
         )
         .at([1.0, 0.0, 0.0])
         .joint(JointSpec::hinge("swing", [0.0, 1.0, 0.0]).with_anchor([0.0, 0.0, 0.2])),
-    ];
-    Model::new(&bodies, fields).unwrap()
+    ]
 }
 
 fn zoo_fields() -> Fields {
@@ -170,7 +201,13 @@ fn names_and_sizes() {
 /// rnea(q, v, a) = M a + rnea(q, v, 0).
 #[test]
 fn crba_matches_rnea() {
-    let m = zoo(zoo_fields());
+    for m in [zoo(zoo_fields()), zoo_extras(zoo_fields())] {
+        crba_matches_rnea_on(&m);
+    }
+}
+
+fn crba_matches_rnea_on(m: &Model) {
+    let m = m.clone();
     let mut d = TreeData::<f64>::new(&m);
     let mut rng = Rng(0x1234_5678_9abc_def1);
     let g = Vector3::new(0.3, -0.2, -9.81);
@@ -465,7 +502,13 @@ fn free_body_falls() {
 /// Ȧ - 2C). Also T from body velocities equals ½ vᵀ A v.
 #[test]
 fn kinetic_energy_is_conserved_by_g() {
-    let model = zoo(Fields::default());
+    for m in [zoo(Fields::default()), zoo_extras(Fields::default())] {
+        kinetic_energy_is_conserved_on(&m);
+    }
+}
+
+fn kinetic_energy_is_conserved_on(model: &Model) {
+    let model = model.clone();
     let mut d = TreeData::<f64>::new(&model);
     let mut dd = TreeData::<Dual64>::new(&model);
     let mut rng = Rng(2024);
@@ -492,11 +535,18 @@ fn kinetic_energy_is_conserved_by_g() {
     }
 }
 
-/// Full energy balance with gravity, attraction, springs and dampers:
+/// Full energy balance with gravity, attraction, springs and dampers (and, on [`zoo_extras`],
+/// armature in T, gravity compensation in V, reference positions):
 /// d(T + V)/dt = -Σ d v² along the motion, over Dual64.
 #[test]
 fn energy_balance_with_fields() {
-    let model = zoo(zoo_fields());
+    for m in [zoo(zoo_fields()), zoo_extras(zoo_fields())] {
+        energy_balance_on(&m);
+    }
+}
+
+fn energy_balance_on(model: &Model) {
+    let model = model.clone();
     let mut d = TreeData::<f64>::new(&model);
     let mut dd = TreeData::<Dual64>::new(&model);
     let mut rng = Rng(77);
@@ -842,7 +892,13 @@ fn anchors_are_fixed_points() {
 /// along q). Negative control: a factorization left at another q misses by far more.
 #[test]
 fn articulated_body_factorization_matches_crba() {
-    let m = zoo(zoo_fields());
+    for m in [zoo(zoo_fields()), zoo_extras(zoo_fields())] {
+        aba_matches_crba_on(&m);
+    }
+}
+
+fn aba_matches_crba_on(m: &Model) {
+    let m = m.clone();
     let nv = m.nv();
     let mut d = TreeData::<f64>::new(&m);
     let mut dd = TreeData::<Dual64>::new(&m);
@@ -937,4 +993,177 @@ fn articulated_body_factorization_reports_a_singular_a() {
     let mut d = TreeData::<f64>::new(&m);
     let e = aba_factor(&m, &mut d, &[0.3, 0.2]).unwrap_err();
     assert_eq!(e.column, 1);
+}
+
+/// A single hinge with armature: `A = m l² + I_zz + armature` (closed form); the RNEA sees it
+/// (`tau = A a` at rest without gravity), the ABA inverts it and `T = ½ A v²`. Negative control:
+/// the same model with the armature zeroed misses the closed form by the armature.
+#[test]
+fn armature_closed_form() {
+    let (m, l, izz, arm) = (1.5, 0.4, 0.02, 0.3);
+    let body = |arm: f64| {
+        BodySpec::new(
+            "b",
+            WORLD,
+            m,
+            [l, 0.0, 0.0],
+            [[0.01, 0.0, 0.0], [0.0, 0.015, 0.0], [0.0, 0.0, izz]],
+        )
+        .joint(JointSpec::hinge("h", [0.0, 0.0, 1.0]).with_armature(arm))
+    };
+    let want = m * l * l + izz + arm;
+    let model = Model::new(&[body(arm)], Fields::default()).unwrap();
+    let mut d = TreeData::<f64>::new(&model);
+    let mut a = DMatrix::zeros(0, 0);
+    for q in [0.0, 0.7, -2.1] {
+        crba(&model, &mut d, &[q], &mut a);
+        assert!(
+            (a[(0, 0)] - want).abs() <= 4.0 * EPS * want,
+            "{}",
+            a[(0, 0)]
+        );
+        let tau = rnea(&model, &mut d, &[q], &[0.0], &[2.0], &Vector3::zeros())[0];
+        assert!((tau - 2.0 * want).abs() <= 8.0 * EPS * want);
+        aba_factor(&model, &mut d, &[q]).unwrap();
+        let mut x = [3.0];
+        aba_solve(&model, &mut d, &mut x);
+        assert!((x[0] - 3.0 / want).abs() <= 8.0 * EPS * x[0]);
+        let mut y = [0.0];
+        mass_mul(&model, &mut d, &[3.0], &mut y);
+        assert!((y[0] - 3.0 * want).abs() <= 8.0 * EPS * y[0]);
+        let t = kinetic_energy(&model, &mut d, &[q], &[2.0]);
+        assert!((t - 0.5 * want * 4.0).abs() <= 8.0 * EPS * t);
+    }
+    // negative control: armature zeroed
+    let bare = Model::new(&[body(0.0)], Fields::default()).unwrap();
+    let mut d = TreeData::<f64>::new(&bare);
+    crba(&bare, &mut d, &[0.7], &mut a);
+    assert!((a[(0, 0)] - want).abs() > 0.9 * arm);
+    // ball and free joints: armature on each of their dofs' diagonal entries
+    let spec = |arm: f64, free: bool| {
+        let j = if free {
+            JointSpec::free("j")
+        } else {
+            JointSpec::ball("j")
+        };
+        BodySpec::new("b", WORLD, m, [l, 0.1, 0.0], inr(0.02, 0.03, 0.04, 0.004))
+            .joint(j.with_armature(arm))
+    };
+    for free in [false, true] {
+        let with = Model::new(&[spec(arm, free)], Fields::default()).unwrap();
+        let without = Model::new(&[spec(0.0, free)], Fields::default()).unwrap();
+        let mut rng = Rng(5);
+        let (q, _, _) = random_state(&with, &mut rng);
+        let (mut a1, mut a0) = (DMatrix::zeros(0, 0), DMatrix::zeros(0, 0));
+        crba(&with, &mut with.data(), &q, &mut a1);
+        crba(&without, &mut without.data(), &q, &mut a0);
+        let diff = a1 - a0;
+        let want = DMatrix::<f64>::identity(with.nv(), with.nv()) * arm;
+        assert!(max_abs(&(diff - want)) <= 16.0 * EPS * 10.0);
+    }
+}
+
+/// Gravity compensation: a pendulum with gravcomp = 1 feels no gravity (Q = 0, V constant); with
+/// gravcomp = 0.25 it feels 3/4 of it; the force acts at the CoM (J_comᵀ), so a welded child's
+/// compensation reaches its parent's joint. Negative control: gravcomp = 0 feels gravity.
+#[test]
+fn gravcomp_closed_form() {
+    let (m, l, g) = (2.0, 0.5, 9.81);
+    let model = |gc: f64, child_gc: f64| {
+        let b = BodySpec::new(
+            "p",
+            WORLD,
+            m,
+            [0.0, 0.0, -l],
+            [[0.01, 0.0, 0.0], [0.0, 0.01, 0.0], [0.0, 0.0, 0.01]],
+        )
+        .joint(JointSpec::hinge("h", [0.0, 1.0, 0.0]))
+        .with_gravcomp(gc);
+        let c = BodySpec::point_mass("c", "p", 1.0, [0.3, 0.0, 0.0])
+            .at([0.0, 0.0, -l])
+            .with_gravcomp(child_gc);
+        Model::new(
+            &[b, c],
+            Fields {
+                gravity: [0.0, 0.0, -g],
+                attractors: vec![],
+            },
+        )
+        .unwrap()
+    };
+    let mut f = DVector::zeros(0);
+    for q in [0.3, -1.2, 2.5] {
+        let full = model(1.0, 1.0);
+        let mut d = full.data::<f64>();
+        applied_forces(&full, &mut d, 0.0, &[q], &[0.0], &mut f);
+        assert!(f[0].abs() <= 32.0 * EPS * m * g * l, "{}", f[0]);
+        natural_forces(&full, &mut d, &[q], &[0.0], &mut f);
+        assert!(f[0].abs() <= 32.0 * EPS * m * g * l, "{}", f[0]);
+        let v0 = potential_energy(&full, &mut d, &[0.0]);
+        assert!((potential_energy(&full, &mut d, &[q]) - v0).abs() <= 32.0 * EPS * m * g * l);
+        // closed form: pendulum p (CoM at distance l) and point c at (0.3, 0, -l) in p's frame
+        let q_of = |gc_p: f64, gc_c: f64| {
+            let (s, cq) = q.sin_cos();
+            // generalized force of gravity on a CoM at body point (x, 0, z), world
+            // z = -x sin q + z cos q: Q = (-m g) dz/dq = m g (x cos q + z sin q)
+            let tp = (1.0 - gc_p) * m * g * (-l * s);
+            let tc = (1.0 - gc_c) * 1.0 * g * (0.3 * cq - l * s);
+            tp + tc
+        };
+        for (gp, gc) in [(0.25, 0.0), (0.0, 1.0), (0.0, 0.0), (-0.5, 2.0)] {
+            let mdl = model(gp, gc);
+            let mut d = mdl.data::<f64>();
+            applied_forces(&mdl, &mut d, 0.0, &[q], &[0.0], &mut f);
+            let want = q_of(gp, gc);
+            assert!(
+                (f[0] - want).abs() <= 64.0 * EPS * m * g,
+                "{} vs {want}",
+                f[0]
+            );
+        }
+        // negative control: without compensation the full-gravity torque is far from 0
+        let none = model(0.0, 0.0);
+        applied_forces(&none, &mut none.data(), 0.0, &[q], &[0.0], &mut f);
+        assert!(f[0].abs() > 0.1);
+    }
+}
+
+/// Reference positions (MuJoCo `ref`): a hinge turns by q - ref and a slide moves by q - ref, so
+/// q = ref is the pose of the placements (and the neutral configuration); the spring reference is
+/// absolute in q. Negative control: the same pose at q = 0 differs.
+#[test]
+fn reference_position_closed_form() {
+    let (l, r, rs) = (0.4, 0.7, -0.2);
+    let b = BodySpec::point_mass("b", WORLD, 1.0, [l, 0.0, 0.0])
+        .joint(
+            JointSpec::hinge("h", [0.0, 0.0, 1.0])
+                .with_reference(r)
+                .with_spring(3.0, 0.1),
+        )
+        .joint(JointSpec::slide("s", [0.0, 0.0, 1.0]).with_reference(rs));
+    let model = Model::new(&[b], Fields::default()).unwrap();
+    let mut d = model.data::<f64>();
+    let n = neutral(&model);
+    assert_eq!(n.as_slice(), &[r, rs]);
+    for (q, z) in [(0.0, 0.5), (r, rs), (1.9, -0.3)] {
+        let p = point_position(&model, &mut d, &[q, z], 0, &Vector3::new(l, 0.0, 0.0));
+        let want = Vector3::new(l * (q - r).cos(), l * (q - r).sin(), z - rs);
+        assert!((p - want).amax() <= 4.0 * EPS, "{p} vs {want}");
+        // spring: -k (q - springref), independent of ref
+        let mut f = DVector::zeros(0);
+        applied_forces(&model, &mut d, 0.0, &[q, z], &[0.0, 0.0], &mut f);
+        assert!((f[0] + 3.0 * (q - 0.1)).abs() <= 4.0 * EPS * 3.0);
+        let v = potential_energy(&model, &mut d, &[q, z]);
+        assert!((v - 1.5 * (q - 0.1) * (q - 0.1)).abs() <= 8.0 * EPS);
+    }
+    // negative control: at q = 0 the body is not in the placements' pose
+    let p = point_position(&model, &mut d, &[0.0, 0.0], 0, &Vector3::new(l, 0.0, 0.0));
+    assert!((p - Vector3::new(l, 0.0, 0.0)).amax() > 0.1);
+    // refused on ball and free joints
+    let bad = BodySpec::point_mass("b", WORLD, 1.0, [l, 0.0, 0.0])
+        .joint(JointSpec::ball("j").with_reference(0.1));
+    assert!(Model::new(&[bad], Fields::default()).is_err());
+    let bad = BodySpec::point_mass("b", WORLD, 1.0, [l, 0.0, 0.0])
+        .joint(JointSpec::hinge("j", [0.0, 0.0, 1.0]).with_armature(-1.0));
+    assert!(Model::new(&[bad], Fields::default()).is_err());
 }

@@ -3,7 +3,8 @@
 - URDF: MuJoCo's URDF compiler loads each catalog robot's URDF (visuals and collisions stripped, so
   no mesh file is needed; `<mujoco><compiler .../></mujoco>` keeps every body (fusestatic off) and
   the stated inertials (no inertia from geoms, no balancing or bounds); armature is 0 in a URDF).
-  A (mj_fullM after mj_forward) and the bias forces (qfrc_bias) agree with progmo's import of the
+  A (mj_fullM after mj_forward) and the forces (qfrc_passive - qfrc_bias: joint damping is modelled)
+  agree with progmo's import of the
   same file (`model.kind = "urdf"`) at random states, relative 1e-12 (as test_urdf_import.py).
   Joints the scene locks stay in MuJoCo's model at qpos = qvel = 0: the other dofs' block of A and
   their bias forces are then those of the locked model.
@@ -100,7 +101,9 @@ def worst(scene, model, seed: int) -> tuple[float, float]:
         A, f = ours["mass"], ours["velocity_terms"] + ours["applied_forces"]
         wa = max(wa, np.abs(M[np.ix_(va, va)] - A).max() / np.abs(A).max())
         scale = max(np.abs(f).max(), np.abs(A).max() * np.abs(v).max() ** 2)
-        wf = max(wf, np.abs(-d.qfrc_bias[va] - f).max() / scale)
+        # G + Q = -bias + passive (damping, springs, gravcomp: all modelled; frictionloss is a
+        # constraint force in MuJoCo, not part of qfrc_passive)
+        wf = max(wf, np.abs(-d.qfrc_bias[va] + d.qfrc_passive[va] - f).max() / scale)
     return wa, wf
 
 

@@ -61,7 +61,8 @@ def worst(scene, model: pin.Model) -> tuple[float, float]:
         Ap, fp = A[np.ix_(perm, perm)], f[perm]
         wa = max(wa, np.abs(M - Ap).max() / np.abs(Ap).max())
         scale = max(np.abs(fp).max(), np.abs(Ap).max() * np.abs(v).max() ** 2)
-        wf = max(wf, np.abs(-b - fp).max() / scale)
+        # joint damping (<dynamics damping>, read by Pinocchio into model.damping) is modelled
+        wf = max(wf, np.abs(-b - model.damping * v[perm] - fp).max() / scale)
     return wa, wf
 
 

@@ -499,6 +499,56 @@ impl PyScene {
         }))
     }
 
+    /// The robot file of a `urdf`/`mjcf` scene as a dict {kind: "urdf" | "mjcf", path: the
+    /// resolved absolute path, locked_joints: [(joint, q value it is welded at)]}; None for
+    /// other models.
+    #[getter]
+    fn robot_file<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(r) = &self.scene.robot else {
+            return Ok(None);
+        };
+        let d = PyDict::new(py);
+        d.set_item("kind", &r.kind)?;
+        d.set_item("path", r.path.display().to_string())?;
+        d.set_item("locked_joints", r.locked.clone())?;
+        Ok(Some(d))
+    }
+
+    /// What the robot file holds that is not modelled, one dict per element in file order:
+    /// {kind (closed vocabulary), element, location "file:line", declared: the scene's reason
+    /// (`[model] ignore`) or None}; [] for other models.
+    #[getter]
+    fn unmodelled<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        let out = PyList::empty(py);
+        for u in self.scene.robot.iter().flat_map(|r| &r.unmodelled) {
+            let d = PyDict::new(py);
+            d.set_item("kind", &u.kind)?;
+            d.set_item("element", &u.element)?;
+            d.set_item("location", &u.location)?;
+            d.set_item("declared", &u.declared)?;
+            out.append(d)?;
+        }
+        Ok(out)
+    }
+
+    /// Position limits the robot file states for the modelled hinge and slide joints: {joint
+    /// (its q name): (lower, upper)} in q's units (radians, metres); {} for other models.
+    #[getter]
+    fn joint_ranges(&self) -> std::collections::BTreeMap<String, (f64, f64)> {
+        self.scene
+            .robot
+            .iter()
+            .flat_map(|r| &r.ranges)
+            .map(|j| (j.joint.clone(), (j.lower, j.upper)))
+            .collect()
+    }
+
+    /// The vocabulary of unmodelled kinds: [(kind, what it covers)].
+    #[staticmethod]
+    fn unmodelled_kinds() -> Vec<(&'static str, &'static str)> {
+        progmo::import::unmodelled::KINDS.to_vec()
+    }
+
     /// `[checks] not_checked` of the scene: {simulator: reason}.
     #[getter]
     fn expected_not_checked(&self) -> Vec<(String, String)> {

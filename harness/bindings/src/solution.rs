@@ -26,6 +26,8 @@ pub struct PySolution {
     wall_seconds: f64,
     /// The solved scene when it has `[[actuators]]`: its servo analysis goes into the summary.
     servo_scene: Option<Scene>,
+    /// The scene's robot file (`Scene::robot`) for summary.json.
+    robot_file: Option<serde_json::Value>,
     /// (name, array) of every sampled quantity, built once, read-only.
     arrays: Vec<(&'static str, Py<PyAny>)>,
     stats: Py<PyAny>,
@@ -55,6 +57,10 @@ impl PySolution {
         let actuated = matches!(&scene.system,
             progmo::scene::SceneSystem::Tree(p) if p.constraints.actuation().is_some());
         let name = scene.name.clone();
+        let robot_file = scene
+            .robot
+            .as_ref()
+            .and_then(|r| serde_json::to_value(r).ok());
         let servo_scene = actuated.then_some(scene);
         let tr = &sol.trajectory;
         let (nq, nv, s) = (tr.q_names.len(), tr.v_names.len(), tr.row_names.len());
@@ -107,6 +113,7 @@ impl PySolution {
             bodies,
             wall_seconds,
             servo_scene,
+            robot_file,
             arrays,
         })
     }
@@ -283,6 +290,7 @@ impl PySolution {
             git_revision: (!progmo::GIT_REVISION.is_empty()).then_some(progmo::GIT_REVISION),
             command_line: &command_line,
             servo: servo.as_ref(),
+            robot_file: self.robot_file.as_ref(),
         };
         write_summary_to_path(path, &input).map_err(os_error)
     }
