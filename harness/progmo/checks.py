@@ -15,10 +15,20 @@ A check is a sequence of small steps over a typed back-end (``simulators.Backend
 2. **Export** (``Scene.export``): refused for what no simulator document carries (lagrangian models,
    system constraints) -> ``not_checked``; every force the back-end must apply itself is in the
    report, and a back-end that cannot apply one says so (``Unsupported``) -> ``not_checked``.
+   A scene whose model is a robot file (``kind = "urdf"``/``"mjcf"``) takes the route "user's
+   file" (``CheckResult.route``): the back-end reads that file itself (``simulators.robot_file``)
+   and the export only supplies the coordinate names and the scene's forces. Elements of the file
+   progmo does not model (``Scene.unmodelled`` and the simulator's own reading) make the check
+   ``not_checked`` naming them unless the scene declares their kind ignored (then the simulator's
+   feature is off and the report lists them): :func:`_unmodelled`.
 3. **Budgets**: every metric gets one, the scene's ``[tolerances]`` entry or the documented default
    of :func:`default_budgets`; ``replay_horizon`` shortens the replayed span (recorded in ``span``).
 4. **Reference solve** at every RK4 stage time (output_dt = h/2) with rtol <= 1e-12; the replay step
    from ``replay_step`` or a convergence check. Its conditioning warnings are kept.
+   Robot file: a joint range of the file that the reference motion leaves is such an element
+   (:func:`_active_limits`); parity at random states with nonzero velocities and along the solution,
+   and ``inverse_dynamics`` (u from the file's inverse dynamics at the solver's accelerations),
+   both gating the replay and naming the worst joint (:func:`_inverse_dynamics`).
 5. **Model parity** at ``options.samples`` states: the exported model's mass matrix and every
    non-control generalized force the simulator sees (``-bias + passive + harness forces``, the
    scene's point and coordinate forces included) against our ``A`` and ``G + Q``: ``parity_mass``,
@@ -665,8 +675,12 @@ def _unmodelled(c: _Check) -> None:
         raise _Stop("not_checked", "the robot file holds what progmo does not model (declare it ignored "
                     "in the scene, or remove it): " + "; ".join(_element(u) for u in found))
     if declared:
-        c.res.notes.append("declared ignored by the scene, switched off in the simulator: " + "; ".join(
-            _element(u) for u in core if u.get("declared")))
+        kinds: dict[str, list[str]] = {}
+        for u in core:
+            if u.get("declared"):
+                kinds.setdefault(str(u["kind"]), []).append(str(u["element"]))
+        c.res.notes.append("declared ignored by the scene (its simulator feature off where it has one): " + "; ".join(
+            f"{k} ({len(v)}: {', '.join(v[:3])}{', ...' if len(v) > 3 else ''})" for k, v in kinds.items()))
 
 
 def _element(u: dict) -> str:

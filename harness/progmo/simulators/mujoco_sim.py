@@ -14,7 +14,7 @@ import mujoco
 
 from . import BlowUp, ExpressionForces, Unsupported, attractor_force, require_forces
 from .replay import CoordMap, Reference, Replay
-from .robot_file import RobotFile, mujoco_addresses, mujoco_model, name_report
+from .robot_file import FILE_FORCES, RobotFile, mujoco_addresses, mujoco_model, name_report
 
 #: |qacc| beyond this is treated as a blow-up (MuJoCo returns huge values at singularities)
 ACC_LIMIT = 1e8
@@ -36,6 +36,9 @@ class MujocoBackend:
     def __init__(self, doc: str, report: dict, scene=None, withhold: tuple[str, ...] = (),
                  robot: RobotFile | None = None):
         """``robot``: build the model from the user's robot file (``robot_file``), not ``doc``."""
+        if robot is not None:  # the file's own passive forces come from the simulator's reading
+            report = {**report, "harness_forces": [hf for hf in report.get("harness_forces", [])
+                                                  if hf["kind"] not in FILE_FORCES]}
         require_forces(report, SUPPORTED, "MuJoCo")
         if report.get("closures") and robot is not None:
             raise Unsupported("loop closures over a robot file: MuJoCo's reading of the file has no sites for them")

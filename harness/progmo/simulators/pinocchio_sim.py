@@ -25,7 +25,7 @@ import pinocchio as pin
 
 from . import BlowUp, ExpressionForces, Unsupported, attractor_force, require_forces
 from .replay import CoordMap, Reference, Replay
-from .robot_file import PinFile, RobotFile, name_report, pinocchio_model
+from .robot_file import FILE_FORCES, PinFile, RobotFile, name_report, pinocchio_model
 
 ACC_LIMIT = 1e8
 NAME = "pinocchio"
@@ -64,6 +64,9 @@ class PinocchioBackend:
     def __init__(self, doc: str, report: dict, scene=None, withhold: tuple[str, ...] = (),
                  robot: RobotFile | None = None):
         """``robot``: build the model from the user's robot file (``robot_file``), not ``doc``."""
+        if robot is not None:  # the file's own passive forces come from the simulator's reading
+            report = {**report, "harness_forces": [hf for hf in report.get("harness_forces", [])
+                                                  if hf["kind"] not in FILE_FORCES]}
         require_forces(report, SUPPORTED, "Pinocchio")
         rj = report.get("root_joint")
         self.file: PinFile | None = None

@@ -62,7 +62,8 @@ def robot_file(scene: Any) -> RobotFile | None:
     kind = model.get("kind")
     if kind not in ("urdf", "mjcf"):
         return None
-    path = getattr(scene, "robot_file", None)
+    given = getattr(scene, "robot_file", None)  # the core's {kind, path, locked_joints}
+    path = given["path"] if isinstance(given, dict) else given
     if not path:
         rel = str(model["file"])
         if rel.startswith("package://"):
@@ -81,11 +82,17 @@ def robot_file(scene: Any) -> RobotFile | None:
                      str(model.get("root_joint", "fixed")), ignored)
 
 
+#: harness forces of the export report that stand for elements of the robot file itself (the file's
+#: passive forces): on the user's-file route the simulator's own reading supplies them
+FILE_FORCES = ("spring", "damper", "gravcomp")
+
+
 def name_report(report: dict, addr: dict[str, tuple[int, int]]) -> dict:
     """The export report with simulator addresses taken from the simulator's model of the file:
     ``addr[sim_joint] = (first qpos, first dof)``; each entry keeps its offset within its joint (the
     export's component order, e.g. Pinocchio's quaternion x, y, z, w)."""
     out = copy.deepcopy(report)
+    out["harness_forces"] = [hf for hf in report.get("harness_forces", []) if hf["kind"] not in FILE_FORCES]
     for key, k in (("q_map", 0), ("v_map", 1)):
         first: dict[str, int] = {}
         for c in report[key]:
