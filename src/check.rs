@@ -36,6 +36,8 @@ pub enum When {
     Actuators,
     /// On scenes with `[[reference]]` values.
     References,
+    /// On scenes whose model is a robot file (`urdf`, `mjcf`): the simulators read that file.
+    RobotFile,
 }
 
 impl When {
@@ -47,6 +49,7 @@ impl When {
             When::Closures => "closures",
             When::Actuators => "actuators",
             When::References => "references",
+            When::RobotFile => "robot_file",
         }
     }
 }
@@ -188,6 +191,20 @@ pub const METRICS: [Metric; 12] = [
                  joint: 1.8e-6, tests/python/test_servo.py)",
     },
     Metric {
+        name: "inverse_dynamics",
+        table: "inverse_dynamics",
+        simulators: When::RobotFile,
+        solver_only: When::Never,
+        rule: Rule::Fixed(1e-10),
+        class: "algebraic identity",
+        reason: "u from the simulator's inverse dynamics of the user's robot file itself (MuJoCo \
+                 mj_inverse: M with armature, bias, minus passive forces; Pinocchio rnea with its \
+                 armature, minus the file's passive forces) at the solver's (t, q, v, dv/dt) along \
+                 the trajectory, against the solver's u, relative to max|u| (catalog <= 2e-14; \
+                 mjcf_arm before progmo modelled joint damping: 3.5e-2, worst joint yaw); gates \
+                 the replay like parity_mass and parity_bias",
+    },
+    Metric {
         name: "formulation_deviation",
         table: "formulation_deviation",
         simulators: When::Never,
@@ -246,6 +263,7 @@ pub fn metrics_for(
     closures: bool,
     actuators: bool,
     references: bool,
+    robot_file: bool,
 ) -> Vec<&'static Metric> {
     let judged = |w: When| match w {
         When::Never => false,
@@ -253,6 +271,7 @@ pub fn metrics_for(
         When::Closures => closures,
         When::Actuators => actuators,
         When::References => references,
+        When::RobotFile => robot_file,
     };
     METRICS
         .iter()

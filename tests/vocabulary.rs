@@ -85,12 +85,12 @@ fn each_check_judges_its_metrics() {
         "replay_residual",
         "replay_deviation",
     ];
-    assert_eq!(names(metrics_for("mujoco", false, false, true)), base);
+    assert_eq!(names(metrics_for("mujoco", false, false, true, false)), base);
     let mut all = base.to_vec();
-    all.extend(["parity_closure", "reaction_closure", "replay_unactuated"]);
-    assert_eq!(names(metrics_for("pinocchio", true, true, false)), all);
+    all.extend(["parity_closure", "reaction_closure", "replay_unactuated", "inverse_dynamics"]);
+    assert_eq!(names(metrics_for("pinocchio", true, true, false, true)), all);
     assert_eq!(
-        names(metrics_for(SOLVER_ONLY, true, true, false)),
+        names(metrics_for(SOLVER_ONLY, true, true, false, true)),
         [
             "solver_residual",
             "formulation_deviation",
@@ -98,7 +98,7 @@ fn each_check_judges_its_metrics() {
         ]
     );
     assert_eq!(
-        names(metrics_for(SOLVER_ONLY, false, false, true)).last(),
+        names(metrics_for(SOLVER_ONLY, false, false, true, false)).last(),
         Some(&"reference_error")
     );
 }

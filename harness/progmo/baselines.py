@@ -13,7 +13,7 @@ magnitude) ignores the normal jitter of integrated errors across machines and li
 round-off-level values (1e-16 .. 1e-13, which jitter by factors of 10-100 when summation order or
 BLAS changes) from flagging. Floors per class:
 
-* ``algebraic`` (``parity_*``, ``instant_*``): identities evaluated at single states; floor 1e-12
+* ``algebraic`` (``parity_*``, ``instant_*``, ``inverse_*``): identities evaluated at single states; floor 1e-12
   (about 5e3 machine epsilons, above the 1e-13 seen on a 30-link chain's mass matrix);
 * ``integrated`` (names containing ``residual``, ``deviation``, ``error``, ``drift``): accumulated
   over thousands of steps (round-off about sqrt(N) eps, 1e-13 .. 1e-12); floor 1e-11;
@@ -40,7 +40,7 @@ FORMAT = 1
 FACTOR = 10.0
 #: Metric classes: (name, pattern on the metric name, absolute floor or None when not judged).
 CLASSES: list[tuple[str, str, float | None]] = [
-    ("algebraic", r"^(parity|instant)", 1e-12),
+    ("algebraic", r"^(parity|instant|inverse)", 1e-12),
     ("integrated", r"residual|deviation|error|drift", 1e-11),
     ("info", r"", None),
 ]

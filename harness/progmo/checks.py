@@ -15,11 +15,21 @@ A check is a sequence of small steps over a typed back-end (``simulators.Backend
 2. **Export** (``Scene.export``): refused for what no simulator document carries (lagrangian models,
    system constraints) -> ``not_checked``; every force the back-end must apply itself is in the
    report, and a back-end that cannot apply one says so (``Unsupported``) -> ``not_checked``.
+   A scene whose model is a robot file (``kind = "urdf"``/``"mjcf"``) takes the route "user's
+   file" (``CheckResult.route``): the back-end reads that file itself (``simulators.robot_file``)
+   and the export only supplies the coordinate names and the scene's forces. Elements of the file
+   progmo does not model (``Scene.unmodelled`` and the simulator's own reading) make the check
+   ``not_checked`` naming them unless the scene declares their kind ignored (then the simulator's
+   feature is off and the report lists them): :func:`_unmodelled`.
 3. **Budgets**: every metric gets one, the scene's ``[tolerances]`` entry or the documented default
    of :func:`default_budgets`; the replayed span is the scene's whole span (``span``; only the
    ``horizon`` option shortens it, and the span then says so).
 4. **Reference solve** at every RK4 stage time (output_dt = h/2) with rtol <= 1e-12; the replay step
    from ``replay_step`` or a convergence check. Its conditioning warnings are kept.
+   Robot file: a joint range of the file that the reference motion leaves is such an element
+   (:func:`_active_limits`); parity at random states with nonzero velocities and along the solution,
+   and ``inverse_dynamics`` (u from the file's inverse dynamics at the solver's accelerations),
+   both gating the replay and naming the worst joint (:func:`_inverse_dynamics`).
 5. **Model parity** at ``options.samples`` states: the exported model's mass matrix and every
    non-control generalized force the simulator sees (``-bias + passive + harness forces``, the
    scene's point and coordinate forces included) against our ``A`` and ``G + Q``: ``parity_mass``,
@@ -78,6 +88,8 @@ BUDGETED = _judged("simulators", "always")
 CLOSURE_BUDGETED = _judged("simulators", "closures")
 #: metrics of scenes with ``[[actuators]]`` (servo-constraints), budgeted in addition
 ACTUATOR_BUDGETED = _judged("simulators", "actuators")
+#: metrics of scenes whose simulators read the user's robot file (``[model] kind = "urdf"/"mjcf"``)
+ROBOT_FILE_BUDGETED = _judged("simulators", "robot_file")
 #: metrics of the solver_only check (``reference_error`` only where the scene gives references)
 SOLVER_ONLY_BUDGETED = _judged("solver_only", "always") + _judged("solver_only", "references")
 #: the scene-table name of a metric's budget where it differs
@@ -155,6 +167,7 @@ class _Check:
     corrupt_u: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
     corrupt_export: Callable[[str], str] | None = None
     withhold: tuple[str, ...] = ()
+    simulator_file: str | None = None
     frame_every: int = 0
     record: Recording | None = None
     scene: Any = None
@@ -167,6 +180,9 @@ class _Check:
     where: dict[str, str] = field(default_factory=dict)
     #: a fresh back-end of the same export withholding the given harness-force kinds
     make_backend: Callable[[tuple[str, ...]], Any] | None = None
+    #: robot-file route: parity over random states (metric -> value), worst joints (metric -> name)
+    file_parity: dict[str, float] = field(default_factory=dict)
+    worst_joint: dict[str, str] = field(default_factory=dict)
 
 
 class _Stop(Exception):
@@ -185,19 +201,22 @@ def run_check(scene_path: str, simulator: str, options: CheckOptions | None = No
 def _run(scene_path: str, simulator: str, options: CheckOptions | None = None, *,
          corrupt_u: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
          corrupt_export: Callable[[str], str] | None = None,
-         withhold: tuple[str, ...] = (),
+         withhold: tuple[str, ...] = (), simulator_file: str | None = None,
          frame_every: int = 0, record: Recording | None = None) -> tuple[CheckResult, Recording | None]:
     """The check. Negative controls: ``corrupt_u(t, u) -> u'`` replaces the replayed (and
     instantaneous-reference) control forces; ``corrupt_export(doc) -> doc'`` alters the exported
-    document; ``withhold`` names harness-force kinds the back-end must not apply. ``frame_every``
+    document; ``withhold`` names harness-force kinds the back-end must not apply;
+    ``simulator_file`` is the robot file the simulators load instead of the scene's (the scene
+    reads a doctored copy, the simulators the original). ``frame_every``
     > 0 records body frames every that many replay steps; ``record`` is filled with the
     trajectories."""
     t_start = _time.perf_counter()
     c = _Check(str(scene_path), simulator, options or CheckOptions(),
                CheckResult(scene=str(scene_path), simulator=simulator, status="error"),
-               corrupt_u, corrupt_export, tuple(withhold), frame_every, record)
+               corrupt_u, corrupt_export, tuple(withhold), simulator_file, frame_every, record)
     steps = (_scene, _solver_only) if simulator == SOLVER_ONLY else (
-        _scene, _export, _budgets, _reference, _parity, _replay)
+        _scene, _export, _unmodelled, _budgets, _reference, _active_limits, _inverse_dynamics, _parity,
+        _replay)
     try:
         for step in steps:
             step(c)
@@ -251,14 +270,16 @@ def _export(c: _Check) -> None:
         raise _Stop("error", f"export failed: {e}") from None
     if c.corrupt_export is not None:
         doc = c.corrupt_export(doc)
+    robot = _robot_route(c)
     cls = mod.MujocoBackend if c.simulator == "mujoco" else mod.PinocchioBackend
     try:
-        c.backend = cls(doc, report, c.scene, c.withhold)
-        c.make_backend = lambda withhold: cls(doc, report, c.scene, withhold)
+        c.backend = cls(doc, report, c.scene, c.withhold, robot=robot)
+        c.make_backend = lambda withhold: cls(doc, report, c.scene, withhold, robot=robot)
     except Unsupported as e:
         raise _Stop("not_checked", str(e)) from None
     except Exception as e:
-        raise _Stop("error", f"{c.simulator} rejected the exported model: {type(e).__name__}: {e}") from None
+        what = f"the robot file {robot.path.name}" if robot is not None else "the exported model"
+        raise _Stop("error", f"{c.simulator} rejected {what}: {type(e).__name__}: {e}") from None
     c.res.notes += c.backend.notes()
     if c.withhold:
         c.res.notes.append("NEGATIVE CONTROL: withheld from the simulator: " + ", ".join(c.withhold))
@@ -269,7 +290,8 @@ def _budgets(c: _Check) -> None:
     c.tol = {k: (float(v[0]), str(v[1])) for k, v in dict(c.scene.tolerances).items()}
     closures = bool(c.backend.report.get("closures"))
     metrics = BUDGETED + (CLOSURE_BUDGETED if closures else ()) + (
-        ACTUATOR_BUDGETED if c.scene.actuators else ())
+        ACTUATOR_BUDGETED if c.scene.actuators else ()) + (
+        ROBOT_FILE_BUDGETED if c.res.route == "user's file" else ())
     c.res.budgets = budgets_for(c.tol, dict(c.scene.settings), c.simulator, metrics)
     full = c.scene.t1 - c.scene.t0
     c.horizon = min(c.options.horizon or full, full)
@@ -418,6 +440,8 @@ def _parity(c: _Check) -> None:
     sU = uabs if uabs > 0 else sR
     pm, pb, iu = np.array(dmt) / max(sM, 1e-300), np.array(drt) / sR, np.array(dU) / sU
     c.res.metrics.update(parity_mass=float(pm.max()), parity_bias=float(pb.max()), instant_u=float(iu.max()))
+    for m in ("parity_mass", "parity_bias"):  # a robot file's parity also covers random states
+        c.res.metrics[m] = max(c.res.metrics[m], c.file_parity.get(m, 0.0))
     c.res.notes.append(f"parity scales: max|A| {sM:.3g}, max|G+Q| {sR:.3g}; instant_u scale "
                        f"{'max|u|' if uabs > 0 else 'max|G+Q| (u = 0)'} {sU:.3g}; {len(idx)} sample states")
     c.first = {"parity_mass": (times, pm), "parity_bias": (times, pb), "instant_u": (times, iu)}
@@ -834,6 +858,150 @@ def _first_times(first: dict, bval: dict) -> dict:
             if ft is not None:
                 out[m] = ft
     return out
+
+
+# --- robot files (issue 27): the simulators read the user's file ----------------------------------
+#: states of the random-state parity of a robot file (besides the samples along the solution)
+RANDOM_STATES = 8
+#: at most this many samples of the reference judge inverse_dynamics (every sample when fewer)
+INVERSE_SAMPLES = 2001
+
+
+def _robot_route(c: _Check):
+    """The user's robot file for a scene whose model is one (``simulators.robot_file``), with the
+    negative-control substitute ``simulator_file``; sets ``CheckResult.route``."""
+    from pathlib import Path
+
+    from .simulators.robot_file import robot_file
+
+    try:
+        rf = robot_file(c.scene)
+    except (OSError, ValueError) as e:
+        raise _Stop("error", f"robot file: {e}") from None
+    c.res.route = "progmo export" if rf is None else "user's file"
+    if rf is not None and c.simulator_file:
+        rf.path = Path(c.simulator_file)
+        c.res.notes.append(f"NEGATIVE CONTROL: the simulators load {rf.path}, not the scene's file")
+    return rf
+
+
+def _unmodelled(c: _Check) -> None:
+    """Elements of the robot file progmo does not model: the core's list (``Scene.unmodelled``) and
+    what the simulator's own reading holds (``Backend.unmodelled``). Undeclared -> not_checked
+    naming them; declared ones are listed (the simulator's feature is switched off). Joint ranges
+    are judged along the motion instead (:func:`_active_limits`)."""
+    if c.res.route != "user's file":
+        return
+    core = [dict(u) for u in getattr(c.scene, "unmodelled", []) or []]
+    declared = {str(u["kind"]) for u in core if u.get("declared")}
+    # a joint range counts when the motion leaves it (_active_limits); inside it no limit acts
+    found = [u for u in core if not u.get("declared") and u["kind"] != "joint_limit"]
+    found += [u for u in c.backend.unmodelled() if u["kind"] not in declared
+              and not any(f["kind"] == u["kind"] and f["element"] == u["element"] for f in found)]
+    if found:
+        raise _Stop("not_checked", "the robot file holds what progmo does not model (declare it ignored "
+                    "in the scene, or remove it): " + "; ".join(_element(u) for u in found))
+    if declared:
+        kinds: dict[str, list[str]] = {}
+        for u in core:
+            if u.get("declared"):
+                kinds.setdefault(str(u["kind"]), []).append(str(u["element"]))
+        c.res.notes.append("declared ignored by the scene (its simulator feature off where it has one): " + "; ".join(
+            f"{k} ({len(v)}: {', '.join(v[:3])}{', ...' if len(v) > 3 else ''})" for k, v in kinds.items()))
+
+
+def _element(u: dict) -> str:
+    loc = f" ({u['location']})" if u.get("location") else ""
+    return f"{u['kind']} {u['element']}{loc}"
+
+
+def _active_limits(c: _Check) -> None:
+    """A joint range (as the simulator reads the file) that the reference motion leaves is an
+    element progmo does not model: not_checked unless the scene declares limits ignored."""
+    if c.res.route != "user's file":
+        return
+    ref, names = c.ref, list(c.scene.q_names)
+    for name, (lo, hi) in c.backend.joint_ranges().items():
+        if name not in names:
+            continue
+        x = ref.q[:, names.index(name)]
+        out = (x < lo) | (x > hi)
+        if out.any():
+            k = int(np.argmax(out))
+            u = {"kind": "joint_limit", "element": f"joint {name} range [{lo:g}, {hi:g}]",
+                 "location": f"left at t = {ref.t[k]:.6g} (q = {x[k]:.6g})"}
+            if "joint_limit" in {str(e["kind"]) for e in getattr(c.scene, "unmodelled", []) or [] if e.get("declared")}:
+                c.res.notes.append("active limit, declared ignored (limits off in the simulator): " + _element(u))
+            else:
+                raise _Stop("not_checked", "the reference motion leaves a joint range of the robot file (an "
+                            "active limit progmo does not model): " + _element(u))
+
+
+def _inverse_dynamics(c: _Check) -> None:
+    """Robot file: parity of progmo's A and G + Q with the simulator's reading at random states
+    (random nonzero velocities: damping, Coriolis) and along the solution, and ``inverse_dynamics``:
+    u from the file's inverse dynamics at the solver's (t, q, v, dv/dt) against the solver's u,
+    relative to max|u|, along the trajectory. A breach names the quantity and the worst joint; it
+    stops the check before the replay (a model mismatch is not blamed on the dynamics)."""
+    if c.res.route != "user's file":
+        return
+    scene, ref, be = c.scene, c.ref, c.backend
+    rng = np.random.default_rng(27)
+    nv = len(scene.v_names)
+    states = []
+    for _ in range(RANDOM_STATES):
+        q = np.array(scene.q0) + rng.uniform(-0.5, 0.5, len(scene.q0))
+        for g in be.cm.quats:
+            q[g] /= np.linalg.norm(q[g])
+        states.append((scene.t0, q, rng.uniform(-1.0, 1.0, nv)))
+    idx = np.unique(np.linspace(0, 2 * ref.steps, max(1, c.options.samples)).round().astype(int))
+    states += [(ref.t[k], ref.q[k], ref.v[k]) for k in idx]
+    dM, dF, sM, sF = [], [], 0.0, 0.0
+    for t, q, v in states:
+        dyn = scene.dynamics(float(t), q, v)
+        A = np.asarray(dyn["mass"])
+        rhs = np.asarray(dyn["velocity_terms"]) + np.asarray(dyn["applied_forces"])
+        Ms, rs = be.model_terms(float(t), q, v)
+        dM.append(np.abs(Ms - A).max(axis=0))
+        dF.append(np.abs(rs - rhs))
+        sM, sF = max(sM, float(np.abs(A).max())), max(sF, float(np.abs(rhs).max()))
+    vn = list(scene.v_names)
+    for m, d, sc in (("parity_mass", np.array(dM), sM), ("parity_bias", np.array(dF), sF)):
+        rel = d.max(axis=1) / max(sc, 1e-300)
+        c.file_parity[m] = float(rel.max())
+        c.worst_joint[m] = vn[int(np.argmax(d.max(axis=0)))]
+    c.res.notes.append(f"robot-file parity: {RANDOM_STATES} random states (q0 +- 0.5, |v| <= 1) and {len(idx)} "
+                       f"along the solution: parity_mass {c.file_parity['parity_mass']:.3g} (worst joint "
+                       f"{c.worst_joint['parity_mass']}), parity_bias {c.file_parity['parity_bias']:.3g} "
+                       f"(worst joint {c.worst_joint['parity_bias']})")
+    # inverse dynamics along the trajectory
+    stride = max(1, -(-len(ref.t) // INVERSE_SAMPLES))
+    ks = np.arange(0, len(ref.t), stride)
+    du = np.array([np.abs(be.inverse_force(ref.t[k], ref.q[k], ref.v[k], ref.a[k]) - ref.u[k]) for k in ks])
+    uabs = float(np.abs(ref.u).max()) if ref.u.size else 0.0
+    su = uabs if uabs > 0 else max(sF, 1e-300)
+    rel = du.max(axis=1) / su
+    c.res.metrics["inverse_dynamics"] = float(rel.max())
+    c.worst_joint["inverse_dynamics"] = vn[int(np.argmax(du.max(axis=0)))]
+    c.first["inverse_dynamics"] = (ref.t[ks], rel)
+    c.res.notes.append(f"inverse_dynamics: u from {c.simulator}'s inverse dynamics of the file at {len(ks)} "
+                       f"samples of the solution vs the solver's u, relative to max|u| {su:.3g}: "
+                       f"{rel.max():.3g} (worst joint {c.worst_joint['inverse_dynamics']})")
+    bval = {b.metric: b.value for b in c.res.budgets}
+    bad = [(m, v) for m, v in (("parity_mass", c.file_parity["parity_mass"]),
+                               ("parity_bias", c.file_parity["parity_bias"]),
+                               ("inverse_dynamics", rel.max())) if not (v <= bval[m])]
+    if bad:
+        c.res.metrics.update({m: v for m, v in c.file_parity.items()})
+        budgets = c.res.budgets
+        c.res.budgets = [b for b in budgets if b.metric in c.res.metrics]
+        c.res.status = "pass"  # judge() decides
+        judge(c.res, _first_times(c.first, bval))
+        c.res.budgets = budgets
+        c.res.reason = (f"{c.simulator}'s reading of the robot file differs from progmo's model: " + "; ".join(
+            f"{m} {float(v):.3g} > {bval[m]:.3g} (worst joint {c.worst_joint[m]})" for m, v in bad)
+            + "; replay not run")
+        raise _Stop(c.res.status, c.res.reason)
 
 
 # --- solver_only ---------------------------------------------------------------------------------

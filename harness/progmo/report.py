@@ -581,7 +581,8 @@ def _sim_block(run: Run, s: str, m: str) -> str:
         h.append(" <span class='small'>not run</span></div>")
         return "".join(h)
     h.append(f" <span class='small'>{r.wall_seconds:.2f} s"
-             + (f"; checked span {_e(r.span_text())}" if r.span_text() else "") + "</span>")
+             + (f"; checked span {_e(r.span_text())}" if r.span_text() else "")
+             + (f"; model: {_e(r.route)}" if r.route else "") + "</span>")
     if (s, m) in run.accepted:
         h.append(" <span class='small good'>baseline accepted by this run</span>")
     if r.reason:
@@ -641,8 +642,9 @@ def render_markdown(run: Run) -> str:
         lines.append(f"- {_md(n)}")
     if run.notes:
         lines.append("")
-    lines.append("| scene | " + " | ".join(_md(m) for m in run.simulators) + " | checked span | max residual | warnings |")
-    lines.append("|---|" + "---|" * len(run.simulators) + "---|---:|---:|")
+    lines.append("| scene | " + " | ".join(_md(m) for m in run.simulators)
+                 + " | checked span | max residual | warnings | simulators' model |")
+    lines.append("|---|" + "---|" * len(run.simulators) + "---|---:|---:|---|")
     icons = {"pass": "✅", "fail": "❌", "error": "💥", "not_checked": "🚫", "declared": "⏭️",
              "regression": "📈", "not run": "⬜"}
     for s in run.scene_names():
@@ -650,6 +652,7 @@ def render_markdown(run: Run) -> str:
         res: list[float] = []
         spans: list[str] = []
         warns: set[str] = set()
+        routes: list[str] = []
         for m in run.simulators:
             if m not in run.cells(s):
                 cells.append("—")
@@ -664,8 +667,10 @@ def render_markdown(run: Run) -> str:
                 if r.span_text():
                     spans.append(r.span_text())
                 warns.update(r.warnings)
+                if r.route:
+                    routes.append(r.route)
         lines.append(f"| {_md(s)} | " + " | ".join(cells) + f" | {_md(' / '.join(dict.fromkeys(spans)))} | "
-                     f"{fmt(max(res)) if res else ''} | {len(warns) or ''} |")
+                     f"{fmt(max(res)) if res else ''} | {len(warns) or ''} | {_md(' / '.join(dict.fromkeys(routes)))} |")
     declared = [(r.scene, r.simulator, r.reason) for r in run.results if run.verdict(r) == "declared"]
     if declared:
         lines += ["", "## Not checked, as declared by the scene", ""]
@@ -691,7 +696,7 @@ TEXT_ERRORS = "backslashreplace"
 
 CSV_FIELDS = ["scene", "simulator", "verdict", "status", "metric", "value", "budget", "budget_source",
               "within_budget", "baseline", "regression_above", "vs_baseline", "checked_span", "reason",
-              "wall_seconds"]
+              "wall_seconds", "model"]
 
 
 def write_csv(run: Run, path: Path) -> None:
@@ -704,10 +709,10 @@ def write_csv(run: Run, path: Path) -> None:
                 r = run.result(s, m)
                 v = run.verdict(r)
                 if r is None:
-                    w.writerow([s, m, v, "", "", "", "", "", "", "", "", "", "", "not run", ""])
+                    w.writerow([s, m, v, "", "", "", "", "", "", "", "", "", "", "not run", "", ""])
                     continue
                 base = [s, m, v, r.status]
-                tail = [r.span_text(), r.reason, f"{r.wall_seconds:.3f}"]
+                tail = [r.span_text(), r.reason, f"{r.wall_seconds:.3f}", r.route]
                 rows = rows_of(run, r)
                 if not rows:
                     w.writerow(base + [""] * 8 + tail)

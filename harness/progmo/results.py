@@ -104,6 +104,9 @@ class CheckResult:
     warnings: list[str] = field(default_factory=list)
     #: facts that are not judged (replay step, growth rate of the open-loop deviation, ...)
     info: dict[str, float] = field(default_factory=dict)
+    #: where the simulator's model came from: "user's file" (the scene's URDF/MJCF read by the
+    #: simulator itself), "progmo export" (progmo's MJCF/URDF of its model), "" (not built)
+    route: str = ""
 
     def ok(self) -> bool:
         """True unless the nightly job must fail on this result."""

@@ -24,6 +24,7 @@ def states(r, base):
         ("parity_mass", "algebraic", 1e-12),
         ("parity_bias", "algebraic", 1e-12),
         ("instant_u", "algebraic", 1e-12),
+        ("inverse_dynamics", "algebraic", 1e-12),
         ("replay_residual", "integrated", 1e-11),
         ("replay_deviation", "integrated", 1e-11),
         ("solver_residual", "integrated", 1e-11),

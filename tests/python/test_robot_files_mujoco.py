@@ -248,7 +248,7 @@ def mjcf_catalog() -> list[pathlib.Path]:
 
 
 def test_the_catalog_has_an_mjcf_robot():
-    assert [p.stem for p in mjcf_catalog()] == ["mjcf_arm"]
+    assert [p.stem for p in mjcf_catalog()] == ["mjcf_arm", "spring_arm"]
 
 
 @pytest.mark.parametrize("path", mjcf_catalog(), ids=lambda p: p.stem)

@@ -13,7 +13,7 @@ import sys
 import pytest
 
 from progmo import Scene, SceneError
-from progmo.checks import (ACTUATOR_BUDGETED, BUDGETED, CLOSURE_BUDGETED, SOLVER_ONLY_BUDGETED, CheckOptions,
+from progmo.checks import (ACTUATOR_BUDGETED, BUDGETED, CLOSURE_BUDGETED, ROBOT_FILE_BUDGETED, SOLVER_ONLY_BUDGETED, CheckOptions,
                            _run, default_budgets, run_check)
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
@@ -83,7 +83,7 @@ def test_default_budgets_follow_the_solver_settings():
     assert proj["solver_residual"][0] == pytest.approx(1e-9)
     assert none["solver_residual"][0] == pytest.approx(1e-8)
     assert set(proj) == (set(BUDGETED) | set(CLOSURE_BUDGETED) | set(ACTUATOR_BUDGETED)
-                         | set(SOLVER_ONLY_BUDGETED))
+                         | set(ROBOT_FILE_BUDGETED) | set(SOLVER_ONLY_BUDGETED))
     assert all(why.startswith("default") for _, why in proj.values())
 
 

@@ -16,6 +16,10 @@ scene itself (to evaluate its expression forces at the simulator's own states):
   (u at each RK4 stage) over the steps ``start`` .. ``stop`` (default: the whole span), from the
   reference's state at ``start`` (a segment restarted from the solver's state) or from ``x0`` = (q, v)
   (the checks' Lyapunov probe).
+* for a scene whose model is a robot file, the back-end reads that file itself (``robot_file``,
+  ``route = "user's file"``) and adds ``inverse_force(t, q, v, a)`` (the control force of its
+  inverse dynamics), ``unmodelled()`` (elements of its reading progmo does not model) and
+  ``joint_ranges()`` (its joint limits).
 
 A back-end that meets a harness force it cannot apply raises :class:`Unsupported` naming it, and
 the check becomes ``not_checked``: a model the simulator does not share never passes.
@@ -66,6 +70,15 @@ class Backend(Protocol):
 
     def replay(self, ref: Any, frame_every: int = 0, start: int = 0, stop: int | None = None,
                x0: tuple[np.ndarray, np.ndarray] | None = None) -> Any: ...
+
+    # robot files (``route == "user's file"``, see ``robot_file``)
+    route: str
+
+    def inverse_force(self, t: float, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray: ...
+
+    def unmodelled(self) -> list[dict]: ...
+
+    def joint_ranges(self) -> dict[str, tuple[float, float]]: ...
 
 
 def attractor_force(point: np.ndarray, mu: float, mass: float, com: np.ndarray) -> np.ndarray:

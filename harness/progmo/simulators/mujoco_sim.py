@@ -12,8 +12,9 @@ from __future__ import annotations
 import numpy as np
 import mujoco
 
-from . import BlowUp, ExpressionForces, attractor_force, require_forces
+from . import BlowUp, ExpressionForces, Unsupported, attractor_force, require_forces
 from .replay import CoordMap, Reference, Replay
+from .robot_file import FILE_FORCES, RobotFile, mujoco_addresses, mujoco_model, name_report
 
 #: |qacc| beyond this is treated as a blow-up (MuJoCo returns huge values at singularities)
 ACC_LIMIT = 1e8
@@ -32,13 +33,26 @@ SUPPORTED = ("attractor", "point_force", "coordinate_force")
 class MujocoBackend:
     name = NAME
 
-    def __init__(self, doc: str, report: dict, scene=None, withhold: tuple[str, ...] = ()):
+    def __init__(self, doc: str, report: dict, scene=None, withhold: tuple[str, ...] = (),
+                 robot: RobotFile | None = None):
+        """``robot``: build the model from the user's robot file (``robot_file``), not ``doc``."""
+        if robot is not None:  # the file's own passive forces come from the simulator's reading
+            report = {**report, "harness_forces": [hf for hf in report.get("harness_forces", [])
+                                                  if hf["kind"] not in FILE_FORCES]}
         require_forces(report, SUPPORTED, "MuJoCo")
+        if report.get("closures") and robot is not None:
+            raise Unsupported("loop closures over a robot file: MuJoCo's reading of the file has no sites for them")
+        self._file_notes: list[str] = []
+        if robot is not None:
+            self.m, self._file_notes = mujoco_model(robot, report["gravity"])
+            report = name_report(report, mujoco_addresses(self.m))
+        else:
+            self.m = mujoco.MjModel.from_xml_string(doc)
+        self.route = "user's file" if robot is not None else "progmo export"
         self.report = report
         self.cm = CoordMap(report)
         self.expr = ExpressionForces(scene, report, withhold)
         self._withhold_attractors = "attractor" in withhold
-        self.m = mujoco.MjModel.from_xml_string(doc)
         self.d = mujoco.MjData(self.m)
         m = self.m
         # ideal rigid-body dynamics: the export disables contacts etc.; make sure of the rest
@@ -69,10 +83,10 @@ class MujocoBackend:
             s += (f"; closures {', '.join(self.closure_names)} as equality constraints (solref timeconst "
                   f"{self._solref0[0, 0] / self._h0:g} steps, solimp {' '.join(f'{x:g}' for x in self.m.eq_solimp[0, :3])}; "
                   "Newton, tolerance 1e-15)")
-        if ch:
+        if ch and not self._file_notes:
             s += "; mass floor on " + ", ".join(
                 f'{c["body"]} (+m {c["delta_mass"]:.0e}, +I {c["delta_inertia"]:.0e})' for c in ch)
-        return [s]
+        return [s] + self._file_notes
 
     def harness(self) -> np.ndarray:
         """Generalized attractor forces from MuJoCo's own state (needs kinematics)."""
@@ -184,6 +198,41 @@ class MujocoBackend:
         Bp = B[programme] if programme is not None else B[:0]
         lam = np.linalg.lstsq(np.vstack([Jc, Bp]).T, total, rcond=None)[0]
         return Bp.T @ lam[len(Jc):]
+
+    def inverse_force(self, t, q, v, a) -> np.ndarray:
+        """The control force MuJoCo's inverse dynamics needs for dv/dt = a at (t, q, v), our
+        coordinates: qfrc_inverse (M with armature, bias, minus passive forces) minus the scene's
+        other forces (robot files: no closures)."""
+        return self.instant_u(t, q, v, a, np.zeros((0, self.cm.nv)), np.zeros(0))
+
+    def unmodelled(self) -> list[dict]:
+        """Elements of MuJoCo's reading of a robot file progmo does not model (robot_file doc)."""
+        m = self.m
+        if self.route != "user's file":
+            return []
+        out = []
+        for j in range(m.njnt):
+            n = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j)
+            f = m.dof_frictionloss[m.jnt_dofadr[j]]
+            if f != 0.0:
+                out.append({"kind": "frictionloss", "element": f"joint {n} frictionloss {f:g}",
+                            "location": "MuJoCo's reading"})
+        for i in range(m.ntendon):
+            out.append({"kind": "tendon", "element": f"tendon {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_TENDON, i) or i}",
+                        "location": "MuJoCo's reading"})
+        for i in range(m.neq):
+            out.append({"kind": "equality", "element": f"equality {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_EQUALITY, i) or i}",
+                        "location": "MuJoCo's reading"})
+        if m.opt.density or m.opt.viscosity or np.any(m.opt.wind):
+            out.append({"kind": "fluid", "element": "fluid forces (option density/viscosity/wind)",
+                        "location": "MuJoCo's reading"})
+        return out
+
+    def joint_ranges(self) -> dict[str, tuple[float, float]]:
+        """Ranges of MuJoCo's limited hinge and slide joints (radians, metres)."""
+        m = self.m
+        return {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j): (float(m.jnt_range[j, 0]), float(m.jnt_range[j, 1]))
+                for j in range(m.njnt) if m.jnt_limited[j] and int(m.jnt_type[j]) in (2, 3)}
 
     def replay(self, ref: Reference, frame_every: int = 0, start: int = 0, stop: int | None = None,
                x0: tuple[np.ndarray, np.ndarray] | None = None) -> Replay:

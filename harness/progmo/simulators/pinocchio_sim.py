@@ -25,6 +25,7 @@ import pinocchio as pin
 
 from . import BlowUp, ExpressionForces, Unsupported, attractor_force, require_forces
 from .replay import CoordMap, Reference, Replay
+from .robot_file import FILE_FORCES, PinFile, RobotFile, name_report, pinocchio_model
 
 ACC_LIMIT = 1e8
 NAME = "pinocchio"
@@ -60,33 +61,54 @@ def _se3(point, quat_wxyz) -> "pin.SE3":
 class PinocchioBackend:
     name = NAME
 
-    def __init__(self, doc: str, report: dict, scene=None, withhold: tuple[str, ...] = ()):
+    def __init__(self, doc: str, report: dict, scene=None, withhold: tuple[str, ...] = (),
+                 robot: RobotFile | None = None):
+        """``robot``: build the model from the user's robot file (``robot_file``), not ``doc``."""
+        if robot is not None:  # the file's own passive forces come from the simulator's reading
+            report = {**report, "harness_forces": [hf for hf in report.get("harness_forces", [])
+                                                  if hf["kind"] not in FILE_FORCES]}
         require_forces(report, SUPPORTED, "Pinocchio")
+        rj = report.get("root_joint")
+        self.file: PinFile | None = None
+        if robot is not None:
+            if report.get("closures"):
+                raise Unsupported("loop closures over a robot file: Pinocchio's reading of the file has "
+                                  "no frames for their sites")
+            if rj and rj["python"] != "pin.JointModelFreeFlyer()":
+                raise Unsupported(f"root joint {rj['python']} over a robot file")
+            self.file = pinocchio_model(robot, report["gravity"], rj)
+            self.model = self.file.model
+            report = name_report(report, self.file.addr)
+            report["sim_q_offset"] = self.file.q_offset
+        else:
+            fd, path = tempfile.mkstemp(suffix=".urdf")
+            try:
+                with os.fdopen(fd, "w") as f:
+                    f.write(doc)
+                if rj:
+                    if rj["python"] not in ROOT_JOINTS:
+                        raise ValueError(f"unknown root joint {rj['python']!r}")
+                    self.model = pin.buildModelFromUrdf(path, ROOT_JOINTS[rj["python"]](), rj["name"])
+                else:
+                    self.model = pin.buildModelFromUrdf(path)
+            finally:
+                os.unlink(path)
+        self.route = "user's file" if robot is not None else "progmo export"
         self.report = report
         self.cm = CoordMap(report)
         self.expr = ExpressionForces(scene, report, withhold)
         self._withhold = withhold
-        rj = report.get("root_joint")
-        fd, path = tempfile.mkstemp(suffix=".urdf")
-        try:
-            with os.fdopen(fd, "w") as f:
-                f.write(doc)
-            if rj:
-                if rj["python"] not in ROOT_JOINTS:
-                    raise ValueError(f"unknown root joint {rj['python']!r}")
-                self.model = pin.buildModelFromUrdf(path, ROOT_JOINTS[rj["python"]](), rj["name"])
-            else:
-                self.model = pin.buildModelFromUrdf(path)
-        finally:
-            os.unlink(path)
         model = self.model
         model.gravity.linear = np.array(report["gravity"], float)
         if model.nq != self.cm.nq or model.nv != self.cm.nv:
             raise ValueError(f"URDF has nq={model.nq}, nv={model.nv}; report {self.cm.nq}, {self.cm.nv}")
         self.lie = model.nq != model.nv
         # harness forces
+        if robot is not None and robot.fmt == "mjcf" and any(
+                hf["kind"] == "attractor" for hf in report.get("harness_forces", [])):
+            raise Unsupported("attractors over an MJCF robot file in Pinocchio (no CoM frames)")
         coms = {}
-        for link in ET.fromstring(doc).iter("link"):
+        for link in ET.fromstring(doc if robot is None else robot.path.read_text()).iter("link"):
             o = link.find("inertial/origin")
             coms[link.get("name")] = np.array([float(x) for x in o.get("xyz", "0 0 0").split()]) \
                 if o is not None else np.zeros(3)
@@ -158,11 +180,11 @@ class PinocchioBackend:
         s = f"Pinocchio {pin.__version__}, harness RK4{' (RKMK4, Lie group)' if self.lie else ''} with {oracle}"
         if self.report.get("root_joint"):
             s += f"; root joint {self.report['root_joint']['python']}"
-        return [s]
+        return [s] + (self.file.notes if self.file is not None else [])
 
     def harness(self, qs, vs) -> np.ndarray:
         model, data = self.model, self.data
-        f = np.zeros(model.nv)
+        f = np.zeros(model.nv) if self.file is None else self._file_passive(qs, vs)
         for iq, iv, k, ref in self.springs:
             f[iv] += -k * (qs[iq] - ref)
         for iv, n, c in self.dampers:
@@ -175,6 +197,24 @@ class PinocchioBackend:
                     force = attractor_force(point, mu, mass, data.oMf[fid].translation)
                     J = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
                     f += J[:3].T @ force
+        return f
+
+    def _file_passive(self, qs, vs) -> np.ndarray:
+        """The robot file's passive forces Pinocchio's dynamics leaves out (robot_file module doc):
+        -damping v (its own model.damping), springs -k (q - springref), gravcomp J_com^T (-gc m g)."""
+        pf, model, data = self.file, self.model, self.data
+        assert pf is not None
+        f = -pf.damping * vs
+        for iq, iv, k, ref in pf.springs:
+            f[iv] += -k * (qs[iq] - ref)
+        if pf.gravcomp:
+            pin.computeJointJacobians(model, data, qs)
+            pin.updateFramePlacements(model, data)
+            for fid, com, mg in pf.gravcomp:
+                J = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+                r = data.oMf[fid].rotation @ com  # CoM offset from the frame origin, world axes
+                Jc = J[:3] - pin.skew(r) @ J[3:]
+                f += Jc.T @ (-mg * model.gravity.linear)
         return f
 
     def expression(self, t, qs, vs):
@@ -263,6 +303,42 @@ class PinocchioBackend:
         pin.forwardDynamics(model, data, qs, vs, tau0, J, g, 0.0)
         lam = np.array(data.lambda_c).copy()
         return cm.f_from_sim(q, J.T @ lam)
+
+    def inverse_force(self, t, q, v, a) -> np.ndarray:
+        """The control force Pinocchio's inverse dynamics needs for dv/dt = a at (t, q, v), our
+        coordinates: rnea (M with armature, bias) minus the passive and the scene's other forces."""
+        cm = self.cm
+        qs, vs = cm.q_to_sim(q), cm.v_to_sim(q, v)
+        f = pin.rnea(self.model, self.data, qs, vs, cm.a_to_sim(q, v, a)) - self.harness(qs, vs) \
+            - self._external(t, qs, vs)
+        return cm.f_from_sim(q, f)
+
+    def unmodelled(self) -> list[dict]:
+        """Elements of Pinocchio's reading of a robot file progmo does not model: dry friction
+        (model.friction), mimic joints; for MJCF also tendons and equalities (MuJoCo's compilation
+        of the file: Pinocchio's reader skips them)."""
+        if self.file is None:
+            return []
+        model, out = self.model, []
+        by_v = {iv: n for n, (_, iv) in self.file.addr.items()}
+        for i, f in enumerate(np.asarray(model.friction)):
+            if f != 0.0:
+                out.append({"kind": "frictionloss", "element": f"joint {by_v.get(i, i)} friction {f:g}",
+                            "location": "Pinocchio's reading"})
+        if len(model.mimicking_joints):
+            out.append({"kind": "mimic", "element": "mimic joints " + ", ".join(
+                model.names[j] for j in model.mimicking_joints), "location": "Pinocchio's reading"})
+        out += self.file.skipped
+        return out
+
+    def joint_ranges(self) -> dict[str, tuple[float, float]]:
+        """Finite position limits of Pinocchio's one-dof joints."""
+        lo, hi = np.asarray(self.model.lowerPositionLimit), np.asarray(self.model.upperPositionLimit)
+        out = {}
+        for n, (iq, _) in self.file.addr.items() if self.file is not None else ():
+            if iq < len(lo) and np.isfinite(lo[iq]) and np.isfinite(hi[iq]) and abs(lo[iq]) < 1e300:
+                out[n] = (float(lo[iq]), float(hi[iq]))
+        return out
 
     def _acc(self, t, qs, vs, ref):
         q = self.cm.q_from_sim(qs)

@@ -68,13 +68,23 @@ class CoordMap:
             if len(d) == 4:
                 self.quats.append([d["qw"], d["qx"], d["qy"], d["qz"]])
 
+        #: (simulator qpos index, offset): q_sim = q - offset there (``sim_q_offset`` of a robot
+        #: file read by Pinocchio: MJCF joint ``ref``)
+        self.q_offset = [(int(i), float(o)) for i, o in report.get("sim_q_offset", [])]
+
     # -- positions
     def q_to_sim(self, q: np.ndarray) -> np.ndarray:
         qs = np.zeros(self.nq)
         qs[self.q_sim] = q[self.q_idx]
+        for i, o in self.q_offset:
+            qs[i] -= o
         return qs
 
     def q_from_sim(self, qs: np.ndarray) -> np.ndarray:
+        if self.q_offset:
+            qs = np.array(qs, float)
+            for i, o in self.q_offset:
+                qs[i] += o
         q = np.zeros(self.nq)
         q[self.q_idx] = qs[self.q_sim]
         return q

@@ -1,0 +1,331 @@
+"""The user's robot file in the simulators (issue 27): a scene whose model is a robot description
+file (``[model] kind = "urdf"`` or ``"mjcf"``) is checked against each simulator's **own reading of
+that file**, not against progmo's export of its import. Only the scene's own additions are applied
+on top: locked joints, gravity, a free root joint, the harness forces of the export report (point,
+coordinate and attractor forces) and u.
+
+* MuJoCo builds its model with ``MjSpec`` from the file: MJCF natively, URDF through MuJoCo's own
+  URDF compiler. A URDF is read from a faithful copy: ``<visual>`` and ``<collision>`` removed (a
+  URDF's geometry carries no inertia; its ``package://`` mesh paths are not readable by MuJoCo) and
+  a ``<mujoco><compiler>`` that keeps every link a body and the stated inertials (no inertia from
+  geometry, no balancing or bounds). The spec is then made ideal rigid-body dynamics where the scene
+  says so: RK4, contact and autoreset off, limits / frictionloss / equalities off only where the
+  scene declares them ignored, the file's actuators' gains and biases zeroed (u enters as
+  ``qfrc_applied``). Passive forces of the file (damping, springs with springref, gravcomp) and
+  armature stay: progmo's model must have them.
+* Pinocchio reads the file with ``buildModelFromUrdf`` / ``buildModelFromMJCF`` (its own
+  ``armature`` enters ``crba``, ``rnea`` and ``aba``; its ``damping`` does not: the harness applies
+  ``-damping * v``). Its MJCF reader has no joint springs and no gravcomp: those the harness applies
+  from MuJoCo's compilation of the same file (``jnt_stiffness``, ``qpos_spring``,
+  ``body_gravcomp``), said in the notes. Locked joints: ``buildReducedModel`` at q = 0.
+
+Coordinates are matched by joint name (:func:`name_report`): the export report's q/v entries keep
+their names and conversions, their simulator addresses come from the simulator's model of the file.
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+import tomllib
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import Unsupported
+
+#: MuJoCo's URDF compiler settings of the faithful copy (module doc)
+URDF_COMPILER = dict(angle="radian", discardvisual="true", fusestatic="false", inertiafromgeom="false",
+                     balanceinertia="false", boundmass="0", boundinertia="0")
+
+
+@dataclass
+class RobotFile:
+    """The robot file of a scene and what the scene adds to it."""
+
+    path: Path
+    fmt: str  # "urdf" or "mjcf"
+    locked: list[str] = field(default_factory=list)
+    root_joint: str = "fixed"
+    #: unmodelled elements the scene declares ignored: kinds ("frictionloss", "limit", ...)
+    ignored: set[str] = field(default_factory=set)
+
+
+def robot_file(scene: Any) -> RobotFile | None:
+    """The scene's robot file (``Scene.robot_file`` when the core gives it, else the scene's
+    ``[model]`` table with ``package://`` resolved as progmo.data does); None for other models."""
+    with open(scene.path, "rb") as f:
+        model = tomllib.load(f).get("model", {})
+    kind = model.get("kind")
+    if kind not in ("urdf", "mjcf"):
+        return None
+    given = getattr(scene, "robot_file", None)  # the core's {kind, path, locked_joints}
+    path = given["path"] if isinstance(given, dict) else given
+    if not path:
+        rel = str(model["file"])
+        if rel.startswith("package://"):
+            from .. import data
+
+            rest = rel.removeprefix("package://")
+            dirs = [Path(d) for d in data.robot_path()]
+            dirs += [Path(d) for d in os.environ.get("PROGMO_ROBOT_PATH", "").split(os.pathsep) if d]
+            path = next((str(d / rest) for d in dirs if (d / rest).is_file()), None)
+            if path is None:
+                raise FileNotFoundError(f"robot file {rel} not found")
+        else:
+            path = str(Path(scene.path).parent / rel)
+    ignored = {str(u["kind"]) for u in getattr(scene, "unmodelled", []) or [] if u.get("declared")}
+    return RobotFile(Path(path), kind, list(model.get("locked_joints", [])),
+                     str(model.get("root_joint", "fixed")), ignored)
+
+
+#: harness forces of the export report that stand for elements of the robot file itself (the file's
+#: passive forces): on the user's-file route the simulator's own reading supplies them
+FILE_FORCES = ("spring", "damper", "gravcomp")
+
+
+def name_report(report: dict, addr: dict[str, tuple[int, int]]) -> dict:
+    """The export report with simulator addresses taken from the simulator's model of the file:
+    ``addr[sim_joint] = (first qpos, first dof)``; each entry keeps its offset within its joint (the
+    export's component order, e.g. Pinocchio's quaternion x, y, z, w)."""
+    out = copy.deepcopy(report)
+    out["harness_forces"] = [hf for hf in report.get("harness_forces", []) if hf["kind"] not in FILE_FORCES]
+    for key, k in (("q_map", 0), ("v_map", 1)):
+        first: dict[str, int] = {}
+        for c in report[key]:
+            first[c["sim_joint"]] = min(first.get(c["sim_joint"], c["sim_index"]), c["sim_index"])
+        for c in out[key]:
+            j = c["sim_joint"]
+            if j not in addr:
+                raise Unsupported(f"joint {j!r} of the scene is not in the simulator's reading of the file")
+            c["sim_index"] = addr[j][k] + c["sim_index"] - first[j]
+    return out
+
+
+# --- MuJoCo --------------------------------------------------------------------------------------
+def urdf_for_mujoco(path: Path) -> str:
+    """The faithful copy of a URDF that MuJoCo's URDF compiler reads (module doc)."""
+    root = ET.parse(path).getroot()
+    for link in root.iter("link"):
+        for tag in ("visual", "collision"):
+            for e in link.findall(tag):
+                link.remove(e)
+    for e in root.findall("mujoco"):
+        root.remove(e)
+    ET.SubElement(ET.SubElement(root, "mujoco"), "compiler", URDF_COMPILER)
+    return ET.tostring(root, encoding="unicode")
+
+
+def mujoco_model(rf: RobotFile, gravity: list[float]) -> tuple[Any, list[str]]:
+    """MuJoCo's model of the file with the scene's additions; notes say what was prepared."""
+    import mujoco
+
+    notes = []
+    if rf.fmt == "urdf":
+        spec = mujoco.MjSpec.from_string(urdf_for_mujoco(rf.path))
+        notes.append(f"MuJoCo reads {rf.path.name} through its URDF compiler from a faithful copy: "
+                     "visual and collision geometry removed (no inertia in a URDF's geometry; mesh "
+                     "paths unreadable), every link kept a body, stated inertials only")
+    else:
+        spec = mujoco.MjSpec.from_file(str(rf.path))
+        notes.append(f"MuJoCo reads {rf.path.name} as given")
+    gone = []  # equalities over a locked joint (a URDF <mimic>) lock with it
+    for e in list(spec.equalities):
+        if e.type == mujoco.mjtEq.mjEQ_JOINT and (e.name1 in rf.locked or e.name2 in rf.locked):
+            if not (e.name1 in rf.locked and (not e.name2 or e.name2 in rf.locked)):
+                raise Unsupported(f"joint equality (mimic) between {e.name1} and {e.name2}: only one of them "
+                                  "is locked")
+            gone.append(f"{e.name1} = f({e.name2})" if e.name2 else e.name1)
+            spec.delete(e)
+    if gone:
+        notes.append("joint equalities (URDF mimic) between locked joints removed with them: " + ", ".join(gone))
+    for j in rf.locked:
+        js = spec.joint(j)
+        if js is None:
+            raise Unsupported(f"locked joint {j!r} is not in MuJoCo's reading of {rf.path.name}")
+        spec.delete(js)
+    if rf.locked:
+        notes.append("locked joints removed in MuJoCo's copy (welded in the file's pose: q = 0, MJCF q = ref): "
+                     + ", ".join(rf.locked))
+    if rf.root_joint == "free":
+        root = spec.worldbody.first_body()
+        root.add_freejoint(name="root")
+        notes.append(f"free root joint 'root' added to body {root.name!r}")
+    # ideal rigid-body dynamics (shared/notes/simulators.md) except what the file says
+    spec.option.gravity = np.asarray(gravity, float)
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_RK4
+    off = mujoco.mjtDisableBit.mjDSBL_CONTACT | mujoco.mjtDisableBit.mjDSBL_AUTORESET
+    declared = {"joint_limit": mujoco.mjtDisableBit.mjDSBL_LIMIT,
+                "frictionloss": mujoco.mjtDisableBit.mjDSBL_FRICTIONLOSS,
+                "equality": mujoco.mjtDisableBit.mjDSBL_EQUALITY}
+    switched = [k for k in declared if k in rf.ignored]
+    for k in switched:
+        off |= declared[k]
+    spec.option.disableflags = int(spec.option.disableflags) | int(off)
+    spec.option.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_ACTUATION)
+    m = spec.compile()
+    if "tendon" in rf.ignored and m.ntendon:
+        m.tendon_stiffness[:] = 0.0
+        m.tendon_damping[:] = 0.0
+        m.tendon_frictionloss[:] = 0.0
+        m.tendon_limited[:] = 0
+        switched.append("tendons (stiffness, damping, friction, limits zeroed)")
+    if m.nu:
+        m.actuator_gainprm[:] = 0.0
+        m.actuator_biasprm[:] = 0.0
+        notes.append(f"the file's {m.nu} actuator(s) made inert (gains and biases zeroed): u enters as qfrc_applied")
+    notes.append("MuJoCo options: RK4, contact and autoreset off"
+                 + (", " + ", ".join(switched) + " off (declared ignored by the scene)" if switched else "")
+                 + "; the file's armature, damping, springs and gravcomp kept")
+    return m, notes
+
+
+def mujoco_addresses(m: Any) -> dict[str, tuple[int, int]]:
+    import mujoco
+
+    out = {}
+    for j in range(m.njnt):
+        name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j)
+        if name:
+            out[name] = (int(m.jnt_qposadr[j]), int(m.jnt_dofadr[j]))
+    return out
+
+
+# --- Pinocchio -----------------------------------------------------------------------------------
+@dataclass
+class PinFile:
+    """Pinocchio's model of the file and the passive forces the harness applies for it."""
+
+    model: Any
+    addr: dict[str, tuple[int, int]]
+    #: per dof: Pinocchio's own model.damping (applied by the harness: rnea/aba ignore it)
+    damping: np.ndarray
+    #: (qpos index, dof index, stiffness, springref) of springs Pinocchio's reader does not read
+    springs: list[tuple[int, int, float, float]]
+    #: (body frame id, CoM in that frame, mass x gravcomp) Pinocchio's reader does not read
+    gravcomp: list[tuple[int, np.ndarray, float]]
+    notes: list[str]
+    #: elements of the file Pinocchio's reader skips that progmo does not model (tendons, equalities)
+    skipped: list[dict] = field(default_factory=list)
+    #: (qpos index, ref) of MJCF joints with a nonzero ``ref``: Pinocchio's reader puts the file's
+    #: pose at q = 0, MuJoCo (and progmo) at q = ref, so q_pin = q - ref
+    q_offset: list[tuple[int, float]] = field(default_factory=list)
+
+
+def pinocchio_model(rf: RobotFile, gravity: list[float], root: dict | None) -> PinFile:
+    import pinocchio as pin
+
+    notes = []
+    if rf.fmt == "urdf":
+        if root:
+            model = pin.buildModelFromUrdf(str(rf.path), pin.JointModelFreeFlyer(), root["name"])
+        else:
+            model = pin.buildModelFromUrdf(str(rf.path))
+        notes.append(f"Pinocchio reads {rf.path.name} (buildModelFromUrdf)")
+    else:
+        model = pin.buildModelFromMJCF(str(rf.path))
+        notes.append(f"Pinocchio reads {rf.path.name} (buildModelFromMJCF; its gravity option is not read)")
+    mj = _mujoco_of_file(rf) if rf.fmt == "mjcf" else None
+    if rf.locked:
+        ids = []
+        for lj in rf.locked:
+            if not model.existJointName(lj):
+                raise Unsupported(f"locked joint {lj!r} is not a one-joint body of Pinocchio's reading of "
+                                  f"{rf.path.name} (buildReducedModel locks whole joints)")
+            ids.append(model.getJointId(lj))
+        # q = 0 is the file's pose in Pinocchio's reading (URDF q = 0, MJCF q = ref: see q_offset)
+        model = pin.buildReducedModel(model, ids, pin.neutral(model))
+        notes.append("locked joints removed by buildReducedModel in the file's pose: " + ", ".join(rf.locked))
+    addr = _pin_addresses(model, mj, rf)
+    for jid in range(1, model.njoints):
+        if model.joints[jid].nq != model.joints[jid].nv and model.joints[jid].shortname() not in (
+                "JointModelFreeFlyer", "JointModelSpherical"):
+            raise Unsupported(f"Pinocchio reads joint {model.names[jid]!r} of {rf.path.name} as "
+                              f"{model.joints[jid].shortname()} (nq {model.joints[jid].nq}, nv "
+                              f"{model.joints[jid].nv}): no coordinate map to progmo's q")
+    model.gravity.linear = np.asarray(gravity, float)
+    damping = np.asarray(model.damping, float).copy()
+    springs: list[tuple[int, int, float, float]] = []
+    grav: list[tuple[int, np.ndarray, float]] = []
+    q_offset: list[tuple[int, float]] = []
+    if mj is not None:
+        import mujoco
+
+        offset: dict[int, float] = {}
+        for j in range(mj.njnt):
+            name = mujoco.mj_id2name(mj, mujoco.mjtObj.mjOBJ_JOINT, j)
+            ref = float(mj.qpos0[mj.jnt_qposadr[j]]) if int(mj.jnt_type[j]) in (2, 3) else 0.0
+            if ref != 0.0 and name in addr:
+                offset[addr[name][0]] = ref
+            k = float(mj.jnt_stiffness[j])
+            if k != 0.0 and name in addr:
+                if int(mj.jnt_type[j]) not in (2, 3):
+                    raise Unsupported(f"a spring on the ball/free joint {name!r}: not applied for Pinocchio")
+                iq, iv = addr[name]
+                # in Pinocchio's q (q - ref): -k (q_pin + ref - springref)
+                springs.append((iq, iv, k, float(mj.qpos_spring[mj.jnt_qposadr[j]]) - ref))
+        q_offset = sorted(offset.items())
+        if q_offset:
+            notes.append("Pinocchio's MJCF reader ignores joint ref (the file's pose at q = 0): q_pin = q - ref on "
+                         + ", ".join(f"{n}" for n, (iq, _) in addr.items() if iq in offset))
+        for b in range(1, mj.nbody):
+            gc = float(mj.body_gravcomp[b])
+            if gc != 0.0:
+                name = mujoco.mj_id2name(mj, mujoco.mjtObj.mjOBJ_BODY, b)
+                if not model.existFrame(name, pin.FrameType.BODY):
+                    raise Unsupported(f"gravcomp on body {name!r}: not a body frame of Pinocchio's reading")
+                fid = model.getFrameId(name, pin.FrameType.BODY)
+                grav.append((fid, np.array(mj.body_ipos[b], float), gc * float(mj.body_mass[b])))
+        if springs or grav:
+            notes.append("not read by Pinocchio's MJCF reader, applied by the harness from MuJoCo's "
+                         "compilation of the same file: "
+                         + ", ".join([f"spring on {n}" for n in _names(addr, springs)]
+                                     + [f"gravcomp of {model.frames[f].name}" for f, _, _ in grav]))
+    if damping.any():
+        notes.append("joint damping as Pinocchio reads it (model.damping) applied by the harness: -damping * v")
+    skipped = []
+    if mj is not None:
+        import mujoco
+
+        skipped += [{"kind": "tendon", "element": f"tendon {mujoco.mj_id2name(mj, mujoco.mjtObj.mjOBJ_TENDON, i) or i}",
+                     "location": rf.path.name} for i in range(mj.ntendon)]
+        skipped += [{"kind": "equality", "element": f"equality {mujoco.mj_id2name(mj, mujoco.mjtObj.mjOBJ_EQUALITY, i) or i}",
+                     "location": rf.path.name} for i in range(mj.neq)]
+    return PinFile(model, addr, damping, springs, grav, notes, skipped, q_offset)
+
+
+def _pin_addresses(model: Any, mj: Any, rf: RobotFile) -> dict[str, tuple[int, int]]:
+    """Joint name -> (first q, first v) in Pinocchio's model; an MJCF body with several joints is
+    one composite joint (named after the body's first joint) whose components follow the file's
+    order (MuJoCo's compilation gives the joints of each body)."""
+    addr = {model.names[jid]: (model.idx_qs[jid], model.idx_vs[jid]) for jid in range(1, model.njoints)}
+    if mj is None:
+        return addr
+    import mujoco
+
+    for b in range(1, mj.nbody):
+        js = [j for j in range(mj.njnt) if mj.jnt_bodyid[j] == b]
+        comp = f"Composite_{mujoco.mj_id2name(mj, mujoco.mjtObj.mjOBJ_JOINT, js[0])}" if len(js) > 1 else None
+        if comp is None or comp not in addr:
+            continue
+        iq, iv = addr.pop(comp)
+        for j in js:
+            addr[mujoco.mj_id2name(mj, mujoco.mjtObj.mjOBJ_JOINT, j)] = (iq, iv)
+            nq, nv = {0: (7, 6), 1: (4, 3)}.get(int(mj.jnt_type[j]), (1, 1))
+            iq, iv = iq + nq, iv + nv
+    return addr
+
+
+def _names(addr: dict[str, tuple[int, int]], springs: list) -> list[str]:
+    by = {v[1]: k for k, v in addr.items()}
+    return [by.get(iv, str(iv)) for _, iv, _, _ in springs]
+
+
+def _mujoco_of_file(rf: RobotFile) -> Any:
+    """MuJoCo's plain compilation of an MJCF file (names, springs, gravcomp; no options changed)."""
+    import mujoco
+
+    return mujoco.MjModel.from_xml_path(str(rf.path))
