@@ -201,10 +201,11 @@ impl DipWatch {
         if !self.on {
             return;
         }
-        let end = self.latest_at(t1, tol).map(|b| b.to_vec());
+        let per = self.b0.len();
+        let end = self.rec_t.iter().rposition(|&x| (x - t1).abs() <= tol);
         self.b0_valid = end.is_some();
-        if let Some(b) = end {
-            self.b0.copy_from_slice(&b);
+        if let Some(k) = end {
+            self.b0.copy_from_slice(&self.rec_b[k * per..(k + 1) * per]);
         }
         self.rec_t.clear();
         self.rec_b.clear();
