@@ -193,6 +193,10 @@ struct SolveArgs {
     /// Stop at the first conditioning warning (exit 1) instead of reporting it and going on.
     #[arg(long)]
     strict: bool,
+    /// With a fixed step (rk4): skip the companion solve at twice the step that estimates the
+    /// global error (summary.json `global_error`; it costs about half the solve again).
+    #[arg(long)]
+    no_richardson: bool,
     /// Never show a progress bar (it is shown only on a terminal anyway).
     #[arg(long)]
     quiet: bool,
@@ -407,6 +411,7 @@ fn settings_from(a: &SolveArgs, base: &Settings) -> Result<Settings, String> {
         output_dt: a.output_dt,
         max_samples: a.max_samples,
         strict: a.strict.then_some(true),
+        richardson: a.no_richardson.then_some(false),
         ..Default::default()
     };
     base.apply(&o).map_err(|e| match e {

@@ -4,7 +4,7 @@ Shapes: n = number of samples, nq / nv = sizes of q / v, s = number of constrain
 """
 
 import os
-from typing import Sequence, Any, Literal, TypedDict, final
+from typing import Sequence, Any, Literal, NotRequired, TypedDict, final
 
 import numpy as np
 import numpy.typing as npt
@@ -27,7 +27,7 @@ class ExportUnsupported(ValueError):
     """The scene holds an element the simulator format cannot carry; the message names it."""
 
 class Warning(TypedDict):
-    kind: Literal["row_gradient", "singular_value", "u_cancellation"]
+    kind: Literal["row_gradient", "singular_value", "u_cancellation", "global_error"]
     t: float  # first crossing of the threshold
     rows: list[str]
     value: float
@@ -35,6 +35,10 @@ class Warning(TypedDict):
     t_worst: float
     threshold: float
     message: str  # one sentence: quantity, time, rows
+    # row_gradient of a fixed-step solve: the Richardson companion's relative velocity error
+    # before `t` and after `t_worst` (what the passage cost)
+    error_before: NotRequired[float]
+    error_after: NotRequired[float]
 
 class ExpressionForces(TypedDict):
     generalized: F64  # (nv,) the scene's coordinate forces

@@ -113,8 +113,22 @@
 //!   CSV/MCAP sample (the last accepted state the solve stands behind).
 //! - `warnings`: array of conditioning warnings ([`Warning`](crate::solve::Warning); thresholds
 //!   [`Conditioning`](crate::solve::Conditioning)), each `{"kind": "row_gradient" |
-//!   "singular_value" | "u_cancellation", "t" (first crossing), "rows", "value", "worst",
-//!   "t_worst", "threshold", "message"}`; empty when the programme stayed well conditioned.
+//!   "singular_value" | "u_cancellation" | "global_error", "t" (first crossing), "rows", "value",
+//!   "worst", "t_worst", "threshold", "message"}`; empty when the programme stayed well
+//!   conditioned. A `row_gradient` of a fixed-step solve with its Richardson companion also has
+//!   `error_before` and `error_after`: the companion's estimate of the velocities' relative error
+//!   (max |dv| / max |v| per sample) over the samples before `t` and after `t_worst`.
+//!   `global_error`: the fixed-step estimate below is over its budget (`value`, `worst`: `scaled`;
+//!   `threshold`: `budget`; `rows` empty).
+//! - `global_error` (fixed-step solves only: `rk4`, or `fixed_step`, unless `--no-richardson`):
+//!   the Richardson estimate of the global error ([`GlobalError`](crate::solve::GlobalError)):
+//!   a companion solve at twice the step, compared at the output samples both runs have:
+//!   `{"method": "richardson", "step", "companion_step", "order" (p), "estimate" (max over
+//!   samples and q, v components of |y_2h - y_h| / (2^p - 1)), "scaled" (the same divided by
+//!   atol + rtol |y_h| per component), "t_worst", "component" (name of the q or v entry),
+//!   "budget" (1: `scaled` above it warns, and with `strict` the code is `ill_conditioned`),
+//!   "samples" (compared), "companion_code", "companion_t_end", "companion" (its integrator
+//!   counters: its cost, about half the solve's)}`. Absent for adaptive solves.
 //! - `max_residual`: largest |residual| over all rows and accepted steps (0 when there is no row).
 //! - `max_residual_rate`: largest |dg/dt| over all position rows and accepted steps.
 //! - `rows`: array, one object per constraint row in solver order:
@@ -132,7 +146,7 @@
 //!   "tol": 1e-12, "max_iter": 8}, "rank_dependent": 1e-10, "rank_vanishing": 1e-12,
 //!   "output": "steps", "max_drift": null, "consistency_tol": 1e-10, "assemble": false,
 //!   "conditioning": {"row_gradient": 0.001, "singular_value": 0.001, "u_cancellation": 1e8},
-//!   "strict": false}`
+//!   "strict": false, "richardson": true}`
 //!   (`h_max: null` is the unlimited default; `output` is `"steps"` or `{"every": dt}`).
 //! - `wall_seconds`: wall-clock duration of the run, as measured by the caller.
 //! - `versions`: `{"progmo": crate version, "git_revision": string or null}`.

@@ -7,7 +7,9 @@ use std::path::Path;
 use serde::Serialize;
 
 use super::OutputError;
-use crate::solve::{InitialCorrection, ReturnCode, Settings, Solution, Statistics, Warning};
+use crate::solve::{
+    GlobalError, InitialCorrection, ReturnCode, Settings, Solution, Statistics, Warning,
+};
 
 /// Format version written in `format_version`.
 const FORMAT_VERSION: u32 = 1;
@@ -73,6 +75,8 @@ struct SummaryOut<'a> {
     rows: Vec<Row<'a>>,
     statistics: &'a Statistics,
     warnings: Vec<WarningOut<'a>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    global_error: Option<&'a GlobalError>,
     initial_correction: &'a Option<InitialCorrection>,
     settings: &'a Settings,
     wall_seconds: f64,
@@ -143,6 +147,7 @@ fn build<'a>(input: &SummaryInput<'a>, file: &str) -> Result<SummaryOut<'a>, Out
                 message: w.to_string(),
             })
             .collect(),
+        global_error: sol.global_error.as_ref(),
         initial_correction: &sol.initial_correction,
         settings: input.settings,
         wall_seconds: input.wall_seconds,
@@ -244,6 +249,7 @@ mod tests {
             }),
             warnings: vec![],
             t_end: 1.5,
+            global_error: None,
         }
     }
 

@@ -1710,6 +1710,7 @@ fn solver(src: &Source, file: &SceneFile) -> R<Settings> {
         max_samples,
         strict: f.strict,
         assemble: Some(file.initial.get_ref().assemble),
+        richardson: None,
     };
     Settings::default().apply(&o).map_err(|e| match e {
         OverrideError::UnknownName(u) => {

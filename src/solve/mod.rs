@@ -110,12 +110,22 @@ pub struct Settings {
     pub conditioning: Conditioning,
     /// Turn a conditioning warning into a stop ([`ReturnCode::IllConditioned`]). Default false.
     pub strict: bool,
+    /// A fixed-step solve (RK4, or `fixed_step`) also runs a companion solve at twice the step and
+    /// reports the Richardson estimate of its global error ([`GlobalError`]); the companion costs
+    /// about half of the solve again (counted in [`GlobalError::companion`]). Default true.
+    #[serde(default = "default_true")]
+    pub richardson: bool,
+}
+
+fn default_true() -> bool {
+    true
 }
 
 /// Thresholds of the conditioning monitor: how close the programme may come to singular, relative
 /// to the initial state, before the solve warns. Row gradients and u are checked at every evaluation
-/// of the right-hand side (the formulation computes both anyway), the singular value at every output
-/// sample (every accepted step with the default output). Near a point where (2.6) loses rank, the reduced equations (2.8)-(2.10)
+/// of the right-hand side (the formulation computes both anyway), row gradients also between the
+/// evaluations (a dip inside a step, located on the step's interpolant: `ode::DipWatch`), the
+/// singular value at every output sample (every accepted step with the default output). Near a point where (2.6) loses rank, the reduced equations (2.8)-(2.10)
 /// and u (2.12) lose about log10(1 / ratio) digits (seed notes: Example 3.1 at p = q = 0).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Conditioning {
@@ -153,6 +163,9 @@ pub enum WarningKind {
     SingularValue,
     /// Cancellation in u = A dv/dt - G - Q ([`Conditioning::u_cancellation`]).
     UCancellation,
+    /// A fixed-step solve's Richardson estimate of its global error beyond its budget
+    /// ([`GlobalError`]); `value` and `worst` are the scaled estimate, `threshold` the budget.
+    GlobalError,
 }
 
 impl WarningKind {
@@ -162,6 +175,7 @@ impl WarningKind {
             WarningKind::RowGradient => "row_gradient",
             WarningKind::SingularValue => "singular_value",
             WarningKind::UCancellation => "u_cancellation",
+            WarningKind::GlobalError => "global_error",
         }
     }
 }
@@ -181,6 +195,13 @@ pub struct Warning {
     pub t_worst: f64,
     /// The threshold crossed.
     pub threshold: f64,
+    /// row_gradient of a fixed-step solve with its Richardson companion ([`GlobalError`]): the
+    /// estimated relative error of the velocities (max over components / max |v|) over the samples
+    /// before `t` and after `t_worst`: what the passage cost, measured (None: not measured).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error_before: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error_after: Option<f64>,
 }
 
 impl std::fmt::Display for Warning {
@@ -194,17 +215,30 @@ impl std::fmt::Display for Warning {
                  pole",
                 self.t_worst, self.t, self.threshold
             ),
-            WarningKind::RowGradient => write!(
+            WarningKind::RowGradient if self.error_after.is_some() => write!(
                 f,
                 "the gradient of row {rows} fell to {:.2e} of its initial norm at t = {:.6} \
-                 (threshold {:.0e}; worst {:.2e} at t = {:.6}): about {:.0} digits of dv/dt and u \
-                 are lost there",
+                 (threshold {:.0e}; worst {:.2e} at t = {:.6}); the Richardson companion puts the \
+                 velocities' relative error at {:.1e} before and {:.1e} after it: {}",
                 self.value,
                 self.t,
                 self.threshold,
                 self.worst,
                 self.t_worst,
-                -self.worst.log10()
+                self.error_before.unwrap_or(f64::NAN),
+                self.error_after.unwrap_or(f64::NAN),
+                digits_kept(self.error_before, self.error_after)
+            ),
+            WarningKind::RowGradient => write!(
+                f,
+                "the gradient of row {rows} fell to {:.2e} of its initial norm at t = {:.6} \
+                 (threshold {:.0e}; worst {:.2e} at t = {:.6}): {} of dv/dt and u are lost there",
+                self.value,
+                self.t,
+                self.threshold,
+                self.worst,
+                self.t_worst,
+                digits_lost(self.worst)
             ),
             WarningKind::SingularValue => write!(
                 f,
@@ -212,6 +246,14 @@ impl std::fmt::Display for Warning {
                  the row-scaled programme Jacobian fell to {:.2e} of its initial value (threshold \
                  {:.0e}; worst {:.2e} at t = {:.6})",
                 self.t, self.value, self.threshold, self.worst, self.t_worst
+            ),
+            WarningKind::GlobalError => write!(
+                f,
+                "the fixed-step solve's estimated global error (Richardson, companion at twice the \
+                 step) reaches {:.2e} times its budget atol + rtol |x| at t = {:.6} (budget {}): \
+                 the trajectory is less accurate than the tolerances ask; use a smaller step or \
+                 an adaptive integrator",
+                self.worst, self.t_worst, self.threshold
             ),
             WarningKind::UCancellation => write!(
                 f,
@@ -222,6 +264,31 @@ impl std::fmt::Display for Warning {
                 self.worst.log10()
             ),
         }
+    }
+}
+
+/// Digits lost to a row gradient at `ratio` of its initial norm (seed notes, Example 3.1: the
+/// reduced equations lose log10(1 / ratio)), as words; float64 carries 16 at most.
+fn digits_lost(ratio: f64) -> String {
+    let d = -ratio.log10();
+    if !(d < 15.5) {
+        "all digits (float64 carries about 16)".into()
+    } else {
+        format!("about {d:.0} digits")
+    }
+}
+
+/// What a passage cost, from the relative errors before and after it, as words.
+fn digits_kept(before: Option<f64>, after: Option<f64>) -> String {
+    let after = after.unwrap_or(f64::NAN);
+    let kept = -after.log10();
+    let lost = (after / before.unwrap_or(f64::NAN)).log10();
+    if !(kept >= 0.5) {
+        "no digit of the motion after it is right".into()
+    } else if lost >= 0.5 {
+        format!("about {lost:.0} digits lost there, {kept:.0} left")
+    } else {
+        format!("no digit lost there, about {kept:.0} left")
     }
 }
 
@@ -260,6 +327,7 @@ impl Default for Settings {
             assemble: false,
             conditioning: Conditioning::default(),
             strict: false,
+            richardson: true,
         }
     }
 }
@@ -710,6 +778,40 @@ pub struct Solution {
     pub warnings: Vec<Warning>,
     /// Last time reached: on an early stop the time of the last output sample and of the code.
     pub t_end: f64,
+    /// Fixed-step solves (with [`Settings::richardson`]): the estimate of the global error.
+    pub global_error: Option<GlobalError>,
+}
+
+/// A fixed-step solve's a-posteriori global error estimate (Richardson extrapolation, HNW I, II.4):
+/// a companion solve with twice the step h gives, at the output samples both runs share,
+/// err(y_h) ~ (y_2h - y_h) / (2^p - 1) for a method of order p. Judged per component of (q, v)
+/// against the solve's own tolerances: `scaled` = max |y_2h - y_h| / ((2^p - 1)(atol + rtol |y_h|))
+/// over samples and components, with budget 1 (the accuracy an adaptive solve is asked for per
+/// step, here asked of the whole trajectory). Beyond the budget: a `global_error` warning (and
+/// with `strict`, the code `ill_conditioned`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct GlobalError {
+    /// `"richardson"`.
+    pub method: &'static str,
+    /// The solve's step h and the companion's step 2h.
+    pub step: f64,
+    pub companion_step: f64,
+    /// Order p of the method.
+    pub order: usize,
+    /// Largest estimated absolute error max |y_2h - y_h| / (2^p - 1) over samples and components.
+    pub estimate: f64,
+    /// Largest scaled estimate (see the type's docs) and where it occurs.
+    pub scaled: f64,
+    pub t_worst: f64,
+    pub component: String,
+    /// The budget of `scaled` (1).
+    pub budget: f64,
+    /// Output samples compared (those the two runs share, up to the earlier end).
+    pub samples: usize,
+    /// The companion's return code name, last time and integrator counters (its cost).
+    pub companion_code: &'static str,
+    pub companion_t_end: f64,
+    pub companion: IntegratorStats,
 }
 
 /// Solve and keep all samples in memory.
@@ -720,8 +822,43 @@ pub fn solve<M: Model, C: Constraints>(problem: &Problem<M, C>, settings: &Setti
     out
 }
 
-/// Solve, streaming samples into `sink`; the returned solution's trajectory is empty.
+/// Solve, streaming samples into `sink`; the returned solution's trajectory is empty. A fixed-step
+/// solve with [`Settings::richardson`] then runs its companion ([`GlobalError`]).
 pub fn solve_into<M: Model, C: Constraints>(
+    problem: &Problem<M, C>,
+    settings: &Settings,
+    sink: &mut dyn SampleSink,
+) -> Solution {
+    let Some(h) = fixed_step_of(settings).filter(|_| settings.richardson) else {
+        return solve_core(problem, settings, sink);
+    };
+    let width = problem.model.nq() + problem.model.nv();
+    let span = (problem.t1 - problem.t0).max(0.0);
+    let per = match settings.output {
+        Output::Every(dt) if dt > 0.0 => dt.min(h),
+        _ => h,
+    };
+    let expected = (span / per).min(1e15) as usize + 2;
+    let stride = (expected.saturating_mul(width + 1))
+        .div_ceil(RICHARDSON_MAX_NUMBERS)
+        .max(1);
+    let mut rec = Recording {
+        inner: sink,
+        rec: Recorded {
+            stride,
+            seen: 0,
+            width,
+            t: vec![],
+            x: vec![],
+        },
+    };
+    let mut sol = solve_core(problem, settings, &mut rec);
+    let Recording { inner, rec } = rec;
+    richardson(problem, settings, inner, &rec, &mut sol);
+    sol
+}
+
+fn solve_core<M: Model, C: Constraints>(
     problem: &Problem<M, C>,
     settings: &Settings,
     sink: &mut dyn SampleSink,
@@ -736,6 +873,7 @@ pub fn solve_into<M: Model, C: Constraints>(
         initial_correction: None,
         warnings: vec![],
         t_end: problem.t0,
+        global_error: None,
     };
     let mut ode = match ode::MotionOde::new(problem, settings, sink) {
         Ok(o) => o,
@@ -757,6 +895,219 @@ pub fn solve_into<M: Model, C: Constraints>(
     sol.max_residual_rate = ode.max_residual_rate.clone();
     sol.t_end = ode.t_last;
     sol
+}
+
+/// The step of a fixed-step solve, if the settings make one.
+fn fixed_step_of(settings: &Settings) -> Option<f64> {
+    match settings.integrator {
+        Method::Rk4 { h } => Some(h),
+        _ => settings.fixed_step.filter(|h| *h > 0.0),
+    }
+    .filter(|h| h.is_finite() && *h > 0.0)
+}
+
+/// Most numbers the Richardson recorder keeps (t, q, v per sample); beyond, it keeps every k-th
+/// sample.
+const RICHARDSON_MAX_NUMBERS: usize = 10_000_000;
+
+/// (t, q, v) of the samples a fixed-step solve emitted (every `stride`-th), for the companion.
+struct Recorded {
+    stride: usize,
+    seen: usize,
+    width: usize,
+    t: Vec<f64>,
+    x: Vec<f64>,
+}
+
+/// Passes samples on to the caller's sink and records them.
+struct Recording<'a> {
+    inner: &'a mut dyn SampleSink,
+    rec: Recorded,
+}
+
+impl SampleSink for Recording<'_> {
+    fn sample(&mut self, s: &Sample<'_>) {
+        self.inner.sample(s);
+        let r = &mut self.rec;
+        if r.seen % r.stride == 0 {
+            r.t.push(s.t);
+            r.x.extend_from_slice(s.q);
+            r.x.extend_from_slice(s.v);
+        }
+        r.seen += 1;
+    }
+    fn warning(&mut self, w: &Warning) {
+        self.inner.warning(w)
+    }
+    fn interrupted(&self) -> bool {
+        self.inner.interrupted()
+    }
+}
+
+/// Compares the companion's samples with the recorded ones at shared times.
+struct Comparing<'a> {
+    inner: &'a dyn SampleSink,
+    rec: &'a Recorded,
+    next: usize,
+    tol: f64,
+    atol: f64,
+    rtol: f64,
+    denominator: f64,
+    samples: usize,
+    estimate: f64,
+    scaled: f64,
+    t_worst: f64,
+    component: usize,
+    buf: Vec<f64>,
+    /// Per compared sample: t and the estimated relative error of v (max |dv| / max |v|).
+    v_error: Vec<(f64, f64)>,
+}
+
+impl SampleSink for Comparing<'_> {
+    fn sample(&mut self, s: &Sample<'_>) {
+        let r = self.rec;
+        while self.next < r.t.len() && r.t[self.next] < s.t - self.tol {
+            self.next += 1;
+        }
+        if self.next >= r.t.len() || (r.t[self.next] - s.t).abs() > self.tol {
+            return;
+        }
+        let x = &r.x[self.next * r.width..(self.next + 1) * r.width];
+        self.buf.clear();
+        self.buf.extend_from_slice(s.q);
+        self.buf.extend_from_slice(s.v);
+        for (j, (a, b)) in x.iter().zip(&self.buf).enumerate() {
+            let e = (b - a).abs() / self.denominator;
+            let sc = e / (self.atol + self.rtol * a.abs());
+            self.estimate = self.estimate.max(e);
+            if sc > self.scaled || sc.is_nan() {
+                self.scaled = sc;
+                self.t_worst = s.t;
+                self.component = j;
+            }
+        }
+        let nq = s.q.len();
+        let (mut dv, mut vmax) = (0.0f64, 0.0f64);
+        for (a, b) in x[nq..].iter().zip(s.v) {
+            dv = dv.max((b - a).abs() / self.denominator);
+            vmax = vmax.max(a.abs());
+        }
+        self.v_error.push((s.t, dv / vmax.max(f64::MIN_POSITIVE)));
+        self.samples += 1;
+    }
+    fn interrupted(&self) -> bool {
+        self.inner.interrupted()
+    }
+}
+
+/// The companion solve at twice the step and the estimate it gives ([`GlobalError`]).
+fn richardson<M: Model, C: Constraints>(
+    problem: &Problem<M, C>,
+    settings: &Settings,
+    sink: &mut dyn SampleSink,
+    rec: &Recorded,
+    sol: &mut Solution,
+) {
+    let Some(h) = fixed_step_of(settings) else {
+        return;
+    };
+    if sink.interrupted() {
+        return;
+    }
+    let mut s2 = settings.clone();
+    match &mut s2.integrator {
+        Method::Rk4 { h: h2 } => *h2 = 2.0 * h,
+        _ => s2.fixed_step = Some(2.0 * h),
+    }
+    // The companion judges the solve; its own stops and warnings are not the solve's.
+    s2.strict = false;
+    let p = settings.integrator.order();
+    let mut cmp = Comparing {
+        inner: sink,
+        rec,
+        next: 0,
+        tol: 1e-9 * h,
+        atol: settings.atol,
+        rtol: settings.rtol,
+        denominator: 2f64.powi(p as i32) - 1.0,
+        samples: 0,
+        estimate: 0.0,
+        scaled: 0.0,
+        t_worst: problem.t0,
+        component: 0,
+        buf: vec![],
+        v_error: vec![],
+    };
+    let mut ode = match ode::MotionOde::new(problem, &s2, &mut cmp) {
+        Ok(o) => o,
+        Err(_) => return,
+    };
+    let nv = problem.model.nv();
+    let mut integrator = Integrator::new(s2.integrator, s2.driver_options(), 2 * nv);
+    let mut y = ode.initial_y();
+    let (outcome, istats) = integrator.integrate(&mut ode, problem.t0, problem.t1, &mut y);
+    let code = ode.finish(outcome);
+    let t_end = ode.t_last;
+    drop(ode);
+    let names: Vec<String> = problem
+        .model
+        .q_names()
+        .into_iter()
+        .chain(problem.model.v_names())
+        .collect();
+    let g = GlobalError {
+        method: "richardson",
+        step: h,
+        companion_step: 2.0 * h,
+        order: p,
+        estimate: cmp.estimate,
+        scaled: cmp.scaled,
+        t_worst: cmp.t_worst,
+        component: names.get(cmp.component).cloned().unwrap_or_default(),
+        budget: 1.0,
+        samples: cmp.samples,
+        companion_code: code.name(),
+        companion_t_end: t_end,
+        companion: istats,
+    };
+    // What each row-gradient passage cost: the velocities' estimated error before and after it.
+    for w in sol.warnings.iter_mut() {
+        if w.kind != WarningKind::RowGradient {
+            continue;
+        }
+        let max_over = |keep: &dyn Fn(f64) -> bool| {
+            cmp.v_error
+                .iter()
+                .filter(|(t, _)| keep(*t))
+                .map(|x| x.1)
+                .reduce(f64::max)
+        };
+        let (t_first, t_worst) = (w.t, w.t_worst);
+        w.error_before = max_over(&|t| t < t_first);
+        w.error_after = max_over(&|t| t > t_worst);
+    }
+    if !(g.scaled <= g.budget) {
+        let w = Warning {
+            kind: WarningKind::GlobalError,
+            t: g.t_worst,
+            rows: vec![],
+            value: g.scaled,
+            worst: g.scaled,
+            t_worst: g.t_worst,
+            threshold: g.budget,
+            error_before: None,
+            error_after: None,
+        };
+        sink.warning(&w);
+        if settings.strict && sol.code.is_success() {
+            sol.code = ReturnCode::IllConditioned {
+                t: sol.t_end,
+                warning: Box::new(w.clone()),
+            };
+        }
+        sol.warnings.push(w);
+    }
+    sol.global_error = Some(g);
 }
 
 /// The state at t0 as the solver will start from it: consistency checked (and assembled if the

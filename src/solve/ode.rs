@@ -127,6 +127,113 @@ pub(crate) struct MotionOde<'a, M: Model, C: Constraints> {
     budget: StepBudget,
     /// Relative degrees and t0 decoupling row norms of a servo programme (actuators), else None.
     servo_degrees: Option<(Vec<usize>, Vec<f64>, Option<crate::servo::Reduction>)>,
+    /// The between-evaluations row-gradient monitor ([`DipWatch`]).
+    dip: DipWatch,
+}
+
+/// Watches each row gradient B_i(t) between accepted states, where the per-evaluation test cannot
+/// see it: a row whose gradient passes through (near) zero inside a step has both end values, and
+/// every stage value, well above the threshold (issue 28: fixed-step RK4 through Example 3.1's
+/// p = q = 0). Over a step B_i is nearly linear in t, so the chord B_i(t0) + s (B_i(t1) - B_i(t0))
+/// reveals a passage by its closest approach to 0 (at s* = -B0 . d / |d|^2, d = B1 - B0) however
+/// large |B0| and |B1| are; only then is the minimum of |B_i| located on the step's interpolant.
+struct DipWatch {
+    /// Off for servo programmes (their decoupling rows are watched by det b's sign) and without rows.
+    on: bool,
+    /// B at the current step's start (row-major s x nv) and whether it is known.
+    b0: Vec<f64>,
+    b0_valid: bool,
+    /// B of every evaluation since the last accepted step: times and row-major matrices.
+    rec_t: Vec<f64>,
+    rec_b: Vec<f64>,
+    /// The step (t0) for which `needs_dense` asked for the interpolant because of a candidate.
+    asked: std::cell::Cell<Option<f64>>,
+}
+
+impl DipWatch {
+    /// Most evaluations remembered within one step (rejected trials included); beyond, the oldest
+    /// half is dropped (the accepted trial's evaluations are the latest).
+    const MAX_RECORDS: usize = 64;
+    /// The chord's closest approach is a candidate below this many times the threshold (margin for
+    /// the curvature of B over a step, h^2 |B''| / 8).
+    const MARGIN: f64 = 10.0;
+    /// Evaluations of B on the interpolant to locate one minimum.
+    const MAX_ITER: usize = 12;
+
+    fn record(&mut self, t: f64, b: &DMatrix<f64>) {
+        if !self.on {
+            return;
+        }
+        let per = b.len();
+        if self.rec_t.len() >= Self::MAX_RECORDS {
+            let half = Self::MAX_RECORDS / 2;
+            self.rec_t.drain(..half);
+            self.rec_b.drain(..half * per);
+        }
+        self.rec_t.push(t);
+        let (s, nv) = b.shape();
+        for i in 0..s {
+            for k in 0..nv {
+                self.rec_b.push(b[(i, k)]);
+            }
+        }
+    }
+
+    /// The latest recorded B at time t (within `tol`), if any.
+    fn latest_at(&self, t: f64, tol: f64) -> Option<&[f64]> {
+        let per = self.b0.len();
+        let k = self.rec_t.iter().rposition(|&x| (x - t).abs() <= tol)?;
+        Some(&self.rec_b[k * per..(k + 1) * per])
+    }
+
+    /// B at the step's start: an evaluation at t0 after the last accepted step (the exact state,
+    /// after any projection) if there was one, else the end of the previous step.
+    fn start(&self, t0: f64) -> Option<&[f64]> {
+        let per = self.b0.len();
+        match self.rec_t.iter().position(|&x| x == t0) {
+            Some(k) => Some(&self.rec_b[k * per..(k + 1) * per]),
+            None => self.b0_valid.then_some(&self.b0[..]),
+        }
+    }
+
+    /// End of an accepted step: B at t1 becomes the next step's start; the records are cleared.
+    fn step_done(&mut self, t1: f64, tol: f64) {
+        if !self.on {
+            return;
+        }
+        let per = self.b0.len();
+        let end = self.rec_t.iter().rposition(|&x| (x - t1).abs() <= tol);
+        self.b0_valid = end.is_some();
+        if let Some(k) = end {
+            self.b0.copy_from_slice(&self.rec_b[k * per..(k + 1) * per]);
+        }
+        self.rec_t.clear();
+        self.rec_b.clear();
+    }
+}
+
+/// The chord from `a` to `b`: its parameter of closest approach to 0 and that distance, when the
+/// closest approach lies strictly inside (0, 1).
+fn chord_min(a: &[f64], b: &[f64]) -> Option<(f64, f64)> {
+    let (mut ad, mut dd) = (0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        ad += x * (y - x);
+        dd += (y - x) * (y - x);
+    }
+    if !(dd > 0.0) {
+        return None;
+    }
+    let s = -ad / dd;
+    if !(s > 0.0 && s < 1.0) {
+        return None;
+    }
+    let m = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (x + s * (y - x)).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    Some((s, m))
 }
 
 impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
@@ -315,6 +422,14 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
             acc_v: vec![],
             last_sample_t: f64::NEG_INFINITY,
             budget: StepBudget::new(t0),
+            dip: DipWatch {
+                on: s > 0 && c.actuation().is_none(),
+                b0: vec![0.0; s * nv],
+                b0_valid: false,
+                rec_t: vec![],
+                rec_b: vec![],
+                asked: std::cell::Cell::new(None),
+            },
             servo_degrees,
         };
         me.acc_q = me.q.clone();
@@ -323,6 +438,7 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
         if let Err(stop) = me.emit(t0, &q0, &v0) {
             return Err(me.code_of(stop, t0));
         }
+        me.dip.step_done(t0, 0.0);
         me.monitor(t0).map_err(|stop| me.code_of(stop, t0))?;
         Ok(me)
     }
@@ -348,6 +464,7 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
                 v,
             )
             .map_err(Stop::Formulation)?;
+        self.dip.record(t, &self.ev.jet.b);
         let d = self.ev.diag;
         self.stats.factorizations += d.factorizations;
         self.stats.max_du = self.stats.max_du.max(d.du);
@@ -498,6 +615,120 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
         Ok(())
     }
 
+    /// Rows whose gradient's chord over the step [t0, t1] passes closer to 0 than
+    /// [`DipWatch::MARGIN`] times the threshold (relative to the row's t0 norm), with B at t1 from
+    /// the latest evaluation there (the last stage, or the state itself once evaluated).
+    fn dip_rows(&self, t0: f64, t1: f64) -> Vec<usize> {
+        let w = &self.dip;
+        if !w.on {
+            return vec![];
+        }
+        let tol = 1e-9 * (t1 - t0).abs();
+        let (Some(b0), Some(b1)) = (w.start(t0), w.latest_at(t1, tol)) else {
+            return vec![];
+        };
+        let nv = self.nv;
+        let limit = DipWatch::MARGIN * self.settings.conditioning.row_gradient;
+        let scale = &self.ev.row_scale;
+        (0..self.levels.len())
+            .filter(|&i| {
+                let r = i * nv..(i + 1) * nv;
+                chord_min(&b0[r.clone()], &b1[r])
+                    .is_some_and(|(_, m)| m < limit * scale[i].max(f64::MIN_POSITIVE))
+            })
+            .collect()
+    }
+
+    /// The minimum of |B_i| / |B_i(t0)| over the step on the interpolant `dense` (None: only the
+    /// chord is known): chords between bracketing points, each new point where the chord comes
+    /// closest to 0, keeping the half where d|B_i|^2/dt changes sign (B_m . d > 0: the minimum lies
+    /// before t_m). Exact in one evaluation when B_i is linear in t. Returns (ratio, time).
+    fn locate_dip(
+        &mut self,
+        i: usize,
+        t0: f64,
+        t1: f64,
+        dense: Option<&dyn DenseOutput>,
+    ) -> Option<(f64, f64)> {
+        let nv = self.nv;
+        let tol = 1e-9 * (t1 - t0).abs();
+        let r = i * nv..(i + 1) * nv;
+        let mut a = self.dip.start(t0)?[r.clone()].to_vec();
+        let mut b = self.dip.latest_at(t1, tol)?[r].to_vec();
+        let scale = self.ev.row_scale[i].max(f64::MIN_POSITIVE);
+        let norm = |x: &[f64]| x.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let (mut ta, mut tb) = (t0, t1);
+        let (s, m) = chord_min(&a, &b)?;
+        let mut best = (norm(&a).min(norm(&b)) / scale, t0 + s * (t1 - t0));
+        let Some(dense) = dense else {
+            return Some((m / scale, best.1));
+        };
+        let mut bm = vec![0.0; nv];
+        for _ in 0..DipWatch::MAX_ITER {
+            let Some((s, _)) = chord_min(&a, &b) else {
+                break;
+            };
+            let tm = ta + s * (tb - ta);
+            if !(tm > ta && tm < tb) {
+                break;
+            }
+            let mut yb = std::mem::take(&mut self.ybuf);
+            dense.eval(tm, &mut yb);
+            self.chart_to_q(&yb);
+            let q = std::mem::take(&mut self.q);
+            self.ev.prepare(tm, &q, &yb[nv..]);
+            self.q = q;
+            self.ybuf = yb;
+            for k in 0..nv {
+                bm[k] = self.ev.jet.b[(i, k)];
+            }
+            let ratio = norm(&bm) / scale;
+            if !ratio.is_finite() {
+                break;
+            }
+            let improved = ratio < best.0;
+            if improved {
+                best = (ratio, tm);
+            }
+            let ahead: f64 = (0..nv).map(|k| bm[k] * (b[k] - a[k])).sum();
+            if ahead > 0.0 {
+                b.copy_from_slice(&bm);
+                tb = tm;
+            } else {
+                a.copy_from_slice(&bm);
+                ta = tm;
+            }
+            if !improved || tb - ta <= 1e-12 * (t1 - t0) {
+                break;
+            }
+        }
+        Some(best)
+    }
+
+    /// The between-evaluations row test of the step [t0, t1] ([`DipWatch`]): a row whose gradient
+    /// dips below the threshold inside the step raises row_gradient at the located minimum.
+    fn watch_step(
+        &mut self,
+        t0: f64,
+        t1: f64,
+        dense: &dyn DenseOutput,
+        has_dense: bool,
+    ) -> Result<(), Stop> {
+        let rows = self.dip_rows(t0, t1);
+        let threshold = self.settings.conditioning.row_gradient;
+        for i in rows {
+            let Some((ratio, tm)) = self.locate_dip(i, t0, t1, has_dense.then_some(dense)) else {
+                continue;
+            };
+            self.stats.min_row_gradient_ratio = self.stats.min_row_gradient_ratio.min(ratio);
+            if ratio < threshold {
+                let k = self.raise(WarningKind::RowGradient, vec![i], tm, ratio, threshold);
+                self.strict_stop(k)?;
+            }
+        }
+        Ok(())
+    }
+
     /// Record a threshold crossing; returns the index of its warning (new or updated). In strict mode
     /// every crossing is an error, so the integrator's step shrinking localizes the first one.
     fn raise(
@@ -513,7 +744,7 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
             .map(|&i| self.problem.constraints.rows()[i].name.clone())
             .collect();
         let worse = |a: f64, b: f64| match kind {
-            WarningKind::UCancellation => a > b,
+            WarningKind::UCancellation | WarningKind::GlobalError => a > b,
             _ => a < b,
         };
         if let Some(k) = self
@@ -536,6 +767,8 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
             worst: value,
             t_worst: t,
             threshold,
+            error_before: None,
+            error_after: None,
         };
         self.sink.warning(&w);
         self.warnings.push(w);
@@ -734,6 +967,11 @@ impl<'a, M: Model, C: Constraints> OdeProblem for MotionOde<'a, M, C> {
     /// Only interior output times read the dense output (`Output::Every`, the same test as in
     /// `accepted`); with output at step ends or at t1 only, the integrator skips it.
     fn needs_dense(&self, t0: f64, t1: f64) -> bool {
+        // A row gradient whose chord dips inside the step: its minimum is located on the interpolant.
+        if !self.dip_rows(t0, t1).is_empty() {
+            self.dip.asked.set(Some(t0));
+            return true;
+        }
         let Output::Every(dt) = self.settings.output else {
             return false;
         };
@@ -760,6 +998,11 @@ impl<'a, M: Model, C: Constraints> OdeProblem for MotionOde<'a, M, C> {
     ) -> Result<Accept, Stop> {
         let nv = self.nv;
         let (ts, te) = (self.problem.t0, self.problem.t1);
+        // Row gradients between the evaluations (before any output: a strict stop keeps t0 as the
+        // last state). The interpolant is there when `needs_dense` asked for it (Radau: always).
+        let has_dense = self.dip.asked.take() == Some(t0)
+            || matches!(self.settings.integrator, crate::integrate::Method::Radau5);
+        self.watch_step(t0, t1, dense, has_dense)?;
         // Interior output times from the dense output (before any projection of the step end).
         if let Output::Every(dt) = self.settings.output {
             loop {
@@ -836,6 +1079,7 @@ impl<'a, M: Model, C: Constraints> OdeProblem for MotionOde<'a, M, C> {
             let (q, v) = (self.q.clone(), self.v.clone());
             self.emit(t1, &q, &v)?;
         }
+        self.dip.step_done(t1, 1e-9 * (t1 - t0));
         // A stop request, or a step rate that cannot reach te, ends the run at this step (unless
         // it completed the span).
         if t1 < te {

@@ -149,6 +149,8 @@ pub struct Overrides {
     pub max_samples: Option<usize>,
     pub strict: Option<bool>,
     pub assemble: Option<bool>,
+    /// [`Settings::richardson`] (the global error estimate of a fixed-step solve).
+    pub richardson: Option<bool>,
 }
 
 /// An override that does not name a method of the vocabulary.
@@ -238,6 +240,7 @@ impl Settings {
         s.max_samples = o.max_samples.unwrap_or(s.max_samples);
         s.strict = o.strict.unwrap_or(s.strict);
         s.assemble = o.assemble.unwrap_or(s.assemble);
+        s.richardson = o.richardson.unwrap_or(s.richardson);
         Ok(s)
     }
 }
