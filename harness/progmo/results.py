@@ -17,7 +17,9 @@ Statuses (``status``); the run's verdict adds ``regression`` (a pass worse than 
   that blew up): a failure of the run, with ``reason``.
 
 ``span`` is the replayed time span against the scene's (a shortened ``replay_horizon`` is visible
-in every verdict); ``warnings`` are the solver's conditioning warnings on the reference solve.
+in every verdict); ``warnings`` are the solver's conditioning warnings on the reference solve;
+``supplied`` names the system rows whose reactions progmo supplied to the simulator (visible in the
+report row and the summary line).
 """
 
 from __future__ import annotations
@@ -92,6 +94,10 @@ class CheckResult:
     warnings: list[str] = field(default_factory=list)
     #: facts that are not judged (replay step, growth rate of the open-loop deviation, ...)
     info: dict[str, float] = field(default_factory=dict)
+    #: system rows the simulator's model leaves out, their reactions supplied by progmo (applied
+    #: forces from the reference solve; ``checks._supplied_route``): shown in the report row and
+    #: the summary line
+    supplied: list[str] = field(default_factory=list)
 
     def ok(self) -> bool:
         """True unless the nightly job must fail on this result."""

@@ -12,7 +12,9 @@ scene itself (to evaluate its expression forces at the simulator's own states):
   rows ``B[programme]``);
 * ``closure_jacobian(t, q, v)`` the simulator's Jacobian of the scene's loop closures (rows in its
   own order and frame) in OUR v, and ``closure_forces(t, q, v, u)`` its closure multipliers under u;
-* ``replay(ref, record_frames) -> Replay`` open-loop replay of ``ref.u`` (u at each RK4 stage).
+* ``replay(ref, record_frames) -> Replay`` open-loop replay of ``ref.u`` (u at each RK4 stage;
+  ``Reference.force_at`` adds the reactions progmo supplies for rows the document leaves out, the
+  report's ``supplied_reaction``).
 
 A back-end that meets a harness force it cannot apply raises :class:`Unsupported` naming it, and
 the check becomes ``not_checked``: a model the simulator does not share never passes.
@@ -25,7 +27,7 @@ from typing import Any, Protocol
 import numpy as np
 
 #: Harness-force kinds of the export report (``src/export/mod.rs``, ``HarnessForce``).
-FORCE_KINDS = ("attractor", "spring", "damper", "point_force", "coordinate_force")
+FORCE_KINDS = ("attractor", "spring", "damper", "point_force", "coordinate_force", "supplied_reaction")
 
 
 class BlowUp(RuntimeError):
