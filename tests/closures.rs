@@ -200,7 +200,7 @@ fn bad_closures_are_located() {
         ),
         (
             "[[model.closures]]\nname = \"c\"\nkind = \"point\"\nbody_a = \"l2\"\naxis = [1.0, 0.0, 0.0]\n",
-            "model.closures[0].axis: `axis` belongs to `line` and `plane` closures",
+            "model.closures[0].axis: `axis` belongs to `line`, `plane` and `rolling` closures",
         ),
         // Tip of the straightened chain held 1 m away from where it is: not assembled.
         (

@@ -275,6 +275,8 @@ fn the_maximal_examples_load_match_the_schema_and_use_every_key() {
         // `[[actuators]]` with every key (servo-constraints): a joint, a direction.
         include_str!("../references/scenes/two_car_chain.toml"),
         include_str!("../references/scenes/thruster_cars.toml"),
+        // a `rolling` closure (radius, normal, a disk's axis)
+        include_str!("../references/scenes/rolling_disk.toml"),
     ];
     for text in examples {
         Scene::from_text(Path::new("maximal"), text).unwrap_or_else(|e| panic!("{e}"));

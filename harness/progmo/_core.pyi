@@ -255,7 +255,8 @@ class Scene:
         v: F64 | None = None,
     ) -> float:
         """Wall-clock seconds per right-hand side (dv/dt and u), looped in Rust, at (t0, q0, v0) by default."""
-    def export(self, format: Literal["mjcf", "urdf"], *, timestep: float = 1e-3) -> tuple[str, dict[str, Any]]: ...
+    def export(self, format: Literal["mjcf", "urdf"], *, timestep: float = 1e-3,
+               supply_reactions: bool = False) -> tuple[str, dict[str, Any]]: ...
     def body_poses(self, q: F64) -> list[tuple[str, list[float], list[float]]]:
         """World pose of every body at q: (name, position, quaternion w x y z); [] for a lagrangian scene."""
     def scene_update(self, q: F64, prefix: str, alpha: float = 1.0, targets: bool = True) -> dict[str, Any] | None:

@@ -12,9 +12,14 @@ A check is a sequence of small steps over a typed back-end (``simulators.Backend
 
 1. **Scene**: load it; the solver's verdict on the initial state (the located message ``progmo
    solve`` gives); a declared ``not_checked``.
-2. **Export** (``Scene.export``): refused for what no simulator document carries (lagrangian models,
-   system constraints) -> ``not_checked``; every force the back-end must apply itself is in the
-   report, and a back-end that cannot apply one says so (``Unsupported``) -> ``not_checked``.
+2. **Export** (``Scene.export``): refused for what no simulator document carries (lagrangian models)
+   -> ``not_checked``; every force the back-end must apply itself is in the report, and a back-end
+   that cannot apply one says so (``Unsupported``) -> ``not_checked``. System rows no simulator
+   holds (expression ``[[constraints]]``, nonholonomic or not; ``distance``, ``line``, ``plane``,
+   ``rolling`` closures) are left out of the document and their **reactions supplied by progmo**
+   (:func:`supplied_reactions`): the generalized reaction B_s^T lambda_s of the reference solve,
+   applied with u at every stage time (open loop), named in the result (``supplied``), the notes,
+   the report row and the summary line; everything else in the model is checked as usual.
    A scene whose model is a robot file (``kind = "urdf"``/``"mjcf"``) takes the route "user's
    file" (``CheckResult.route``): the back-end reads that file itself (``simulators.robot_file``)
    and the export only supplies the coordinate names and the scene's forces. Elements of the file
@@ -57,6 +62,7 @@ max(1, |x_ref|)). It is a verdict of its own, shown as such in the report, never
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import math
 import time as _time
@@ -183,6 +189,8 @@ class _Check:
     #: robot-file route: parity over random states (metric -> value), worst joints (metric -> name)
     file_parity: dict[str, float] = field(default_factory=dict)
     worst_joint: dict[str, str] = field(default_factory=dict)
+    #: system rows whose reactions progmo supplies (export report ``supplied_reaction``)
+    supplied: list[str] = field(default_factory=list)
 
 
 class _Stop(Exception):
@@ -263,11 +271,12 @@ def _export(c: _Check) -> None:
     except ImportError as e:
         raise _Stop("error", f"simulator package for {c.simulator} is not importable: {e}") from None
     try:
-        doc, report = c.scene.export(fmt)
+        doc, report = c.scene.export(fmt, supply_reactions=True)
     except ExportUnsupported as e:
         raise _Stop("not_checked", f"{fmt.upper()} export: {e}") from None
     except ValueError as e:
         raise _Stop("error", f"export failed: {e}") from None
+    _supplied_route(c, report)
     if c.corrupt_export is not None:
         doc = c.corrupt_export(doc)
     robot = _robot_route(c)
@@ -283,6 +292,35 @@ def _export(c: _Check) -> None:
     c.res.notes += c.backend.notes()
     if c.withhold:
         c.res.notes.append("NEGATIVE CONTROL: withheld from the simulator: " + ", ".join(c.withhold))
+
+
+def _supplied_route(c: _Check, report: dict) -> None:
+    """Name the rows whose reactions progmo supplies (export report ``supplied_reaction``), visibly:
+    the result's ``supplied`` (report row, summary line) and a note with the reason."""
+    for hf in report.get("harness_forces", []):
+        if hf["kind"] != "supplied_reaction":
+            continue
+        c.supplied += list(hf["rows"])
+        c.res.notes.append(
+            f"reactions of rows {', '.join(hf['rows'])} supplied by progmo: {hf['reason']}. The "
+            f"{c.simulator} model leaves these rows out and receives their generalized reaction "
+            "B_s^T lambda_s from the reference solve at every RK4 stage time, with u (open loop); "
+            "their residual on the replay is measured (replay_residual, info "
+            "replay_supplied_residual), not enforced by the simulator; model parity and instant_u "
+            "(against u + B_s^T lambda_s) judge everything else")
+    c.res.supplied = list(c.supplied)
+    if c.supplied and "supplied_reaction" in c.withhold:
+        c.res.notes.append("NEGATIVE CONTROL: the supplied reactions are withheld from the replay")
+
+
+def supplied_reactions(scene: Any, rows: list[str], t: np.ndarray, q: np.ndarray, v: np.ndarray,
+                       lam: np.ndarray) -> np.ndarray:
+    """B_s^T lambda_s at every sample (K x nv): the generalized reaction of ``rows`` (the core's
+    jet B at the sample's state, the solver's multipliers ``lam``, K x s, in scene row order)."""
+    names = [r["name"] for r in scene.rows]
+    idx = [names.index(r) for r in rows]
+    return np.array([np.asarray(scene.dynamics(float(tk), qk, vk)["B"])[idx].T @ lam[k, idx]
+                     for k, (tk, qk, vk) in enumerate(zip(t, q, v))])
 
 
 def _budgets(c: _Check) -> None:
@@ -331,11 +369,21 @@ def _solve_reference(c: _Check, h: float):
         m = len(scene.actuators)
         ref.actuation = lambda tk, qk: np.asarray(scene.actuation_map_at(tk, qk))
         ref.tau, ref.u_model = lam[:, :m], u_model
+    if c.supplied:  # rows the simulator does not hold: their reactions, from this solve
+        ref.supplied = supplied_reactions(scene, c.supplied, t, ref.q, ref.v, lam)
     return ref
 
 
 def _replay_of(c: _Check, ref):
-    return c.backend.replay(ref, _frame_every(c, ref))
+    return c.backend.replay(_replay_ref(c, ref), _frame_every(c, ref))
+
+
+def _replay_ref(c: _Check, ref):
+    """The reference the replay feeds: without the supplied reactions when they are withheld (negative
+    control)."""
+    if ref.supplied is not None and "supplied_reaction" in c.withhold:
+        ref = dataclasses.replace(ref, supplied=None)
+    return ref
 
 
 def _replay_residual(c: _Check, ref, rp) -> np.ndarray:
@@ -406,6 +454,9 @@ def _parity(c: _Check) -> None:
     sRc = 0.0
     names = [r["name"] for r in scene.rows]
     programme = [i for i, r in enumerate(scene.rows) if r["role"] == "programme"]
+    # supplied rows: the simulator derives their force with the programme's (u + B_s^T lambda_s)
+    programme += [names.index(r) for r in c.supplied]
+    applied = ref.u if ref.supplied is None else ref.u + ref.supplied
     closures = be.report.get("closures", [])
     closure_idx = [names.index(r) for cl in closures for r in cl["rows"] if r not in cl["set_aside"]]
     for k in idx:
@@ -422,28 +473,29 @@ def _parity(c: _Check) -> None:
         B = np.asarray(dyn["B"])
         us = be.instant_u(tk, qk, vk, ak, B, np.asarray(dyn["gamma"]), programme,
                           actuated=bool(scene.actuators))
-        dU.append(float(np.abs(us - ref.u[k]).max()))
-        diffs["instant_u"].append(us - ref.u[k])
+        dU.append(float(np.abs(us - applied[k]).max()))
+        diffs["instant_u"].append(us - applied[k])
         if closures:
             Jsim = be.closure_jacobian(tk, qk, vk)
             dJ.append(row_space_distance(B[closure_idx], Jsim))
             closure_jac.append((B[closure_idx], Jsim))
             # closure reactions: ours B_c^T lambda_c; the simulator's J^T f under the same u
             ours_r = B[closure_idx].T @ np.asarray(ref.lam[k])[closure_idx]
-            sim_r = Jsim.T @ be.closure_forces(tk, qk, vk, ref.u[k])
+            sim_r = Jsim.T @ be.closure_forces(tk, qk, vk, applied[k])
             dR.append(float(np.abs(sim_r - ours_r).max()))
             diffs["reaction_closure"].append(sim_r - ours_r)
             sRc = max(sRc, float(np.abs(ours_r).max()))
     sR = sR if sR > 0 else 1.0
     # u relative to its own scale; without a programme (u = 0) relative to the forces.
-    uabs = float(np.abs(ref.u).max()) if ref.u.size else 0.0
+    uabs = float(np.abs(applied).max()) if applied.size else 0.0
     sU = uabs if uabs > 0 else sR
     pm, pb, iu = np.array(dmt) / max(sM, 1e-300), np.array(drt) / sR, np.array(dU) / sU
     c.res.metrics.update(parity_mass=float(pm.max()), parity_bias=float(pb.max()), instant_u=float(iu.max()))
     for m in ("parity_mass", "parity_bias"):  # a robot file's parity also covers random states
         c.res.metrics[m] = max(c.res.metrics[m], c.file_parity.get(m, 0.0))
+    uname = "max|u + B_s^T lambda_s|" if c.supplied else "max|u|"
     c.res.notes.append(f"parity scales: max|A| {sM:.3g}, max|G+Q| {sR:.3g}; instant_u scale "
-                       f"{'max|u|' if uabs > 0 else 'max|G+Q| (u = 0)'} {sU:.3g}; {len(idx)} sample states")
+                       f"{uname if uabs > 0 else 'max|G+Q| (u = 0)'} {sU:.3g}; {len(idx)} sample states")
     c.first = {"parity_mass": (times, pm), "parity_bias": (times, pb), "instant_u": (times, iu)}
     gate = ["parity_mass", "parity_bias"]
     if closures:
@@ -574,7 +626,7 @@ def _probe(c: _Check, base, base_dev: np.ndarray) -> Probe:
     exp(Lambda(t) - Lambda(s)) at t; Lambda(T) / T is the finite-time Lyapunov exponent."""
     from .simulators import BlowUp
 
-    ref, be, cm = c.ref, c.backend, c.backend.cm
+    ref, be, cm = _replay_ref(c, c.ref), c.backend, c.backend.cm
     n, nq = ref.steps, ref.q.shape[1]
     ks = np.unique(np.linspace(0, n, min(PROBE_CHUNKS, n) + 1).round().astype(int))
     rng = np.random.default_rng(0)
@@ -668,7 +720,7 @@ def _replay(c: _Check) -> None:
     from .simulators import BlowUp
     from .simulators.replay import downsample, quat_aware_diff
 
-    scene, ref, be, res = c.scene, c.ref, c.backend, c.res
+    scene, ref, be, res = c.scene, _replay_ref(c, c.ref), c.backend, c.res
     t0r = _time.perf_counter()
     fe = _frame_every(c, ref)
     # the continuous open-loop replay: judged when the span is one segment, else information
@@ -732,6 +784,10 @@ def _replay(c: _Check) -> None:
         names = [r["name"] for r in scene.rows]
         ci = [names.index(r) for cl in closures for r in cl["rows"] if r not in cl["set_aside"]]
         res.info["replay_closure_residual"] = float(max(np.abs(p[2][:, ci]).max() for p in parts))
+    if c.supplied and R.shape[1]:  # the supplied rows alone: how well their reactions held them
+        names = [r["name"] for r in scene.rows]
+        si = [names.index(r) for r in c.supplied]
+        res.info["replay_supplied_residual"] = float(max(np.abs(p[2][:, si]).max() for p in parts))
     res.metrics["replay_deviation"] = float(max(p[4].max() for p in parts))
     rq, rv = ref.q[::2][: len(rp.t)], ref.v[::2][: len(rp.t)]  # the joined replay: a sample per step
     c.where["replay_deviation"] = attribution.deviation(

@@ -346,6 +346,8 @@ def _progress(i: int, n: int, r: CheckResult, run: rp.Run) -> str:
         line += f" [checked {r.span_text()}]"
     if r.warnings:
         line += f" [{len(r.warnings)} solver warning(s)]"
+    if r.supplied:
+        line += f" [reactions of {', '.join(r.supplied)} supplied by progmo]"
     return line
 
 

@@ -148,6 +148,16 @@ class Run:
         checked = t["pass"] > 0  # a run that checked nothing proves nothing
         return checked and all(n == 0 for k, n in t.items() if k not in OK_VERDICTS)
 
+    def supplied(self) -> dict[str, list[str]]:
+        """Scenes whose checks received the reactions of rows the simulator's model leaves out
+        (``CheckResult.supplied``), with the rows."""
+        out: dict[str, list[str]] = {}
+        for r in self.results:
+            if r.supplied:
+                out.setdefault(r.scene, [])
+                out[r.scene] += [x for x in r.supplied if x not in out[r.scene]]
+        return out
+
     def coverage(self) -> str:
         """What the verdict covers, in one line: counts of every (scene x simulator) cell, the
         declared not_checked cells, shortened replay spans (``--horizon``), segmented replays and
@@ -174,6 +184,10 @@ class Run:
 
             rest.append(f"replayed in segments restarted from the solver (open-loop growth beyond "
                         f"x{SEGMENT_GROWTH:g}): " + ", ".join(segmented))
+        supplied = self.supplied()
+        if supplied:
+            rest.append("reactions supplied by progmo for rows no simulator holds: " + ", ".join(
+                f"{s} ({', '.join(rows)})" for s, rows in supplied.items()))
         warned = sorted({r.scene for r in self.results if r.warnings})
         if warned:
             rest.append("solver conditioning warnings: " + ", ".join(warned))
@@ -469,7 +483,10 @@ def render_html(run: Run) -> str:
         a(f"<th>{_e(m)}</th>")
     a("<th>checked span</th><th>max residual</th><th>worst budget use</th><th>warnings</th></tr></thead><tbody>")
     for s in run.scene_names():
-        a(f"<tr><td><a href='#{_anchor(s)}'>{_e(s)}</a></td>")
+        sup = run.supplied().get(s)
+        a(f"<tr><td><a href='#{_anchor(s)}'>{_e(s)}</a>"
+          + (f" <span class='small'>reactions of {_e(', '.join(sup))} supplied by progmo</span>" if sup else "")
+          + "</td>")
         res: list[float] = []
         use: list[float] = []
         spans: list[str] = []
@@ -669,7 +686,9 @@ def render_markdown(run: Run) -> str:
                 warns.update(r.warnings)
                 if r.route:
                     routes.append(r.route)
-        lines.append(f"| {_md(s)} | " + " | ".join(cells) + f" | {_md(' / '.join(dict.fromkeys(spans)))} | "
+        sup = run.supplied().get(s)
+        name = s + (f" (reactions of {', '.join(sup)} supplied by progmo)" if sup else "")
+        lines.append(f"| {_md(name)} | " + " | ".join(cells) + f" | {_md(' / '.join(dict.fromkeys(spans)))} | "
                      f"{fmt(max(res)) if res else ''} | {len(warns) or ''} | {_md(' / '.join(dict.fromkeys(routes)))} |")
     declared = [(r.scene, r.simulator, r.reason) for r in run.results if run.verdict(r) == "declared"]
     if declared:

@@ -18,7 +18,9 @@ Statuses (``status``); the run's verdict adds ``regression`` (a pass worse than 
 
 ``span`` is the replayed time span against the scene's (the whole span, in segments for an unstable
 programme; shorter only when a run asks for it with ``--horizon`` or the replay blew up, and then
-visible in every verdict); ``warnings`` are the solver's conditioning warnings on the reference solve.
+visible in every verdict); ``warnings`` are the solver's conditioning warnings on the reference solve;
+``supplied`` names the system rows whose reactions progmo supplied to the simulator (visible in the
+report row and the summary line).
 """
 
 from __future__ import annotations
@@ -107,6 +109,10 @@ class CheckResult:
     #: where the simulator's model came from: "user's file" (the scene's URDF/MJCF read by the
     #: simulator itself), "progmo export" (progmo's MJCF/URDF of its model), "" (not built)
     route: str = ""
+    #: system rows the simulator's model leaves out, their reactions supplied by progmo (applied
+    #: forces from the reference solve; ``checks._supplied_route``): shown in the report row and
+    #: the summary line
+    supplied: list[str] = field(default_factory=list)
 
     def ok(self) -> bool:
         """True unless the nightly job must fail on this result."""

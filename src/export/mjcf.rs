@@ -26,7 +26,7 @@ pub fn mjcf(tree: &Model, options: &ExportOptions) -> Result<(String, ExportRepo
 /// [`mjcf`] with loop closures (see [`ClosureExport`]): sites, `<equality>` elements, equality
 /// enabled and the constraint solver at its tightest (Newton, 200 iterations, tolerance 1e-15).
 /// A `distance` closure is [`ExportError::Unsupported`]: MuJoCo offers no exact one; nor does it
-/// offer a point on a line or in a plane (`line`, `plane`).
+/// offer a point on a line or in a plane (`line`, `plane`) or rolling without slip (`rolling`).
 pub fn mjcf_closed(
     tree: &Model,
     closures: &[ClosureExport],
@@ -57,6 +57,16 @@ pub fn mjcf_closed(
                  on a line or in a plane of another body (connect, weld, joint, tendon and flex \
                  only): the scene stays solver-only in MuJoCo",
                 c.kind, c.name, options.name
+            ),
+        });
+    }
+    if let Some(c) = closures.iter().find(|c| c.kind == "rolling") {
+        return Err(ExportError::Unsupported {
+            format: Format::Mjcf,
+            what: format!(
+                "rolling closure '{}' of scene '{}': MuJoCo has no rolling constraint (its \
+                 contacts are soft and frictional, never an exact no-slip row)",
+                c.name, options.name
             ),
         });
     }
@@ -318,7 +328,9 @@ fn write_equalities(x: &mut String, closures: &[ClosureExport], o: &ExportOption
                     "    <weld name=\"{n}\" site1=\"{a}\" site2=\"{b}\" torquescale=\"1\" {soft}/>"
                 );
             }
-            _ => unreachable!("distance, line and plane closures are refused before writing"),
+            _ => unreachable!(
+                "distance, line, plane and rolling closures are refused before writing"
+            ),
         }
     }
     let _ = writeln!(x, "  </equality>");

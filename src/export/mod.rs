@@ -285,6 +285,17 @@ pub enum HarnessForce {
     /// A scene generalized force on our velocity coordinate `v_name` (expression). The harness
     /// evaluates it (`Scene.expression_forces`) and maps it to the simulator's dofs.
     CoordinateForce { v_name: String, expr: String },
+    /// The generalized reaction B_s^T lambda_s of system rows the document leaves out because no
+    /// simulator holds them (`Scene::export_supplying`), computed by progmo: the harness takes
+    /// lambda_s of these rows from the solver's reference at each stage time and applies the
+    /// force on our velocity coordinates, like u (open loop). The rows' residual on the replay is
+    /// then a measurement, not a constraint of the simulator.
+    SuppliedReaction {
+        /// The rows (scene row names, role system).
+        rows: Vec<String>,
+        /// Why no simulator holds them (one clause per closure or group of rows).
+        reason: String,
+    },
 }
 
 /// Correspondence of one of our q or v entries with a simulator entry.

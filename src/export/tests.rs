@@ -913,6 +913,7 @@ fn urdf_complex_model() {
             } => format!("damper {joint} {sim_v} {nv}"),
             HarnessForce::PointForce { body, .. } => format!("point force {body}"),
             HarnessForce::CoordinateForce { v_name, .. } => format!("coordinate force {v_name}"),
+            HarnessForce::SuppliedReaction { rows, .. } => format!("supplied {rows:?}"),
         })
         .collect();
     assert_eq!(

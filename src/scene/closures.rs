@@ -9,7 +9,15 @@
 //! - `distance`: |p_a - p_b| - d = 0 (NAME);
 //! - `line`: e_1 . (p_a - p_b) = 0, e_2 . (p_a - p_b) = 0 (NAME_u, NAME_v), e_1, e_2 = R_b times
 //!   two unit vectors perpendicular to the line's direction in body b ([`perpendiculars`]);
-//! - `plane`: n . (p_a - p_b) = 0 (NAME), n = R_b times the unit normal in body b.
+//! - `plane`: n . (p_a - p_b) = 0 (NAME), n = R_b times the unit normal in body b;
+//! - `rolling`: body a (a disk of `radius` about `axis` in body a, or a sphere without `axis`)
+//!   centred at point_a rolls without slipping on the world plane through point_b with unit
+//!   normal n (`normal`): the contact height n . (c - p_b) - r_n = 0 (NAME_n, holonomic) and the
+//!   contact point's velocity along e_1, e_2 (perpendicular to n, [`perpendiculars`]) zero,
+//!   e_i . (c' + w x r_c) = 0 (NAME_u, NAME_v, nonholonomic); c the centre, w the body's world
+//!   angular velocity, r_c the centre-to-contact vector: sphere -r n (r_n = r); disk
+//!   -r k / |k|, k = n - (n . a) a, a = R_a axis, |k| = sqrt(1 - (n . a)^2) (r_n = r |k|). The
+//!   normal component of the contact velocity is the height's rate, so it is not a row of its own.
 //!
 //! R_b is body b's rotation written from its quaternion signals (`NAME__b.qw`, ...), the identity
 //! for the world, so a line or plane carried by a moving body turns with it.
@@ -47,6 +55,9 @@ pub enum ClosureKind {
     Line,
     /// A point of body a stays in a plane of body b (1 row).
     Plane,
+    /// A disk or a sphere of body a rolls without slipping on a world plane (3 rows: contact
+    /// height, two tangential no-slip rows).
+    Rolling,
 }
 
 impl ClosureKind {
@@ -58,6 +69,7 @@ impl ClosureKind {
             ClosureKind::Distance => "distance",
             ClosureKind::Line => "line",
             ClosureKind::Plane => "plane",
+            ClosureKind::Rolling => "rolling",
         }
     }
 }
@@ -77,9 +89,13 @@ pub struct Closure {
     pub quat_b: [f64; 4],
     /// `distance` only.
     pub distance: Option<f64>,
-    /// `line` (direction) and `plane` (normal) only: unit vector in body b's frame (world frame
-    /// for the world).
+    /// `line` (direction) and `plane` (normal): unit vector in body b's frame (world frame for the
+    /// world); `rolling`: the disk's axis in body a's frame (None: a sphere).
     pub axis: Option<[f64; 3]>,
+    /// `rolling` only: the disk's or sphere's radius (m).
+    pub radius: Option<f64>,
+    /// `rolling` only: the plane's unit normal (world frame).
+    pub normal: Option<[f64; 3]>,
 }
 
 /// A closure row set aside as dependent at t0, with why.
@@ -138,13 +154,14 @@ pub(super) fn load(
             "distance" => ClosureKind::Distance,
             "line" => ClosureKind::Line,
             "plane" => ClosureKind::Plane,
+            "rolling" => ClosureKind::Rolling,
             other => {
                 return Err(src.error(
                     cf.kind.span(),
                     &format!("{field}.kind"),
                     format!(
                         "unknown closure kind `{other}`: expected `point`, `weld`, `distance`, \
-                         `line` or `plane`"
+                         `line`, `plane` or `rolling`"
                     ),
                 ))
             }
@@ -207,17 +224,22 @@ pub(super) fn load(
             }
             (_, None) => None,
         };
-        let axis = match (kind, cf.axis) {
-            (ClosureKind::Line | ClosureKind::Plane, Some(a)) => {
-                let n = a.iter().map(|x| x * x).sum::<f64>().sqrt();
-                if !(n.is_finite() && n > 0.0) {
-                    return Err(err(
-                        "axis",
-                        format!("the axis must be finite and nonzero, not {a:?}"),
-                    ));
-                }
-                Some(a.map(|x| x / n))
+        let unit = |a: [f64; 3], key: &str| {
+            let n = a.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if n.is_finite() && n > 0.0 {
+                Ok(a.map(|x| x / n))
+            } else {
+                Err(err(
+                    key,
+                    format!("the {key} must be finite and nonzero, not {a:?}"),
+                ))
             }
+        };
+        let axis = match (kind, cf.axis) {
+            (ClosureKind::Line | ClosureKind::Plane | ClosureKind::Rolling, Some(a)) => {
+                Some(unit(a, "axis")?)
+            }
+            (ClosureKind::Rolling, None) => None,
             (ClosureKind::Line | ClosureKind::Plane, None) => {
                 return Err(err(
                     "axis",
@@ -231,10 +253,37 @@ pub(super) fn load(
             (_, Some(_)) => {
                 return Err(err(
                     "axis",
-                    "`axis` belongs to `line` and `plane` closures".into(),
+                    "`axis` belongs to `line`, `plane` and `rolling` closures".into(),
                 ))
             }
             (_, None) => None,
+        };
+        let (radius, normal) = if kind == ClosureKind::Rolling {
+            if body_b.is_some() {
+                return Err(err(
+                    "body_b",
+                    "a `rolling` closure rolls on a world plane: body_b must be `world`".into(),
+                ));
+            }
+            let r = match cf.radius {
+                Some(r) if r.is_finite() && r > 0.0 => r,
+                Some(r) => return Err(err("radius", format!("the radius must be > 0, not {r}"))),
+                None => return Err(err("radius", "a `rolling` closure needs `radius`".into())),
+            };
+            (
+                Some(r),
+                Some(unit(cf.normal.unwrap_or([0.0, 0.0, 1.0]), "normal")?),
+            )
+        } else {
+            for (key, given) in [
+                ("radius", cf.radius.is_some()),
+                ("normal", cf.normal.is_some()),
+            ] {
+                if given {
+                    return Err(err(key, format!("`{key}` belongs to `rolling` closures")));
+                }
+            }
+            (None, None)
         };
         for (side, body, point) in [('a', Some(body_a), cf.point_a), ('b', body_b, cf.point_b)] {
             let Some(body) = body else { continue };
@@ -265,6 +314,8 @@ pub(super) fn load(
             quat_b,
             distance,
             axis,
+            radius,
+            normal,
         };
         for (name, expr) in closure.rows() {
             let row = RowFile {
@@ -286,6 +337,7 @@ impl Closure {
             ClosureKind::Weld => 6,
             ClosureKind::Distance | ClosureKind::Plane => 1,
             ClosureKind::Line => 2,
+            ClosureKind::Rolling => 3,
         }
     }
 
@@ -315,6 +367,7 @@ impl Closure {
         };
         let axis = self.axis.unwrap_or([0.0, 0.0, 1.0]);
         match self.kind {
+            ClosureKind::Rolling => self.rolling_rows(&a),
             ClosureKind::Plane => vec![(n.clone(), dot(world(axis)))],
             ClosureKind::Line => {
                 let (e1, e2) = perpendiculars(axis);
@@ -361,6 +414,57 @@ impl Closure {
                 rows
             }
         }
+    }
+}
+
+impl Closure {
+    /// The rows of a `rolling` closure (module doc) over the centre site `a`'s signals.
+    fn rolling_rows(&self, a: &str) -> Vec<(String, String)> {
+        let n = self.normal.unwrap_or([0.0, 0.0, 1.0]);
+        let r = self.radius.unwrap_or(0.0);
+        let c = ["x", "y", "z"].map(|k| format!("{a}.{k}"));
+        let (e1, e2) = perpendiculars(n);
+        // centre-to-contact vector r_c and the contact's height above the centre r_n
+        let (rc, rn): ([String; 3], String) = match self.axis {
+            None => (n.map(|x| num(-r * x)), num(r)),
+            Some(axis) => {
+                let aw = rotate(&["qw", "qx", "qy", "qz"].map(|k| format!("{a}.{k}")), axis);
+                let s = (0..3)
+                    .map(|k| format!("{}*({})", num(n[k]), aw[k]))
+                    .collect::<Vec<_>>()
+                    .join(" + ");
+                let norm = format!("sqrt(1 - ({s})^2)");
+                let rc = [0, 1, 2]
+                    .map(|k| format!("{}*({} - ({s})*({}))/{norm}", num(-r), num(n[k]), aw[k]));
+                (rc, format!("{}*{norm}", num(r)))
+            }
+        };
+        let height = (0..3)
+            .map(|k| format!("{}*({} - {})", num(n[k]), c[k], num(self.point_b[k])))
+            .collect::<Vec<_>>()
+            .join(" + ");
+        let w = ["wx", "wy", "wz"].map(|k| format!("{a}.{k}"));
+        // contact velocity c' + w x r_c
+        let vc = [0, 1, 2].map(|i| {
+            let (j, k) = ((i + 1) % 3, (i + 2) % 3);
+            format!(
+                "{}' + ({})*({}) - ({})*({})",
+                c[i], w[j], rc[k], w[k], rc[j]
+            )
+        });
+        let along = |e: [f64; 3]| {
+            (0..3)
+                .filter(|&k| e[k] != 0.0)
+                .map(|k| format!("{}*({})", num(e[k]), vc[k]))
+                .collect::<Vec<_>>()
+                .join(" + ")
+        };
+        let name = &self.name;
+        vec![
+            (format!("{name}_n"), format!("{height} - {rn}")),
+            (format!("{name}_u"), along(e1)),
+            (format!("{name}_v"), along(e2)),
+        ]
     }
 }
 

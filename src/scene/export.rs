@@ -9,6 +9,10 @@ use crate::export::{
 };
 use crate::programme::Role;
 
+/// Closure kinds the simulators hold (MuJoCo equalities, Pinocchio constraint models); the rows of
+/// the others are supplied by [`Scene::export_supplying`].
+pub const HELD_CLOSURES: [&str; 2] = ["point", "weld"];
+
 impl Scene {
     /// Export the scene's model to `format`. The report lists, besides the tree's own harness
     /// forces, every expression force of the scene ([`HarnessForce::PointForce`],
@@ -22,6 +26,30 @@ impl Scene {
         format: Format,
         options: &ExportOptions,
     ) -> Result<(String, ExportReport), ExportError> {
+        self.export_route(format, options, false)
+    }
+
+    /// Export with the reactions of the system rows no simulator holds supplied by progmo: those
+    /// rows (expression `[[constraints]]`, nonholonomic or not, and the rows of `distance`,
+    /// `line`, `plane` and `rolling` closures) are left out of the document, and the report lists
+    /// them as one [`HarnessForce::SuppliedReaction`]: the harness applies their generalized
+    /// reaction B_s^T lambda_s from the solver as a coordinate force, so the rest of the model
+    /// (inertia, forces, programme, the closures the simulator does hold) is still checked. Without
+    /// such rows it is [`Scene::export`]; lagrangian models are refused as there.
+    pub fn export_supplying(
+        &self,
+        format: Format,
+        options: &ExportOptions,
+    ) -> Result<(String, ExportReport), ExportError> {
+        self.export_route(format, options, true)
+    }
+
+    fn export_route(
+        &self,
+        format: Format,
+        options: &ExportOptions,
+        supply: bool,
+    ) -> Result<(String, ExportReport), ExportError> {
         let p = match &self.system {
             SceneSystem::Tree(p) => p,
             SceneSystem::Lagrangian(_) => {
@@ -33,7 +61,13 @@ impl Scene {
                 })
             }
         };
-        let closures = self.closure_exports();
+        let all = self.closure_exports();
+        let (closures, left_out): (Vec<ClosureExport>, Vec<ClosureExport>) = if supply {
+            all.into_iter()
+                .partition(|c| HELD_CLOSURES.contains(&c.kind.as_str()))
+        } else {
+            (all, vec![])
+        };
         let closure_rows: Vec<&String> = closures.iter().flat_map(|c| &c.rows).collect();
         let system: Vec<String> = self
             .rows()
@@ -41,7 +75,40 @@ impl Scene {
             .filter(|r| r.role == Role::System && !closure_rows.contains(&&r.name))
             .map(|r| r.name)
             .collect();
-        if !system.is_empty() {
+        let supplied = if supply && !system.is_empty() {
+            let mut why = vec![];
+            let in_closures: Vec<&String> = left_out.iter().flat_map(|c| &c.rows).collect();
+            let plain: Vec<String> = system
+                .iter()
+                .filter(|r| !in_closures.contains(r))
+                .cloned()
+                .collect();
+            if !plain.is_empty() {
+                why.push(format!(
+                    "system constraints {} (no simulator element holds an expression row)",
+                    crate::solve::quoted(&plain)
+                ));
+            }
+            for c in &left_out {
+                why.push(format!(
+                    "{} closure `{}` ({})",
+                    c.kind,
+                    c.name,
+                    match c.kind.as_str() {
+                        "distance" => "MuJoCo's tendon equality leaves out its curvature term;                                        no Pinocchio constraint model",
+                        "rolling" => "no rolling contact in MuJoCo or Pinocchio",
+                        _ => "no such equality in MuJoCo, no such constraint model in Pinocchio",
+                    }
+                ));
+            }
+            Some(HarnessForce::SuppliedReaction {
+                rows: system.clone(),
+                reason: why.join("; "),
+            })
+        } else {
+            None
+        };
+        if !system.is_empty() && supplied.is_none() {
             return Err(ExportError::Unsupported {
                 format,
                 what: format!(
@@ -71,6 +138,7 @@ impl Scene {
                 expr: e.source().to_string(),
             });
         }
+        report.harness_forces.extend(supplied);
         Ok((doc, report))
     }
 

@@ -29,7 +29,7 @@ pub const TREE_ONLY: [&str; 6] = [
     "closures",
 ];
 /// Loop-closure kinds (`kind` of a `[[model.closures]]` entry).
-pub const CLOSURE_KINDS: [&str; 5] = ["point", "weld", "distance", "line", "plane"];
+pub const CLOSURE_KINDS: [&str; 6] = ["point", "weld", "distance", "line", "plane", "rolling"];
 /// Joint types (`type` of a joint).
 pub const JOINT_TYPES: [&str; 4] = ["hinge", "slide", "ball", "free"];
 /// Joint types that need an `axis`.
@@ -415,7 +415,8 @@ pub struct ClosureFile {
     /// point: point_a = point_b (3 rows); weld: frame a = frame b (6 rows); distance: |point_a -
     /// point_b| = distance (1 row); line: point_a on the line of body_b through point_b along
     /// `axis` (2 rows); plane: point_a in the plane of body_b through point_b normal to `axis`
-    /// (1 row).
+    /// (1 row); rolling: a disk (`axis`) or sphere of body_a centred at point_a rolls without
+    /// slipping on the world plane through point_b normal to `normal` (3 rows).
     #[schemars(schema_with = "schema::closure_kind")]
     pub kind: Spanned<String>,
     /// First body.
@@ -442,9 +443,19 @@ pub struct ClosureFile {
     #[schemars(with = "Option<f64>", extend("exclusiveMinimum" = 0.0))]
     pub distance: Option<f64>,
     /// line: the line's direction; plane: the plane's normal; in body_b's frame (world: world
-    /// frame), nonzero, normalised implicitly. Required for line and plane, refused otherwise.
+    /// frame), nonzero, normalised implicitly. Required for line and plane; rolling: the disk's
+    /// axis in body_a's frame (absent: a sphere); refused otherwise.
     #[serde(default)]
     pub axis: Option<[f64; 3]>,
+    /// rolling: the disk's or sphere's radius (m), > 0; required for rolling, refused otherwise.
+    #[serde(default)]
+    #[schemars(with = "Option<f64>", extend("exclusiveMinimum" = 0.0))]
+    pub radius: Option<f64>,
+    /// rolling: the plane's normal, world frame, nonzero, normalised implicitly (default
+    /// [0, 0, 1]); refused otherwise.
+    #[serde(default)]
+    #[schemars(with = "[f64; 3]", extend("default" = [0.0, 0.0, 1.0]))]
+    pub normal: Option<[f64; 3]>,
 }
 
 /// A rigid body of a tree model.

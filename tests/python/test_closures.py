@@ -12,6 +12,7 @@ import pytest
 import progmo
 from progmo.checks import _run, row_space_distance, run_check
 from progmo.data import scene_file
+from progmo.simulators import Unsupported
 from progmo.simulators.mujoco_sim import MujocoBackend
 from progmo.simulators.pinocchio_sim import PinocchioBackend
 
@@ -130,25 +131,32 @@ replay_step = { value = 1e-3, reason = "test" }
 """
 
 
-def test_distance_closure_is_solver_only(tmp_path):
+def test_distance_closure_reactions_are_supplied(tmp_path):
     """No exact distance constraint in either simulator: MuJoCo's export refuses it (naming the
     scene and the closure: its tendon equality leaves out dJ/dt v) and Pinocchio has no constraint
-    model for it; both checks are not_checked, naming the closure."""
+    model for it. The checks leave the row out and supply its reaction (the rod's tension) from
+    progmo's solve, naming the closure; the row holds on the replay; withheld, it does not."""
     p = tmp_path / "distance_pendulum.toml"
     p.write_text(DISTANCE)
     scene = progmo.load(str(p))
     with pytest.raises(progmo.ExportUnsupported, match="distance closure 'rod' of scene 'distance_pendulum'"):
         scene.export("mjcf")
-    r = run_check(str(p), "mujoco")
-    assert r.status == "not_checked" and not r.expected and "distance closure 'rod'" in r.reason, r.reason
-    r = run_check(str(p), "pinocchio")
-    assert r.status == "not_checked" and not r.expected and "distance closure 'rod'" in r.reason, r.reason
+    with pytest.raises(Unsupported, match="distance closure 'rod'"):
+        backend(scene, "pinocchio")
+    for sim in BOTH:
+        r = run_check(str(p), sim)
+        assert r.status == "pass" and r.supplied == ["rod"], (sim, r.reason, r.metrics)
+        assert any("supplied by progmo: distance closure `rod`" in n for n in r.notes), r.notes
+        assert r.info["replay_supplied_residual"] < 1e-9, r.info
+        r, _ = _run(str(p), sim, withhold=("supplied_reaction",))
+        assert r.status == "fail" and "replay_residual" in {b.metric for b in r.breaches}, (sim, r.reason)
 
 
-def test_line_closure_is_solver_only(tmp_path):
+def test_line_closure_reactions_are_supplied(tmp_path):
     """A point on a line (or in a plane) of another body has no MuJoCo equality and no Pinocchio
-    constraint model: the MJCF export refuses it naming scene and closure, and both checks are
-    not_checked naming the closure (never a pass without the closure)."""
+    constraint model: the MJCF export refuses it naming scene and closure, and both checks supply
+    the closure rows' reactions, naming the closure (never a pass without the rows: they are
+    measured on the replay)."""
     text = DISTANCE.replace('name = "distance_pendulum"', 'name = "line_slider"').replace(
         'kind = "distance"', 'kind = "line"').replace("distance = 1.0", "axis = [0.6, -0.8, 0.0]").replace(
         "v = { x = 0.8, y = 0.6 }", "v = { x = 0.3, y = -0.4 }")  # along the line
@@ -159,7 +167,9 @@ def test_line_closure_is_solver_only(tmp_path):
         scene.export("mjcf")
     for sim in BOTH:
         r = run_check(str(p), sim)
-        assert r.status == "not_checked" and not r.expected and "line closure 'rod'" in r.reason, (sim, r.reason)
+        # rod_v (the offset along z) has no gradient on two slides: set aside at t0, not supplied
+        assert r.status == "pass" and r.supplied == ["rod_u"], (sim, r.reason, r.metrics)
+        assert any("supplied by progmo: line closure `rod`" in n for n in r.notes), r.notes
 
 
 WELD = """name = "welded_pair"

@@ -96,7 +96,7 @@ def test_a_scene_without_programme_is_checked_against_the_free_motion(sim):
 
 SYSTEM_ROW = """name = "{name}"
 description = "A double pendulum whose elbow angle is held by a system constraint (a joint lock)."
-purpose = "test: system constraints are not exported"
+purpose = "test: system constraints are not exported; their reactions are supplied by progmo"
 [model]
 kind = "tree"
 gravity = [0.0, 0.0, -9.81]
@@ -128,23 +128,78 @@ output_dt = 0.01
 {checks}"""
 
 
+BALL_ROW = """name = "{name}"
+description = "Two links, a ball joint below the root: no URDF element for it."
+purpose = "test: an element a simulator cannot reproduce"
+[model]
+kind = "tree"
+gravity = [0.0, 0.0, -9.81]
+[[model.bodies]]
+name = "a"
+mass = 1.0
+com = [0.0, 0.0, -0.5]
+inertia = [0.02, 0.02, 0.01]
+joints = [{{ name = "q1", type = "hinge", axis = [0.0, 1.0, 0.0] }}]
+[[model.bodies]]
+name = "b"
+parent = "a"
+pos = [0.0, 0.0, -1.0]
+mass = 1.0
+com = [0.0, 0.0, -0.5]
+inertia = [0.02, 0.02, 0.01]
+joints = [{{ name = "ball", type = "ball" }}]
+[[programme]]
+name = "elbow"
+expr = "ball.wz - 0.1"
+[initial]
+q = {{ q1 = 0.3 }}
+v = {{ ball = [0.1, 0.0, 0.1] }}
+[time]
+t1 = 0.5
+output_dt = 0.01
+{checks}"""
+
+
 def test_unexpected_not_checked_fails_the_run_and_a_declared_one_does_not(tmp_path):
-    plain = tmp_path / "locked.toml"
-    plain.write_text(SYSTEM_ROW.format(name="locked", checks=""))
-    r = run_check(str(plain), "mujoco")
-    assert r.status == "not_checked" and not r.expected and "system constraints (`lock`)" in r.reason
-    args = ["check", "-s", "mujoco", "--horizon", "0.5", "--no-plots", "-j", "1"]
+    plain = tmp_path / "ball.toml"
+    plain.write_text(BALL_ROW.format(name="ball", checks=""))
+    r = run_check(str(plain), "pinocchio")
+    assert r.status == "not_checked" and not r.expected and "ball" in r.reason, r.reason
+    args = ["check", "-s", "pinocchio", "--horizon", "0.5", "--no-plots", "-j", "1"]
     p = cli(*args, "-o", str(tmp_path / "a"), "double_pendulum", str(plain))
     assert p.returncode == 1, p.stdout + p.stderr
     assert "FAIL: 1 of 2 (scene x simulator) passed; 1 not checked" in p.stdout
     declared = tmp_path / "declared.toml"
-    declared.write_text(SYSTEM_ROW.format(
-        name="declared", checks='[checks]\nnot_checked = { mujoco = "joint lock is a system row (issue 12)" }\n'))
+    declared.write_text(BALL_ROW.format(
+        name="declared", checks='[checks]\nnot_checked = { pinocchio = "URDF has no ball joint below the root" }\n'))
     p = cli(*args, "-o", str(tmp_path / "b"), "double_pendulum", str(declared))
     assert p.returncode == 0, p.stdout + p.stderr
-    assert "PASS: 1 of 2 (scene x simulator) passed; 1 not checked as declared (declared/mujoco)" in p.stdout
+    assert "PASS: 1 of 2 (scene x simulator) passed; 1 not checked as declared (declared/pinocchio)" in p.stdout
     md = (tmp_path / "b" / "summary.md").read_text()
-    assert "joint lock is a system row (issue 12)" in md
+    assert "URDF has no ball joint below the root" in md
+
+
+def test_a_system_row_is_checked_with_its_reaction_supplied_and_says_so(tmp_path):
+    """An expression system constraint (a joint lock) no simulator holds: the model leaves it out,
+    progmo supplies its reaction, the check passes and the progress line, the summary line and
+    summary.md name the row; withheld, the replay leaves the row (negative control)."""
+    plain = tmp_path / "locked.toml"
+    plain.write_text(SYSTEM_ROW.format(name="locked", checks=""))
+    for sim in BOTH:
+        r = run_check(str(plain), sim)
+        assert r.status == "pass" and r.supplied == ["lock"], (sim, r.reason, r.metrics)
+        assert any("reactions of rows lock supplied by progmo: system constraints `lock`" in n
+                   for n in r.notes), r.notes
+    r, _ = _run(str(plain), "mujoco", withhold=("supplied_reaction",))
+    assert r.status == "fail" and "replay_residual" in {b.metric for b in r.breaches}, (r.reason, r.metrics)
+    args = ["check", "-s", "mujoco", "--horizon", "0.5", "--no-plots", "-j", "1"]
+    p = cli(*args, "-o", str(tmp_path / "a"), "double_pendulum", str(plain))
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert "locked / mujoco: pass (" in p.stderr and "[reactions of lock supplied by progmo]" in p.stderr
+    assert "PASS: 2 of 2 (scene x simulator) passed;" in p.stdout
+    assert "reactions supplied by progmo for rows no simulator holds: locked (lock)" in p.stdout
+    md = (tmp_path / "a" / "summary.md").read_text()
+    assert "locked (reactions of lock supplied by progmo)" in md
 
 
 def test_refused_scene_gets_the_solve_diagnosis_and_exit_2_in_check_and_debug(tmp_path):

@@ -609,12 +609,15 @@ impl PyScene {
     /// Export a tree scene's model: `format` "mjcf" or "urdf". Returns (document, report dict) —
     /// the report lists mass floors applied, forces the harness must apply itself (attractors;
     /// springs/dampers in URDF), gravity, the root joint to pass to Pinocchio, and q/v maps.
-    #[pyo3(signature = (format, *, timestep=1e-3))]
+    /// `supply_reactions`: system rows no simulator holds are left out and listed as a
+    /// `supplied_reaction` harness force (`Scene::export_supplying`) instead of refused.
+    #[pyo3(signature = (format, *, timestep=1e-3, supply_reactions=false))]
     fn export<'py>(
         &self,
         py: Python<'py>,
         format: &str,
         timestep: f64,
+        supply_reactions: bool,
     ) -> PyResult<(String, Bound<'py, PyAny>)> {
         let options = progmo::export::ExportOptions {
             name: self.scene.name.clone(),
@@ -630,7 +633,12 @@ impl PyScene {
                 )))
             }
         };
-        let (doc, report) = self.scene.export(format, &options).map_err(|e| match e {
+        let exported = if supply_reactions {
+            self.scene.export_supplying(format, &options)
+        } else {
+            self.scene.export(format, &options)
+        };
+        let (doc, report) = exported.map_err(|e| match e {
             progmo::export::ExportError::Unsupported { .. } => {
                 ExportUnsupported::new_err(format!("cannot export {}: {e}", self.scene.name))
             }

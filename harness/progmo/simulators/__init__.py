@@ -13,7 +13,8 @@ scene itself (to evaluate its expression forces at the simulator's own states):
 * ``closure_jacobian(t, q, v)`` the simulator's Jacobian of the scene's loop closures (rows in its
   own order and frame) in OUR v, and ``closure_forces(t, q, v, u)`` its closure multipliers under u;
 * ``replay(ref, frame_every, start=0, stop=None, x0=None) -> Replay`` open-loop replay of ``ref.u``
-  (u at each RK4 stage) over the steps ``start`` .. ``stop`` (default: the whole span), from the
+  (u at each RK4 stage; ``Reference.force_at`` adds the reactions progmo supplies for rows the
+  document leaves out, the report's ``supplied_reaction``) over the steps ``start`` .. ``stop`` (default: the whole span), from the
   reference's state at ``start`` (a segment restarted from the solver's state) or from ``x0`` = (q, v)
   (the checks' Lyapunov probe).
 * for a scene whose model is a robot file, the back-end reads that file itself (``robot_file``,
@@ -32,7 +33,7 @@ from typing import Any, Protocol
 import numpy as np
 
 #: Harness-force kinds of the export report (``src/export/mod.rs``, ``HarnessForce``).
-FORCE_KINDS = ("attractor", "spring", "damper", "point_force", "coordinate_force")
+FORCE_KINDS = ("attractor", "spring", "damper", "point_force", "coordinate_force", "supplied_reaction")
 
 
 class BlowUp(RuntimeError):

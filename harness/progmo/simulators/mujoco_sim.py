@@ -26,8 +26,9 @@ def version() -> str:
     return mujoco.__version__
 
 
-#: harness forces this back-end applies (springs and dampers are in the MJCF itself)
-SUPPORTED = ("attractor", "point_force", "coordinate_force")
+#: harness forces this back-end applies (springs and dampers are in the MJCF itself;
+#: ``supplied_reaction``: the reference's force_at carries it, like u)
+SUPPORTED = ("attractor", "point_force", "coordinate_force", "supplied_reaction")
 
 
 class MujocoBackend:

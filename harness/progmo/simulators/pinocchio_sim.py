@@ -41,7 +41,8 @@ def version() -> str:
     return pin.__version__
 
 
-SUPPORTED = ("attractor", "spring", "damper", "point_force", "coordinate_force")
+#: (``supplied_reaction``: the reference's force_at carries it, like u)
+SUPPORTED = ("attractor", "spring", "damper", "point_force", "coordinate_force", "supplied_reaction")
 
 #: proximal solver of constraintDynamics: absolute and relative accuracy, mu, iterations. mu > 0
 #: regularises the rows a planar loop's spatial closure leaves without gradient (the solver sets

@@ -163,6 +163,10 @@ class Reference:
     actuation: Callable[[float, np.ndarray], np.ndarray] | None = None
     tau: np.ndarray | None = None
     u_model: np.ndarray | None = None
+    #: the generalized reaction B_s^T lambda_s of the system rows the simulator's document leaves
+    #: out (export report ``supplied_reaction``) at every stage time, from this solve: applied with
+    #: u at the stage time (open loop)
+    supplied: np.ndarray | None = None
 
     def _at(self, x: np.ndarray, time: float) -> np.ndarray:
         """x at a stage time (exact grid value; linear interpolation off the grid)."""
@@ -180,12 +184,15 @@ class Reference:
 
     def force_at(self, time: float, q: np.ndarray) -> np.ndarray:
         """The generalized force to apply at a stage time and the simulator's state q (ours): u(t),
-        or with a state-dependent actuation map H(t, q) tau(t)."""
+        or with a state-dependent actuation map H(t, q) tau(t); plus the supplied reactions r(t)."""
         if self.actuation is None or self.tau is None:
-            return self.u_at(time)
-        f = self.actuation(time, q) @ self._at(self.tau, time)
-        if self.u_model is not None:
-            f = f + self._at(self.u, time) - self._at(self.u_model, time)
+            f = self.u_at(time)
+        else:
+            f = self.actuation(time, q) @ self._at(self.tau, time)
+            if self.u_model is not None:
+                f = f + self._at(self.u, time) - self._at(self.u_model, time)
+        if self.supplied is not None:
+            f = f + self._at(self.supplied, time)
         return f
 
 
