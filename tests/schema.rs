@@ -667,6 +667,7 @@ fn the_numeric_solver_keys_are_the_schemas() {
         .collect();
     let listed: BTreeSet<&str> = progmo::scene::file::SOLVER_NUMBERS.into_iter().collect();
     assert_eq!(listed, numeric);
+}
 
 /// The rows of the table after `marker` in FORMAT.md: (first cell, second cell).
 fn table_after(page: &str, marker: &str) -> Vec<(String, String)> {
