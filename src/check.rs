@@ -368,6 +368,7 @@ pub fn default_budget_table() -> String {
         match (m.simulators, m.solver_only) {
             (When::Closures, _) => notes.push("scenes with `[[model.closures]]`".into()),
             (When::Actuators, _) => notes.push("scenes with `[[actuators]]`".into()),
+            (When::RobotFile, _) => notes.push("`urdf` and `mjcf` scenes".into()),
             (When::Never, When::References) => {
                 notes.push("solver_only, scenes with `[[reference]]`".into())
             }
