@@ -85,10 +85,21 @@ fn each_check_judges_its_metrics() {
         "replay_residual",
         "replay_deviation",
     ];
-    assert_eq!(names(metrics_for("mujoco", false, false, true, false)), base);
+    assert_eq!(
+        names(metrics_for("mujoco", false, false, true, false)),
+        base
+    );
     let mut all = base.to_vec();
-    all.extend(["parity_closure", "reaction_closure", "replay_unactuated", "inverse_dynamics"]);
-    assert_eq!(names(metrics_for("pinocchio", true, true, false, true)), all);
+    all.extend([
+        "parity_closure",
+        "reaction_closure",
+        "replay_unactuated",
+        "inverse_dynamics",
+    ]);
+    assert_eq!(
+        names(metrics_for("pinocchio", true, true, false, true)),
+        all
+    );
     assert_eq!(
         names(metrics_for(SOLVER_ONLY, true, true, false, true)),
         [
