@@ -1039,6 +1039,7 @@ def _inverse_dynamics(c: _Check) -> None:
     rel = du.max(axis=1) / su
     c.res.metrics["inverse_dynamics"] = float(rel.max())
     c.worst_joint["inverse_dynamics"] = vn[int(np.argmax(du.max(axis=0)))]
+    c.where["inverse_dynamics"] = f"joint {c.worst_joint['inverse_dynamics']}"
     c.first["inverse_dynamics"] = (ref.t[ks], rel)
     c.res.notes.append(f"inverse_dynamics: u from {c.simulator}'s inverse dynamics of the file at {len(ks)} "
                        f"samples of the solution vs the solver's u, relative to max|u| {su:.3g}: "
@@ -1052,7 +1053,9 @@ def _inverse_dynamics(c: _Check) -> None:
         budgets = c.res.budgets
         c.res.budgets = [b for b in budgets if b.metric in c.res.metrics]
         c.res.status = "pass"  # judge() decides
-        judge(c.res, _first_times(c.first, bval))
+        for m in ("parity_mass", "parity_bias"):  # the worst joint of the robot file's parity
+            c.where.setdefault(m, f"joint {c.worst_joint[m]}")
+        _judge(c, _first_times(c.first, bval))
         c.res.budgets = budgets
         c.res.reason = (f"{c.simulator}'s reading of the robot file differs from progmo's model: " + "; ".join(
             f"{m} {float(v):.3g} > {bval[m]:.3g} (worst joint {c.worst_joint[m]})" for m, v in bad)

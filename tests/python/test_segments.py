@@ -57,8 +57,7 @@ def _last_quarter(name):
 
 
 @pytest.mark.parametrize("name,sim", [("chain_8", "mujoco"), ("chain_8", "pinocchio"),
-                                      ("panda_circle", "pinocchio"), ("double_pendulum", "mujoco"),
-                                      ("double_pendulum", "pinocchio")])
+                                      ("double_pendulum", "mujoco"), ("double_pendulum", "pinocchio")])
 def test_negative_control_one_percent_in_the_last_quarter_fails(name, sim):
     """u 1 % too large only in the last quarter of the span: the segment that covers it fails, first
     after the corruption starts (the run without it passes: the test above and test_checks.py)."""
@@ -74,6 +73,17 @@ def test_negative_control_one_percent_in_the_last_quarter_fails(name, sim):
         assert r.info["replay_segments"] == 1
     else:
         assert r.info["replay_segments"] >= 2 and "segment" in r.reason, r.reason
+
+
+def test_one_percent_in_the_last_quarter_of_a_robot_file_scene_fails_before_the_replay():
+    """On a robot-file scene (panda_circle) the same corruption is caught at the first sample of
+    the last quarter by the file's own inverse dynamics, which gates the replay."""
+    start, corrupt = _last_quarter("panda_circle")
+    r, _ = _run(scene("panda_circle"), "pinocchio", CheckOptions(), corrupt_u=corrupt)
+    assert r.status == "fail", r.metrics
+    bad = {b.metric: b for b in r.breaches}
+    assert "inverse_dynamics" in bad and bad["inverse_dynamics"].first_time >= start - 1e-9, r.breaches
+    assert bad["inverse_dynamics"].value > 1e-3 and bad["inverse_dynamics"].where.startswith("joint "), r.breaches
 
 
 def _prepared(name, sim, horizon=None):

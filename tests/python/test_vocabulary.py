@@ -9,7 +9,8 @@ import re
 import pytest
 
 from progmo import Scene, SceneError, _core
-from progmo.checks import (ACTUATOR_BUDGETED, BUDGETED, CLOSURE_BUDGETED, SOLVER_ONLY_BUDGETED, TABLE_NAME,
+from progmo.checks import (ACTUATOR_BUDGETED, BUDGETED, CLOSURE_BUDGETED, ROBOT_FILE_BUDGETED, SOLVER_ONLY_BUDGETED,
+                           TABLE_NAME,
                            budgets_for, default_budgets)
 from progmo.results import SOLVER_ONLY
 
@@ -35,8 +36,10 @@ def test_the_harness_budgets_are_the_cores_table():
     """Every metric the harness judges is the core's, with the core's default and reason, and the
     default values are the ones FORMAT.md documents."""
     core = {m["name"]: m for m in _core.check_metrics()}
-    judged = set(BUDGETED) | set(CLOSURE_BUDGETED) | set(ACTUATOR_BUDGETED) | set(SOLVER_ONLY_BUDGETED)
+    judged = (set(BUDGETED) | set(CLOSURE_BUDGETED) | set(ACTUATOR_BUDGETED) | set(ROBOT_FILE_BUDGETED)
+              | set(SOLVER_ONLY_BUDGETED))
     assert judged == set(core)
+    assert ROBOT_FILE_BUDGETED == ("inverse_dynamics",)
     assert BUDGETED == ("solver_residual", "parity_mass", "parity_bias", "instant_u", "replay_residual",
                         "replay_deviation")
     assert SOLVER_ONLY_BUDGETED[-1] == "reference_error" and SOLVER_ONLY == _core.SOLVER_ONLY
