@@ -128,7 +128,7 @@ class Dynamics(TypedDict):
     gamma: F64  # (s,) B dv/dt = gamma
 
 __all__ = ["Scene", "Solution", "SceneError", "SettingsError", "SolveStopped", "ExportUnsupported", "FORMULATIONS", "INTEGRATORS", "DRIFTS", "version",
-           "chain_toml", "drift_cost", "cli"]
+           "chain_toml", "drift_cost", "cli", "resolve_file"]
 
 #: The core's method vocabulary (progmo::solve::FORMULATION_NAMES, ...); the Literal types below
 #: spell the same names (tests/python/test_bindings.py checks it).
@@ -252,3 +252,6 @@ def chain_toml(
     ValueError otherwise. The name is quoted and escaped."""
 def drift_cost(rounds: int = 5) -> dict[str, float]:
     """Projection on/off over 10^4 periods: minimum wall times and residuals (progmo::problems::hard)."""
+def resolve_file(name: str, folder: str | os.PathLike[str]) -> str:
+    """The canonical path `name` names from `folder` under the path rule of scene files
+    (src/input.rs: inside the folder, the robot path or $PROGMO_ALLOW_ROOTS); SceneError otherwise."""
