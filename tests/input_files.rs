@@ -147,7 +147,6 @@ fn only_regular_text_files_are_read_and_never_quoted() {
     // an XML file quoted in a window of the offending line: the canary 400 characters before it
     let long = format!("<robot name=\"{CANARY}{}\"><link></robot>", "x".repeat(400));
     std::fs::write(d.join("long.urdf"), long).unwrap();
-    let dir = d.display().to_string();
     for (file, phrase) in [
         ("dir.urdf", "it is a directory, not a regular file"),
         ("fifo.urdf", "it is a FIFO (named pipe), not a regular file"),
