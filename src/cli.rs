@@ -338,11 +338,12 @@ fn bundled_scene_dirs() -> Vec<PathBuf> {
 /// A scene argument: a file as given, else the name of a bundled scene (`double_pendulum`, with
 /// or without `.toml`); the same rule as `progmo.data.scene_file` in Python.
 fn scene_file(arg: &Path) -> Result<PathBuf, String> {
-    if arg.is_file() {
-        return Ok(arg.to_path_buf());
-    }
     let bare = arg.parent().is_none_or(|p| p.as_os_str().is_empty())
         && arg.extension().is_none_or(|e| e == "toml");
+    // a FIFO, device or folder given as a path: the core refuses it by what it is (src/input.rs)
+    if arg.exists() && !(bare && arg.is_dir()) {
+        return Ok(arg.to_path_buf());
+    }
     if !bare {
         return Err(format!("{}: no such scene file", arg.display()));
     }

@@ -33,6 +33,7 @@ pub mod formulation;
 #[doc(hidden)]
 pub mod fuzzing;
 pub mod import;
+pub mod input;
 pub mod integrate;
 pub mod interrupt;
 pub mod linalg;

@@ -46,7 +46,9 @@ __all__ = [
 
 def load(name_or_path: str | os.PathLike[str]) -> Scene:
     """Load a scene: a scene file (TOML), or the name of a bundled scene (``progmo.data
-    .bundled_scenes()``), from any directory. Raises SceneError with a located message."""
+    .bundled_scenes()``), from any directory. Raises SceneError with a located message. The robot
+    file a scene names must lie inside the scene's folder, its ``package://`` package or a folder
+    of ``$PROGMO_ALLOW_ROOTS`` (src/scene/FORMAT.md, "Files a scene reads")."""
     return Scene(str(data.scene_file(name_or_path)))
 
 

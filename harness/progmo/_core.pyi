@@ -144,7 +144,7 @@ class Dynamics(TypedDict):
 
 __all__ = ["Scene", "Solution", "SceneError", "SettingsError", "SolveStopped", "ExportUnsupported", "FORMULATIONS", "INTEGRATORS", "DRIFTS", "version",
            "chain_toml", "drift_cost", "cli", "REFERENCE_RTOL", "REFERENCE_ATOL", "SIMULATORS", "SOLVER_ONLY",
-           "CHECK_OPTIONS", "SOLVER_NUMBERS", "check_metrics", "default_budgets", "tolerance_keys", "nearest"]
+           "CHECK_OPTIONS", "SOLVER_NUMBERS", "check_metrics", "default_budgets", "tolerance_keys", "nearest", "resolve_file"]
 
 #: The core's method vocabulary (progmo::solve::FORMULATION_NAMES, ...); the Literal types below
 #: spell the same names (tests/python/test_bindings.py checks it).
@@ -294,7 +294,7 @@ REFERENCE_ATOL: float
 SIMULATORS: list[str]
 #: The checker of scenes no simulator document describes.
 SOLVER_ONLY: str
-#: `[tolerances]` entries that are options of the check, not budgets (replay_step, replay_horizon).
+#: `[tolerances]` entries that are options of the check, not budgets (replay_step).
 CHECK_OPTIONS: list[str]
 #: The numeric keys of `[solver]` (what a sweep may vary there).
 SOLVER_NUMBERS: list[str]
@@ -302,7 +302,7 @@ SOLVER_NUMBERS: list[str]
 def check_metrics() -> list[dict[str, str]]:
     """Every metric the check judges, in the order budgets are listed: name, table (its budget's
     name in [tolerances]), simulators and solver_only (when those checks judge it: "always",
-    "closures", "actuators", "references" or "never"), class (the tolerance class) and reason."""
+    "closures", "actuators", "references", "robot_file" or "never"), class (the tolerance class) and reason."""
 def default_budgets(drift: dict[str, Any]) -> dict[str, tuple[float, str]]:
     """Default budget and reason of every metric under a drift control as `Scene.settings["drift"]`
     gives it; ValueError for an unknown kind."""
@@ -310,3 +310,7 @@ def tolerance_keys() -> list[str]:
     """Every name a scene's `[tolerances]` may hold."""
 def nearest(name: str, candidates: list[str]) -> str | None:
     """The nearest candidate to a misspelt name (the rule of every "did you mean"), or None."""
+
+def resolve_file(name: str, folder: str | os.PathLike[str]) -> str:
+    """The canonical path `name` names from `folder` under the path rule of scene files
+    (src/input.rs: inside the folder, the robot path or $PROGMO_ALLOW_ROOTS); SceneError otherwise."""

@@ -120,6 +120,8 @@ def parser() -> argparse.ArgumentParser:
 # --- check ---------------------------------------------------------------------------------------
 def _scene_files(args: list[str]) -> tuple[list[Path], list[str]]:
     """Scene files named by the arguments (files, folders, bundled names) and the problems."""
+    from ._core import SceneError, resolve_file
+
     scenes_dir = data.scenes_dir()
     if not args:
         return sorted(scenes_dir.glob("*.toml")), ([] if scenes_dir.is_dir() else [f"no bundled scenes in {scenes_dir}"])
@@ -130,7 +132,13 @@ def _scene_files(args: list[str]) -> tuple[list[Path], list[str]]:
             files.append(p)
         elif p.is_dir():
             found = sorted(p.glob("*.toml"))
-            files += found
+            for f in found:
+                # a file of the folder that resolves outside it (a symlink) is refused, not read
+                try:
+                    resolve_file(f.name, p)
+                    files.append(f)
+                except SceneError as e:
+                    problems.append(f"{f}: {e}")
             if not found:
                 problems.append(f"{a}: folder holds no *.toml scene")
         else:

@@ -46,9 +46,10 @@ def scene_file(name_or_path: str | os.PathLike[str]) -> Path:
     or without ``.toml``). The same rule as the Rust CLI's. Raises SceneError naming what was
     looked for."""
     p = Path(name_or_path)
-    if p.is_file():
-        return p
-    if p.parent == Path(".") and p.suffix in ("", ".toml"):
+    bare = p.parent == Path(".") and p.suffix in ("", ".toml")
+    if p.exists() and not (bare and p.is_dir()):
+        return p  # a FIFO, device or folder too: the core refuses it by what it is (src/input.rs)
+    if bare:
         bundled = scenes_dir() / f"{p.stem}.toml"
         if bundled.is_file():
             return bundled

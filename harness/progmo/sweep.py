@@ -12,7 +12,8 @@ the number of workers or the order results arrived in.
 
 Sweep file::
 
-    scene = "double_pendulum"      # optional: the scene it is written for (name or path)
+    scene = "double_pendulum"      # optional: the scene it is written for (a bundled name, or a
+                                   # path from this file's folder that stays inside it)
     samples = 16                   # random draws (per point of the grid variables)
     seed = 20261123                # sample i draws from numpy's SeedSequence([seed, i])
     simulators = ["mujoco", "pinocchio"]     # default: both
@@ -233,6 +234,25 @@ def check_names(spec: Spec, scene: Any) -> None:
             raise _located(spec.path, text, f"vary.{v.key}",
                            f"the scene {scene.path} has no {what[v.where]} {v.name!r}"
                            f"{_did_you_mean(v.name, names)} (have: {', '.join(names) or 'none'})", v.key)
+
+
+def spec_scene(spec: Spec) -> Path:
+    """The scene a sweep file's ``scene`` names: a bare name (no folder, no other suffix than
+    ``.toml``) not beside the sweep file is a bundled scene; a path is relative to the sweep
+    file's folder and must resolve inside it, the robot path or $PROGMO_ALLOW_ROOTS (the path rule
+    of scene files, src/scene/FORMAT.md "Files a scene reads")."""
+    from ._core import SceneError, resolve_file
+
+    assert spec.scene is not None
+    folder = Path(spec.path).parent
+    p = Path(spec.scene)
+    if p.parent == Path(".") and p.suffix in ("", ".toml") and not (folder / p).exists():
+        return data.scene_file(spec.scene)
+    try:
+        return Path(resolve_file(spec.scene, folder))
+    except SceneError as e:
+        line = _line_of(Path(spec.path).read_text(), "scene")
+        raise SweepError(f"{spec.path}:{line}: scene: {e}") from None
 
 
 def bundled_spec(scene_name: str) -> Path | None:
@@ -654,20 +674,19 @@ def main(argv: list[str] | None = None) -> int:
             if ns.samples < 1:
                 raise SweepError("--samples must be >= 1")
             spec.samples = ns.samples
+        scene_files = []
         if not scene_args:
             if spec.scene is None:
                 raise SweepError(f"{spec_path}: no SCENE given and the sweep file names no `scene`")
-            scene_args = [spec.scene]
-        scene_files = []
+            scene_files.append(spec_scene(spec))
         for s in scene_args:
-            p = Path(s)
-            scene_files.append(p if p.is_file() else data.scene_file(s))
+            scene_files.append(data.scene_file(s))
         out.mkdir(parents=True, exist_ok=True)
         samples: list[Sample] = []
         texts: dict[str, str] = {}
         for f in scene_files:
+            samples += make_samples(Path(f), spec, out)  # loads the scene through the core's door
             texts[str(f)] = f.read_text()
-            samples += make_samples(Path(f), spec, out)
     except (SweepError, ValueError, OSError) as e:
         _say(f"progmo sweep: error: {last_line(e) if not isinstance(e, SweepError) else e}")
         return EXIT_USAGE

@@ -9,7 +9,7 @@
 //! - [`unmodelled`]: what either file holds that is read and not modelled (limits, friction,
 //!   tendons, contacts, actuators, ...): a closed vocabulary of kinds, one record per element.
 //! - [`resolve`]: where `package://PKG/...` paths are found (`$PROGMO_ROBOT_PATH`, then
-//!   `$ROS_PACKAGE_PATH`).
+//!   `$ROS_PACKAGE_PATH`) and the folders a scene may read ([`crate::input`]).
 //!
 //! Errors are [`SceneError`](crate::scene::SceneError)s located in the description file (file,
 //! line, column, element).
@@ -27,42 +27,10 @@ use std::path::{Path, PathBuf};
 pub const ROBOT_PATH_VAR: &str = "PROGMO_ROBOT_PATH";
 
 /// The file a model's `file` names: `package://PKG/rest` through [`ROBOT_PATH_VAR`] (then
-/// `ROS_PACKAGE_PATH`), otherwise a path relative to the scene file's directory.
+/// `ROS_PACKAGE_PATH`), otherwise a path relative to the scene file's directory; refused outside
+/// the folders a scene may read ([`crate::input::resolve`]).
 pub fn resolve(file: &str, scene_dir: &Path) -> Result<PathBuf, String> {
-    if let Some(rest) = file.strip_prefix("package://") {
-        let mut roots = vec![];
-        for var in [ROBOT_PATH_VAR, "ROS_PACKAGE_PATH"] {
-            if let Ok(v) = std::env::var(var) {
-                roots.extend(v.split(':').filter(|s| !s.is_empty()).map(PathBuf::from));
-            }
-        }
-        for r in &roots {
-            let p = r.join(rest);
-            if p.is_file() {
-                return Ok(p);
-            }
-        }
-        let pkg = rest.split('/').next().unwrap_or(rest);
-        return Err(format!(
-            "`{file}` not found: package `{pkg}` is looked up in ${ROBOT_PATH_VAR} and \
-             $ROS_PACKAGE_PATH ({}); for example-robot-data, `pip install example-robot-data` \
-             (the Python `progmo` then finds it) or set {ROBOT_PATH_VAR} to its `share` directory",
-            if roots.is_empty() {
-                "both unset".to_string()
-            } else {
-                format!("searched {}", roots.len())
-            }
-        ));
-    }
-    let p = scene_dir.join(file);
-    if p.is_file() {
-        Ok(p)
-    } else {
-        Err(format!(
-            "`{}` not found (relative to the scene file)",
-            p.display()
-        ))
-    }
+    crate::input::resolve(file, scene_dir)
 }
 
 /// Test support: example-robot-data's `share` folder inside this checkout's `.venv` (what
@@ -107,6 +75,19 @@ pub(crate) fn rotate_inertia(r: &Matrix3<f64>, local: &Matrix3<f64>) -> [[f64; 3
 pub(crate) fn parse_xml(
     src: &crate::scene::Source,
 ) -> Result<roxmltree::Document<'_>, crate::scene::SceneError> {
+    // a file that does not begin as XML is not one: located, never quoted (it may be anything)
+    if let Some((line, column)) = crate::input::xml_start(&src.text) {
+        return Err(crate::scene::SceneError {
+            file: src.file.clone(),
+            line,
+            column,
+            field: "xml".into(),
+            message: format!(
+                "not an XML document: it does not begin with `<` (line {line}, column {column})"
+            ),
+            excerpt: String::new(),
+        });
+    }
     roxmltree::Document::parse(&src.text).map_err(|e| {
         let p = e.pos();
         let offset = src

@@ -59,12 +59,19 @@ impl Source {
         (line, self.text[start..offset].chars().count() + 1)
     }
 
+    /// The line at an error with a caret, under the quoting rule of [`crate::input`]: nothing
+    /// for text that is not quotable, else one line of at most `QUOTE_WIDTH` characters.
     fn excerpt(&self, line: usize, column: usize, width: usize) -> String {
+        if !crate::input::quotable(&self.text) {
+            return String::new();
+        }
         let text = self.text.lines().nth(line - 1).unwrap_or("");
+        let (text, column) = crate::input::excerpt_line(text, column);
+        let room = text.chars().count().saturating_sub(column - 1).max(1);
         format!(
             "    {text}\n    {}{}",
             " ".repeat(column.saturating_sub(1)),
-            "^".repeat(width.max(1))
+            "^".repeat(width.clamp(1, room))
         )
     }
 
@@ -312,7 +319,7 @@ fn parse_position(head: &str) -> Option<(usize, usize)> {
 }
 
 /// An error reading the file itself.
-pub fn io_error(file: &Path, e: &std::io::Error) -> SceneError {
+pub fn io_error(file: &Path, e: String) -> SceneError {
     SceneError {
         file: file.to_path_buf(),
         line: 0,
@@ -323,26 +330,14 @@ pub fn io_error(file: &Path, e: &std::io::Error) -> SceneError {
     }
 }
 
-/// A file that is not valid UTF-8: located at the first invalid byte.
-pub fn utf8_error(file: &Path, bytes: &[u8], e: std::str::Utf8Error) -> SceneError {
-    let at = e.valid_up_to();
-    let valid = String::from_utf8_lossy(&bytes[..at]).into_owned();
-    let line_start = valid.rfind('\n').map_or(0, |i| i + 1);
-    let line = valid.matches('\n').count() + 1;
-    let column = valid[line_start..].chars().count() + 1;
+/// A scene file that is not text ([`crate::input::text`]): located, never quoted.
+pub fn not_text(file: &Path, e: crate::input::NotText) -> SceneError {
     SceneError {
         file: file.to_path_buf(),
-        line,
-        column,
+        line: e.line,
+        column: e.column,
         field: String::new(),
-        message: format!(
-            "the scene file is not valid UTF-8 (byte 0x{:02x}); save it as UTF-8",
-            bytes[at]
-        ),
-        excerpt: format!(
-            "    {}\n    {}^",
-            &valid[line_start..],
-            " ".repeat(column - 1)
-        ),
+        message: format!("the scene file {}", e.message),
+        excerpt: String::new(),
     }
 }

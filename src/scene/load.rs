@@ -1043,13 +1043,16 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
     let dir = src.file.parent().unwrap_or(std::path::Path::new("."));
     let path = import::resolve(file.get_ref(), dir)
         .map_err(|e| src.error(file.span(), "model.file", e))?;
-    let text = std::fs::read_to_string(&path).map_err(|e| {
-        src.error(
-            file.span(),
-            "model.file",
-            format!("cannot read `{}`: {e}", path.display()),
-        )
-    })?;
+    let text = crate::input::read(&path, crate::input::ROBOT_LIMIT)
+        .map_err(|e| {
+            let shown = path.display();
+            src.error(
+                file.span(),
+                "model.file",
+                format!("cannot read `{shown}`: {e}"),
+            )
+        })
+        .and_then(|b| crate::input::text(b).map_err(|e| robot_not_text(&path, e)))?;
     let root = match m.root_joint.as_ref().map(|r| r.get_ref().as_str()) {
         Some(_) if kind == "mjcf" => {
             return Err(src.error(
@@ -1198,6 +1201,18 @@ fn declared(
             declared: m.ignore.get(u.kind).map(|r| r.get_ref().clone()),
         })
         .collect())
+}
+
+/// A robot file that is not text: located in it, never quoted ([`crate::input::text`]).
+fn robot_not_text(path: &std::path::Path, e: crate::input::NotText) -> SceneError {
+    SceneError {
+        file: path.to_path_buf(),
+        line: e.line,
+        column: e.column,
+        field: "xml".into(),
+        message: format!("the robot file {}", e.message),
+        excerpt: String::new(),
+    }
 }
 
 /// The bodies of a `tree` model as written in `[[model.bodies]]`, and its joint names.

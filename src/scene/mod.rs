@@ -141,20 +141,33 @@ impl RobotFile {
 }
 
 impl Scene {
-    /// Load and validate a scene file.
-    /// A file that is not UTF-8 is refused at its first invalid byte.
+    /// Load and validate a scene file, read through [`crate::input`]: a regular file of at most
+    /// [`crate::input::SCENE_LIMIT`] bytes, UTF-8 text (otherwise refused at line and column,
+    /// without quoting it).
     pub fn load(path: impl AsRef<Path>) -> Result<Scene, SceneError> {
         let path = path.as_ref();
-        let bytes = std::fs::read(path).map_err(|e| error::io_error(path, &e))?;
-        let text = match String::from_utf8(bytes) {
-            Ok(t) => t,
-            Err(e) => return Err(error::utf8_error(path, e.as_bytes(), e.utf8_error())),
-        };
+        let bytes = crate::input::read(path, crate::input::SCENE_LIMIT)
+            .map_err(|e| error::io_error(path, e))?;
+        let text = crate::input::text(bytes).map_err(|e| error::not_text(path, e))?;
         Scene::from_text(path, &text)
     }
 
-    /// Load from text (`path` is used in messages only).
+    /// Load from text (`path` names the file in messages; files the scene names are found from
+    /// its folder). A text whose first line is neither a table header nor `key = value` is not a
+    /// scene: refused at that line, which is not quoted.
     pub fn from_text(path: &Path, text: &str) -> Result<Scene, SceneError> {
+        if let Some(line) = crate::input::toml_start(text) {
+            return Err(SceneError {
+                file: path.to_path_buf(),
+                line,
+                column: 1,
+                field: String::new(),
+                message: format!(
+                    "not a TOML scene: line {line} is neither a `[table]` header nor a `key = value`"
+                ),
+                excerpt: String::new(),
+            });
+        }
         load::load(Source {
             file: path.to_path_buf(),
             text: text.to_string(),

@@ -804,6 +804,16 @@ fn cli(py: Python<'_>, argv: Vec<std::ffi::OsString>) -> u8 {
     py.detach(|| progmo::cli::run(argv))
 }
 
+/// The file `name` names when written in a file of `folder` (a sweep file's `scene`), under the
+/// path rule of scene files (`progmo::input::resolve`): its canonical path, or SceneError saying
+/// which rule refused it.
+#[pyfunction]
+fn resolve_file(name: &str, folder: PathBuf) -> PyResult<String> {
+    progmo::input::resolve(name, &folder)
+        .map(|p| p.display().to_string())
+        .map_err(SceneError::new_err)
+}
+
 /// Version of the core.
 #[pyfunction]
 fn version() -> &'static str {
@@ -828,6 +838,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(drift_cost, m)?)?;
     // The check's vocabulary (progmo::check): metrics, budgets, options.
     check::register(m)?;
+    m.add_function(wrap_pyfunction!(resolve_file, m)?)?;
     Ok(())
 }
 
