@@ -4,7 +4,8 @@ Pinocchio on the same URDF, in the same run (issue 13, item 6).
 - Model: Pinocchio's own reading of the scene's URDF (`pin.buildModelFromUrdf`, the finger joints
   removed with `pin.buildReducedModel` at q = 0, as the scene locks them). The C++ anchor
   (bench/cpp/anchor.cpp, header-only) builds the same model from those numbers (joint placements
-  and inertias): the `pin` wheel does ship urdfdom and libpinocchio_parsers.so, but linking them
+  and inertias, and the joints' damping 0.003, applied as tau = -damping v in every variant since
+  Pinocchio's aba and forwardDynamics leave model.damping out): the `pin` wheel does ship urdfdom and libpinocchio_parsers.so, but linking them
   would end the anchor's header-only build against Debian's Eigen, so the C++ side does not parse
   the URDF itself.
 - One right-hand side (dv/dt and u): progmo's null_space and kkt (`Scene.rhs_benchmark`, a Rust
@@ -93,6 +94,8 @@ def model_text(scene, model) -> str:
         nums = [*np.asarray(M.rotation).ravel(), *np.asarray(M.translation), Y.mass, *np.asarray(Y.lever),
                 *np.asarray(Y.inertia).ravel()]
         lines.append(f"joint {kind} {model.parents[i]} " + " ".join(repr(float(x)) for x in nums))
+    if np.any(model.damping):  # the URDF's <dynamics damping>: tau = -damping v in every variant
+        lines.append("damping " + " ".join(repr(float(x)) for x in model.damping))
     if [r["name"] for r in scene.rows] != [r[0] for r in ROWS]:
         raise NotImplementedError(f"{scene.name}: rows {[r['name'] for r in scene.rows]} are not the hand-written "
                                   f"ones {[r[0] for r in ROWS]}")
@@ -127,7 +130,7 @@ def agreement(scene, model, proc, states) -> tuple[dict[str, float], float]:
         got = proc.check(t, q, v)
         ref = scene.accelerations(t, q, v, "kkt")
         tol = max(tol, float(np.finfo(float).eps) * float(np.linalg.cond(scene.dynamics(t, q, v)["mass"])))
-        a_aba = np.asarray(pin.aba(model, data, q, v, np.zeros(len(v))))
+        a_aba = np.asarray(pin.aba(model, data, q, v, -model.damping * v))
         for var in VARIANTS:
             errs = [_rel(got[("a", var)], a_aba)] if var == "aba" else [_rel(got[(k, var)], ref[k]) for k in ("a", "u")]
             worst[var] = max(worst[var], *errs)
@@ -168,6 +171,9 @@ class PinPipeline:
         J = pin.getFrameJacobian(model, data, self.fid, pin.LOCAL_WORLD_ALIGNED)
         acc = pin.getFrameClassicalAcceleration(model, data, self.fid, pin.LOCAL_WORLD_ALIGNED)
         gamma = np.concatenate([acc.linear - self.desired(t), acc.angular])
+        # the URDF's joint damping (model.damping, which forwardDynamics leaves out)
+        np.multiply(model.damping, v, out=self.tau)
+        self.tau *= -1.0
         return np.asarray(pin.forwardDynamics(model, data, q, v, self.tau, J, gamma))
 
     def solve(self, t0, t1, q0, v0, rtol, atol):

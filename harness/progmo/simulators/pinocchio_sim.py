@@ -42,7 +42,8 @@ def version() -> str:
 
 
 #: (``supplied_reaction``: the reference's force_at carries it, like u)
-SUPPORTED = ("attractor", "spring", "damper", "point_force", "coordinate_force", "supplied_reaction")
+SUPPORTED = ("attractor", "spring", "damper", "gravcomp", "point_force", "coordinate_force",
+             "supplied_reaction")
 
 #: proximal solver of constraintDynamics: absolute and relative accuracy, mu, iterations. mu > 0
 #: regularises the rows a planar loop's spatial closure leaves without gradient (the solver sets
@@ -94,6 +95,10 @@ class PinocchioBackend:
                     self.model = pin.buildModelFromUrdf(path)
             finally:
                 os.unlink(path)
+            # URDF has no armature: the export report lists it for model.armature (crba, rnea and
+            # aba add it to the mass matrix diagonal)
+            for a in report.get("armature", []):
+                self.model.armature[a["sim_v"]:a["sim_v"] + a["nv"]] = a["armature"]
         self.route = "user's file" if robot is not None else "progmo export"
         self.report = report
         self.cm = CoordMap(report)
@@ -113,20 +118,29 @@ class PinocchioBackend:
             o = link.find("inertial/origin")
             coms[link.get("name")] = np.array([float(x) for x in o.get("xyz", "0 0 0").split()]) \
                 if o is not None else np.zeros(3)
+        com_frames: dict[str, int] = {}
+
+        def com_frame(b: str) -> int:
+            """An operational frame at body b's CoM (one per body, shared by its forces)."""
+            if b not in com_frames:
+                fid = model.getFrameId(b, pin.FrameType.BODY)
+                fr = model.frames[fid]
+                place = fr.placement * pin.SE3(np.eye(3), coms.get(b, np.zeros(3)))
+                com_frames[b] = model.addFrame(pin.Frame(b + "__com", fr.parentJoint, fid, place,
+                                                         pin.FrameType.OP_FRAME))
+            return com_frames[b]
         self.attractors = []
         self.springs = []
         self.dampers = []
+        #: (CoM frame, world force -gravcomp m g): a body's gravity compensation (export report)
+        self.gravcomp: list[tuple[int, np.ndarray]] = []
         for hf in report.get("harness_forces", []):
             if hf["kind"] == "attractor":
-                bodies = []
-                for b, mass in hf["bodies"]:
-                    fid = model.getFrameId(b, pin.FrameType.BODY)
-                    fr = model.frames[fid]
-                    place = fr.placement * pin.SE3(np.eye(3), coms.get(b, np.zeros(3)))
-                    cid = model.addFrame(pin.Frame(b + "__com", fr.parentJoint, fid, place,
-                                                   pin.FrameType.OP_FRAME))
-                    bodies.append((cid, mass))
+                bodies = [(com_frame(b), mass) for b, mass in hf["bodies"]]
                 self.attractors.append((np.array(hf["point"], float), hf["mu"], bodies))
+            elif hf["kind"] == "gravcomp":
+                g = np.array(report["gravity"], float)
+                self.gravcomp.append((com_frame(hf["body"]), -hf["gravcomp"] * hf["mass"] * g))
             elif hf["kind"] == "spring":
                 self.springs.append((hf["sim_q"], hf["sim_v"], hf["stiffness"], hf["spring_ref"]))
             elif hf["kind"] == "damper":
@@ -190,14 +204,19 @@ class PinocchioBackend:
             f[iv] += -k * (qs[iq] - ref)
         for iv, n, c in self.dampers:
             f[iv:iv + n] += -c * vs[iv:iv + n]
-        if self.attractors:
+        if self.attractors or self.gravcomp:
             pin.computeJointJacobians(model, data, qs)
             pin.updateFramePlacements(model, data)
+
+            def at_com(fid: int, force: np.ndarray) -> np.ndarray:
+                """J_com^T f: a world force at the CoM frame's origin as a generalized force."""
+                J = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+                return J[:3].T @ force
             for point, mu, bodies in self.attractors:
                 for fid, mass in bodies:
-                    force = attractor_force(point, mu, mass, data.oMf[fid].translation)
-                    J = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
-                    f += J[:3].T @ force
+                    f += at_com(fid, attractor_force(point, mu, mass, data.oMf[fid].translation))
+            for fid, force in self.gravcomp:
+                f += at_com(fid, force)
         return f
 
     def _file_passive(self, qs, vs) -> np.ndarray:

@@ -99,7 +99,15 @@ struct Anchor {
   // work space, allocated once
   MatrixXd J, Jf, MinvJt, S;
   VectorXd gamma, tau, zero, a, u, lambda, tmp;
+  VectorXd damping;  // empty: no joint damping
   Eigen::LLT<MatrixXd> llt;
+
+  // tau = -damping v: the joint dampers' force, which Pinocchio's aba and forwardDynamics leave
+  // out (model.damping is not read by them); progmo's right-hand side evaluates it too.
+  const VectorXd &passive(const VectorXd &v) {
+    if (damping.size()) tau.noalias() = -damping.cwiseProduct(v);
+    return tau;
+  }
 
   void load(const std::string &path) {
     std::ifstream in(path);
@@ -141,7 +149,13 @@ struct Anchor {
       model.appendBodyToJoint(id, Inertia(mass, c, Symmetric3(I)), SE3::Identity());
     }
     model.gravity.linear(g);
-    in >> tag >> s;
+    in >> tag;
+    if (tag == "damping") {  // optional: joint damping (a URDF's <dynamics damping>), per dof
+      damping.setZero(model.nv);
+      for (Eigen::Index i = 0; i < damping.size(); ++i) in >> damping[i];
+      in >> tag;
+    }
+    in >> s;
     if (tag != "rows" || s < 1) fail("expected 'rows S'");
     for (int i = 0; i < s; ++i) {
       Row r;
@@ -229,6 +243,7 @@ struct Anchor {
   }
 
   void same_cat(double t, const VectorXd &q, const VectorXd &v) {
+    passive(v);
     computeAllTerms(model, data, q, v);
     rows_from_kinematics(t);
     a = forwardDynamics(model, data, tau, J, gamma, 0.0);
@@ -236,6 +251,7 @@ struct Anchor {
   }
 
   void same_sep(double t, const VectorXd &q, const VectorXd &v) {
+    passive(v);
     forwardKinematics(model, data, q, v, zero);
     computeJointJacobians(model, data);
     rows_from_kinematics(t);
@@ -246,6 +262,7 @@ struct Anchor {
   }
 
   void same_minv(double t, const VectorXd &q, const VectorXd &v) {
+    passive(v);
     forwardKinematics(model, data, q, v, zero);
     computeJointJacobians(model, data);
     rows_from_kinematics(t);
@@ -256,6 +273,7 @@ struct Anchor {
   }
 
   void same_abaunit(double t, const VectorXd &q, const VectorXd &v) {
+    passive(v);
     forwardKinematics(model, data, q, v, zero);
     computeJointJacobians(model, data);
     rows_from_kinematics(t);
@@ -265,6 +283,7 @@ struct Anchor {
   }
 
   void kkt(const VectorXd &q, const VectorXd &v, const MatrixXd &Jg, const VectorXd &gg) {
+    passive(v);
     a = forwardDynamics(model, data, q, v, tau, Jg, gg);
     u.noalias() = Jg.transpose() * data.lambda_c;
   }
@@ -324,7 +343,7 @@ int main(int argc, char **argv) {
     for (int i = 0; i < s; ++i) in >> gg[i];
     if (!in) fail("truncated command " + cmd);
     if (cmd == "check") {
-      print_vec("a", "aba", aba(an.model, an.data, q, v, an.tau));
+      print_vec("a", "aba", aba(an.model, an.data, q, v, an.passive(v)));
       an.kkt(q, v, Jg, gg);
       print_vec("a", "kkt", an.a);
       print_vec("u", "kkt", an.u);
@@ -343,7 +362,7 @@ int main(int argc, char **argv) {
     } else {
       if (iters < 1) fail("bench needs iters >= 1");
       const double t_aba = time_loop(iters, q, [&](const VectorXd &x) {
-        const VectorXd &r = aba(an.model, an.data, x, v, an.tau);
+        const VectorXd &r = aba(an.model, an.data, x, v, an.passive(v));
         asm volatile("" : : "g"(r.data()) : "memory");
       });
       const double t_kkt = time_loop(iters, q, [&](const VectorXd &x) {
