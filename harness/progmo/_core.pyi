@@ -12,7 +12,15 @@ import numpy.typing as npt
 F64 = npt.NDArray[np.float64]
 
 class SceneError(ValueError):
-    """A scene file is invalid; the message names file, line, column and field."""
+    """A scene file is invalid; the message names file, line, column and field, and so do the
+    attributes (line and column None without a position, field None when not applicable)."""
+
+    file: str | None
+    line: int | None
+    column: int | None
+    field: str | None
+    message: str
+    excerpt: str
 
 class SettingsError(ValueError):
     """A solver setting or override is invalid; the message names it (`rtol: must be > 0`)."""

@@ -61,6 +61,25 @@ def test_errors_are_python_exceptions_with_the_location(tmp_path):
         s.residuals(np.zeros(3), np.zeros((3, 5)), np.zeros((3, 2)))
 
 
+def test_a_scene_error_carries_its_location_as_attributes(tmp_path):
+    # file, line, column and field as attributes (issue 26 item 3), the same numbers as the message
+    with pytest.raises(ph.SceneError) as e:
+        ph.Scene(str(ROOT / "tests" / "bad_scenes" / "types_wrong_type.toml"))
+    err = e.value
+    assert (err.line, err.column, err.field) == (10, 8, "model.bodies[0].mass"), vars(err)
+    assert err.file.endswith("types_wrong_type.toml") and "expected f64" in err.message
+    assert str(err).startswith(f"{err.file}:10:8: error: model.bodies[0].mass: ")
+    # a file that cannot be read has no position: line and column are None, not 0
+    with pytest.raises(ph.SceneError) as e:
+        ph.Scene(str(tmp_path / "missing.toml"))
+    assert e.value.line is None and e.value.column is None and e.value.message
+    # a path refused by the file rule (no scene position at all)
+    from progmo._core import resolve_file
+    with pytest.raises(ph.SceneError) as e:
+        resolve_file("/etc/passwd", tmp_path)
+    assert e.value.file is None and e.value.line is None and "must resolve inside" in e.value.message
+
+
 def test_stub_literals_spell_the_core_vocabulary():
     """One vocabulary: the names the core parses (progmo::solve) are the names the stub's Literal
     types offer, so `_core.pyi` cannot drift from the binary (null_space_stacked once did)."""

@@ -52,8 +52,53 @@ create_exception!(
     "The scene holds an element the simulator format cannot carry; the message names it."
 );
 
+/// A located scene error as Python's `SceneError`: the one-line message as `args[0]` and the
+/// location as attributes, `file`, `line` and `column` (None without a position), `field` (None
+/// when not applicable), `message` (what is wrong, without the location) and `excerpt`.
 fn scene_error(e: progmo::scene::SceneError) -> PyErr {
-    SceneError::new_err(e.to_string())
+    let located = e.line > 0;
+    let attrs = (
+        Some(e.file.display().to_string()),
+        located.then_some(e.line),
+        located.then_some(e.column),
+        (!e.field.is_empty()).then(|| e.field.clone()),
+        e.message.clone(),
+        e.excerpt.clone(),
+    );
+    with_attributes(SceneError::new_err(e.to_string()), attrs)
+}
+
+/// `SceneError` of a message that has no scene position (a path rule): the same attributes, the
+/// location ones None.
+fn scene_error_unlocated(message: String) -> PyErr {
+    let attrs = (None, None, None, None, message.clone(), String::new());
+    with_attributes(SceneError::new_err(message), attrs)
+}
+
+type SceneErrorAttrs = (
+    Option<String>,
+    Option<usize>,
+    Option<usize>,
+    Option<String>,
+    String,
+    String,
+);
+
+fn with_attributes(
+    err: PyErr,
+    (file, line, column, field, message, excerpt): SceneErrorAttrs,
+) -> PyErr {
+    Python::attach(|py| {
+        let v = err.value(py);
+        // an exception instance takes attributes; a failure here would leave only the message
+        let _ = v.setattr("file", file);
+        let _ = v.setattr("line", line);
+        let _ = v.setattr("column", column);
+        let _ = v.setattr("field", field);
+        let _ = v.setattr("message", message);
+        let _ = v.setattr("excerpt", excerpt);
+    });
+    err
 }
 
 pub(crate) fn json_to_py<'py>(
@@ -811,7 +856,7 @@ fn cli(py: Python<'_>, argv: Vec<std::ffi::OsString>) -> u8 {
 fn resolve_file(name: &str, folder: PathBuf) -> PyResult<String> {
     progmo::input::resolve(name, &folder)
         .map(|p| p.display().to_string())
-        .map_err(SceneError::new_err)
+        .map_err(scene_error_unlocated)
 }
 
 /// Version of the core.
