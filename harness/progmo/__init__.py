@@ -64,10 +64,12 @@ def check(scene: Scene | str | os.PathLike[str],
     its budget (the nightly check of one pair); ``"solver_only"`` compares two formulations and the
     scene's ``[[reference]]`` values instead (how a lagrangian scene is checked). ``step``/``horizon``/``samples`` as in ``progmo
     check``. With ``baselines`` (a folder of accepted baselines, e.g. ``progmo.data.baselines_dir()``;
-    None: no comparison), a pass worse than its baseline becomes a ``fail`` whose ``reason`` names
-    the regressed metrics. Never raises for a failing scene: ``status`` says what happened."""
+    None: no comparison), a pass worse than its baseline has the status ``regression`` (the verdict
+    ``progmo check`` gives it: ``verdict.cell_verdict``) and a ``reason`` naming the regressed
+    metrics. Never raises for a failing scene: ``status`` says what happened."""
     from . import baselines as bl
     from .checks import CHECKERS, CheckOptions, run_check
+    from .verdict import cell_verdict
 
     if simulator not in CHECKERS:
         raise ValueError(f"unknown simulator {simulator!r} (one of {', '.join(CHECKERS)})")
@@ -75,8 +77,8 @@ def check(scene: Scene | str | os.PathLike[str],
     r = run_check(sc.path, simulator, CheckOptions(step=step, horizon=horizon, samples=samples))
     if baselines is not None and r.status == "pass":
         worse = bl.regressions(bl.compare(r, bl.load(Path(baselines), r.scene, r.simulator)))
+        r.status = cell_verdict(r, regressed=bool(worse))
         if worse:
-            r.status = "fail"
             r.reason = "regression against the baseline: " + "; ".join(
                 f"{c.metric} {c.value} > {c.threshold} (baseline {c.baseline})" for c in worse)
     return r

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from .report import Run
+    from .verdict import Run
 
 FORMAT = 1
 KEEP = 60

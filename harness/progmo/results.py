@@ -4,7 +4,8 @@ A nightly check produces one :class:`CheckResult` per (scene, simulator). Everyt
 (numbers, strings, lists) so a result serializes to JSON (``to_json``/``from_json``) and the report
 can be rebuilt from saved results.
 
-Statuses (``status``); the run's verdict adds ``regression`` (a pass worse than its baseline):
+Statuses (``status``); the verdict (``verdict.cell_verdict``) adds ``regression`` (a pass worse than
+its baseline), which ``progmo.check(..., baselines=...)`` returns as the status:
 
 * ``pass``: every budgeted metric within its budget (every metric has one: the scene's, or the
   documented default of ``checks.default_budgets``);

@@ -118,7 +118,7 @@ def test_typed_errors():
         progmo.check("double_pendulum", "bullet")  # type: ignore[arg-type]
 
 
-def test_check_judges_and_a_regression_against_a_baseline_fails(tmp_path):
+def test_check_judges_and_a_regression_has_one_status_at_both_doors(tmp_path):
     r = progmo.check("double_pendulum", "mujoco")
     assert r.status == "pass" and r.ok(), r.reason
     assert {b.metric for b in r.budgets} >= {"replay_residual", "parity_mass"}
@@ -130,7 +130,14 @@ def test_check_judges_and_a_regression_against_a_baseline_fails(tmp_path):
     doc["metrics"]["replay_error_lost"] = 1e-12
     bl.path_for(tmp_path, "double_pendulum", "mujoco").write_text(json.dumps(doc))
     bad = progmo.check("double_pendulum", "mujoco", baselines=tmp_path)
-    assert bad.status == "fail" and "regression" in bad.reason and "replay_error_lost" in bad.reason
+    assert bad.status == "regression" and not bad.ok(), bad.status
+    assert "regression" in bad.reason and "replay_error_lost" in bad.reason
+    # the command gives the same pair the same status against the same baselines (one verdict)
+    r = progmo_cmd("check", "double_pendulum", "-s", "mujoco", "--baselines", tmp_path, "--out", tmp_path / "out",
+                   "--no-plots", "--json", cwd=tmp_path)
+    assert r.returncode == 1, r.stderr
+    (cell,) = json.loads(r.stdout)["results"]
+    assert cell["verdict"] == bad.status == "regression"
 
 
 def test_json_output_of_solve_validate_export_and_check(tmp_path):
