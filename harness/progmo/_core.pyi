@@ -126,6 +126,9 @@ class Solution:
     def lambda_(self) -> F64:
         """(n, s) multipliers"""
     @property
+    def tau(self) -> F64 | None:
+        """(n, m) actuator forces in the order of [[actuators]] (u = H(t, q) tau); None without actuators."""
+    @property
     def residuals(self) -> F64:
         """(n, s)"""
     @property
@@ -225,6 +228,8 @@ class Scene:
         """Does H depend on the state (a `direction` of expressions of t and the coordinates)?"""
     def actuation_map_at(self, t: float, q: F64) -> F64 | None:
         """H(t, q) (n x m); None without actuators."""
+    def unactuated_part(self, t: F64, q: F64, u: F64) -> F64 | None:
+        """u_k - P(t_k, q_k) u_k per sample (K x n): the part of u outside range(H); None without actuators."""
     @property
     def robot_file(self) -> RobotFile | None:
         """The robot file of a urdf/mjcf scene (kind, resolved absolute path, locked joints with

@@ -68,15 +68,13 @@ def row(row_names: Sequence[str], R: np.ndarray) -> str:
     return f"row {row_names[int(np.argmax(np.abs(R).max(axis=0)))]}"
 
 
-def unactuated(v_names: Sequence[str], u: np.ndarray, H: np.ndarray) -> str:
-    """The joint carrying the largest part of u outside range(H) (``H``: n x m, or one per sample
-    of ``u``): where the replayed force acts that no actuator can produce."""
-    u, H = np.asarray(u), np.asarray(H)
-    if not u.size:
+def unactuated(v_names: Sequence[str], off: np.ndarray) -> str:
+    """The joint carrying the largest part of u outside range(H) (``off``: samples x n, the core's
+    ``Scene.unactuated_part``): where the replayed force acts that no actuator can produce."""
+    off = np.asarray(off)
+    if not off.size or not np.abs(off).max() > 0:
         return ""
-    Hs = H if H.ndim == 3 else np.broadcast_to(H, (len(u), *H.shape))
-    off = np.array([uk - Q @ (Q.T @ uk) for uk, Q in ((uk, np.linalg.qr(Hk)[0]) for uk, Hk in zip(u, Hs))])
-    return f"joint {v_names[int(np.argmax(np.abs(off).max(axis=0)))]}" if np.abs(off).max() > 0 else ""
+    return f"joint {v_names[int(np.argmax(np.abs(off).max(axis=0)))]}"
 
 
 def _closure_rows(closures: list[dict], row_names: Sequence[str], closure_idx: Sequence[int]) -> dict[str, list[int]]:

@@ -366,9 +366,8 @@ def _solve_reference(c: _Check, h: float):
                     np.asarray(sol.residuals), h, n, scene.t0, _time.perf_counter() - t0s,
                     lam, np.asarray(sol.residual_rates))
     if scene.actuation_varies:  # H(t, q): the replay applies H at the simulator's state
-        m = len(scene.actuators)
         ref.actuation = lambda tk, qk: np.asarray(scene.actuation_map_at(tk, qk))
-        ref.tau, ref.u_model = lam[:, :m], u_model
+        ref.tau, ref.u_model = np.asarray(sol.tau), u_model
     if c.supplied:  # rows the simulator does not hold: their reactions, from this solve
         ref.supplied = supplied_reactions(scene, c.supplied, t, ref.q, ref.v, lam)
     return ref
@@ -794,10 +793,9 @@ def _replay(c: _Check) -> None:
         scene.q_names, scene.v_names, quat_aware_diff(be.cm, rp.q, rq), rp.v - rv)
     c.where["replay_residual"] = attribution.row([r["name"] for r in scene.rows], R)
     if scene.actuators:  # servo-constraints: the force fed to the simulator acts on actuated joints only
-        H = (np.array([scene.actuation_map_at(tk, qk) for tk, qk in zip(ref.t, ref.q)])
-             if scene.actuation_varies else scene.actuation_map)
-        res.metrics["replay_unactuated"] = unactuated_force(ref.u, H)
-        c.where["replay_unactuated"] = attribution.unactuated(scene.v_names, ref.u, H)
+        off = np.asarray(scene.unactuated_part(ref.t, ref.q, ref.u))  # the core's range(H(t, q))
+        res.metrics["replay_unactuated"] = unactuated_force(ref.u, off)
+        c.where["replay_unactuated"] = attribution.unactuated(scene.v_names, off)
     _open_loop_info(c, cont, cont_m[2] if cont_m is not None else None, cont_blowup, probe, segs, most)
     if len(segs) > 1:
         res.notes.append("per segment (max replay_residual, replay_deviation): " + "; ".join(
@@ -884,24 +882,12 @@ def _open_loop_info(c: _Check, cont, dev, blowup, probe: Probe, segs: list, most
     res.notes.append(what)
 
 
-def unactuated_force(u: np.ndarray, H: np.ndarray) -> float:
-    """The largest part of u(t) no actuator can produce, relative to max |u| (0 when u = 0): on
-    joint actuators (unit columns of H) max |u_j| over the joints j none drives, read exactly; else
-    the component of u outside range(H), |u - Q Q^T u| with Q an orthonormal basis of range(H).
-    H is one n x m map, or one per sample of u (K x n x m) for a state-dependent map."""
-    u, H = np.asarray(u), np.asarray(H)
-    scale = float(np.abs(u).max()) if u.size else 0.0
-    if scale == 0.0:
-        return 0.0
-    if H.ndim == 3:
-        return max(unactuated_force(uk[None, :], Hk) * float(np.abs(uk).max()) for uk, Hk in zip(u, H)) / scale
-    unit = all(np.count_nonzero(c) == 1 and c[np.flatnonzero(c)[0]] == 1.0 for c in H.T)
-    if unit:
-        free = [j for j in range(u.shape[1]) if not H[j].any()]
-        return float(np.abs(u[:, free]).max()) / scale if free else 0.0
-    Q, _ = np.linalg.qr(H)
-    off = u - (u @ Q) @ Q.T
-    return float(np.abs(off).max()) / scale
+def unactuated_force(u: np.ndarray, off: np.ndarray) -> float:
+    """The largest part of u(t) no actuator can produce, relative to max |u| (0 when u = 0).
+    ``off``: per sample, the part of u outside range(H(t, q)) (``Scene.unactuated_part``: on joint
+    actuators exactly the entries of the joints none drives)."""
+    scale = float(np.abs(u).max()) if np.size(u) else 0.0
+    return float(np.abs(off).max()) / scale if scale > 0.0 else 0.0
 
 
 def _first_times(first: dict, bval: dict) -> dict:

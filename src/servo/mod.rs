@@ -234,9 +234,17 @@ impl Actuation {
         }
     }
 
-    /// |x - P x| with P the orthogonal projector onto range(H(t, q)): the part of x no actuator
-    /// can produce (exactly the entries on unactuated joints when every column is a joint's).
+    /// |x - P x| with P the orthogonal projector onto range(H(t, q)): the size of the part of x
+    /// no actuator can produce ([`Actuation::outside_part`]).
     pub fn outside(&self, t: f64, q: &[f64], x: &[f64]) -> f64 {
+        let r = self.outside_part(t, q, x);
+        r.iter().map(|a| a * a).sum::<f64>().sqrt()
+    }
+
+    /// x - P x with P the orthogonal projector onto range(H(t, q)): the part of x no actuator can
+    /// produce (exactly the entries on unactuated joints when every column is a joint's: a unit
+    /// basis vector removes its entry and leaves the others untouched).
+    pub fn outside_part(&self, t: f64, q: &[f64], x: &[f64]) -> Vec<f64> {
         let owned;
         let basis = if self.entries.is_empty() {
             &self.basis
@@ -252,7 +260,7 @@ impl Actuation {
                 *a -= d * b;
             }
         }
-        r.iter().map(|a| a * a).sum::<f64>().sqrt()
+        r
     }
 }
 

@@ -23,16 +23,38 @@ def test_the_scene_lists_its_actuators():
     assert Scene(str(scene_file("double_pendulum"))).actuation_map is None
 
 
-def test_unactuated_force_is_relative_to_the_largest_force():
-    u = np.array([[2.0, 0.0], [-4.0, 1e-3]])
-    e0, e01 = np.array([[1.0], [0.0]]), np.eye(2)
-    assert unactuated_force(u, e0) == pytest.approx(2.5e-4)
-    assert unactuated_force(u, e01) == 0.0
-    assert unactuated_force(np.zeros((3, 2)), e0) == 0.0
-    # a direction: the part of u off the line (1, -1), relative to max |u|
-    d = np.array([[1.0], [-1.0]])
-    assert unactuated_force(np.array([[1.0, -1.0], [-3.0, 3.0]]), d) == pytest.approx(0.0, abs=1e-15)
-    assert unactuated_force(np.array([[1.0, 0.0]]), d) == pytest.approx(0.5)
+def test_the_unactuated_part_comes_from_the_core_and_is_relative_to_the_largest_force():
+    # joint actuator on x1 (two_car_chain): the part outside range(H) is exactly the other entry
+    s = Scene(str(scene_file("two_car_chain")))
+    ix1 = s.v_names.index("x1")
+    u = np.zeros((2, 2))
+    u[:, ix1] = [2.0, -4.0]
+    u[1, 1 - ix1] = 1e-3
+    t, q = np.zeros(2), np.zeros((2, len(s.q_names)))
+    off = np.asarray(s.unactuated_part(t, q, u))
+    assert off[:, ix1].tolist() == [0.0, 0.0] and off[:, 1 - ix1].tolist() == [0.0, 1e-3]
+    assert unactuated_force(u, off) == pytest.approx(2.5e-4)
+    assert unactuated_force(np.zeros((3, 2)), np.zeros((3, 2))) == 0.0
+    # a direction (thruster_cars: (1, 1) over (x1, d)): the part of u off that line
+    th = Scene(str(scene_file("thruster_cars")))
+    on, half = np.array([[1.0, 1.0], [-3.0, -3.0]]), np.array([[1.0, 0.0]])
+    assert np.abs(th.unactuated_part(np.zeros(2), np.zeros((2, 2)), on)).max() <= 1e-15
+    assert unactuated_force(half, th.unactuated_part(np.zeros(1), np.zeros((1, 2)), half)) == pytest.approx(0.5)
+    assert Scene(str(scene_file("double_pendulum"))).unactuated_part(t, q, u) is None
+    with pytest.raises(ValueError, match="shapes"):
+        s.unactuated_part(t, q, np.zeros((2, 3)))
+
+
+def test_solution_tau_is_the_actuators_force():
+    # u = H(t, q) tau at every sample (cylinder_cars: H depends on q), tau named by [[actuators]]
+    s = Scene(str(scene_file("cylinder_cars")))
+    sol = s.solve(t1=0.5, output_dt=0.05)
+    tau = np.asarray(sol.tau)
+    assert tau.shape == (len(sol.t), 1) and np.abs(tau).max() > 0
+    Hu = np.array([np.asarray(s.actuation_map_at(tk, qk)) @ tk_tau for tk, qk, tk_tau in zip(sol.t, sol.q, tau)])
+    assert np.abs(Hu - np.asarray(sol.u)).max() <= 1e-12 * np.abs(sol.u).max()
+    assert np.abs(np.asarray(s.unactuated_part(sol.t, sol.q, sol.u))).max() <= 1e-12 * np.abs(sol.u).max()
+    assert Scene(str(scene_file("double_pendulum"))).solve(t1=0.1).tau is None
 
 
 @pytest.mark.parametrize("sim", BOTH)
@@ -99,11 +121,21 @@ def test_a_state_dependent_map_is_evaluated_at_the_state():
         s.actuation_map_at(0.0, np.zeros(3))
 
 
-def test_unactuated_force_takes_one_map_per_sample():
-    # a direction turning with the samples: on it at every sample is 0, off it at one sample is not
-    H = np.array([[[1.0], [0.0]], [[0.0], [1.0]]])
-    assert unactuated_force(np.array([[2.0, 0.0], [0.0, -4.0]]), H) == 0.0
-    assert unactuated_force(np.array([[2.0, 0.0], [1e-3, -4.0]]), H) == pytest.approx(2.5e-4)
+def test_the_unactuated_part_takes_the_map_at_each_sample(tmp_path):
+    # a direction that turns with x1, (cos x1, sin x1) over (x1, d): u along H(q_k) at each sample
+    # is on range(H), the same forces at the other sample's state are not
+    text = scene_file("cylinder_cars").read_text()
+    line = next(ln for ln in text.splitlines() if ln.startswith("direction = "))
+    p = tmp_path / "turning.toml"
+    p.write_text(text.replace(line, 'direction = { x1 = "cos(x1)", d = "sin(x1)" }'))
+    s = Scene(str(p))
+    ix1, idd = s.v_names.index("x1"), s.v_names.index("d")
+    q = np.zeros((2, len(s.q_names)))
+    q[1, s.q_names.index("x1")] = 0.7
+    u = np.zeros((2, len(s.v_names)))
+    u[:, ix1], u[:, idd] = np.cos(q[:, s.q_names.index("x1")]), np.sin(q[:, s.q_names.index("x1")])
+    assert np.abs(s.unactuated_part(np.zeros(2), q, u)).max() <= 1e-15
+    assert np.abs(s.unactuated_part(np.zeros(2), q[::-1], u)).max() > 0.1
 
 
 @pytest.mark.parametrize("sim", BOTH)

@@ -545,6 +545,48 @@ impl PyScene {
         }))
     }
 
+    /// The part of each force u_k no actuator can produce, u_k - P u_k with P the orthogonal
+    /// projector onto range(H(t_k, q_k)) (`servo::Actuation::outside_part`: exactly the entries on
+    /// unactuated joints for joint actuators). Shapes t (K,), q (K, nq), u (K, n) -> (K, n); None
+    /// without actuators.
+    fn unactuated_part<'py>(
+        &self,
+        py: Python<'py>,
+        t: PyReadonlyArray1<'py, f64>,
+        q: PyReadonlyArray2<'py, f64>,
+        u: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
+        let Some(act) = self.actuation() else {
+            return Ok(None);
+        };
+        let (t, q, u) = (
+            t.as_array().to_owned(),
+            q.as_array().to_owned(),
+            u.as_array().to_owned(),
+        );
+        finite("t", t.iter())?;
+        finite("q", q.iter())?;
+        finite("u", u.iter())?;
+        let k = t.len();
+        let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
+        if q.shape() != [k, nq] || u.shape() != [k, nv] {
+            return Err(PyValueError::new_err(format!(
+                "shapes: t ({k},), q must be ({k}, {nq}), u ({k}, {nv})"
+            )));
+        }
+        let out = py.detach(|| {
+            let mut out = Array2::<f64>::zeros((k, nv));
+            for i in 0..k {
+                let qi: Vec<f64> = q.row(i).to_vec();
+                let ui: Vec<f64> = u.row(i).to_vec();
+                let r = act.outside_part(t[i], &qi, &ui);
+                out.row_mut(i).assign(&numpy::ndarray::ArrayView1::from(&r));
+            }
+            out
+        });
+        Ok(Some(out.into_pyarray(py)))
+    }
+
     /// The robot file of a `urdf`/`mjcf` scene as a dict {kind: "urdf" | "mjcf", path: the
     /// resolved absolute path, locked_joints: [(joint, q value it is welded at)]}; None for
     /// other models.

@@ -232,6 +232,29 @@ impl PySolution {
         self.array(py, "lambda_")
     }
     /// Residual of every row, (n, s): g (position), f (velocity), h (acceleration rows).
+    /// The actuators' forces tau (samples x m, in the order of `[[actuators]]`; u = H(t, q) tau),
+    /// or None without actuators.
+    #[getter]
+    fn tau<'py>(&self, py: Python<'py>) -> PyResult<Option<Py<PyAny>>> {
+        use progmo::programme::Constraints;
+        let m = match self.servo_scene.as_ref().map(|s| &s.system) {
+            Some(progmo::scene::SceneSystem::Tree(p)) => p.constraints.actuation().map(|a| a.len()),
+            _ => None,
+        };
+        let Some(m) = m else {
+            return Ok(None);
+        };
+        // the servo solve's multipliers are tau (evaluator: lambda holds tau, one per actuator)
+        let tr = &self.sol.trajectory;
+        let s = tr.row_names.len();
+        let flat: Vec<f64> = tr
+            .lambda
+            .chunks(s.max(1))
+            .flat_map(|row| row[..m].to_vec())
+            .collect();
+        Ok(Some(frozen(matrix(py, &flat, m)?.into_any())?))
+    }
+
     #[getter]
     fn residuals(&self, py: Python<'_>) -> Py<PyAny> {
         self.array(py, "residuals")
