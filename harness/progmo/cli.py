@@ -162,9 +162,7 @@ def rerun_command(argv: list[str], cwd: Path, root: Path) -> str:
 
 
 def _save_atomic(results: list[CheckResult], path: Path) -> None:
-    tmp = path.with_suffix(".json.tmp")
-    save(results, str(tmp))
-    os.replace(tmp, path)
+    save(results, str(path))  # through results.json.partial: whole or WriteFailed (exit 3)
 
 
 def _say(msg: str) -> None:
