@@ -33,7 +33,8 @@ def partial(path: str | os.PathLike[str]) -> Path:
     return p.with_name(p.name + PARTIAL)
 
 
-def _kind(mode: int) -> str | None:
+def kind(mode: int) -> str | None:
+    """What a file of this mode is when it is not a regular file (None for a regular file)."""
     if stat.S_ISREG(mode):
         return None
     for test, name in ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
@@ -47,13 +48,13 @@ def _kind(mode: int) -> str | None:
 def check_destination(path: str | os.PathLike[str]) -> None:
     """WriteFailed unless ``path`` is free or a regular file (links followed)."""
     try:
-        kind = _kind(os.stat(path).st_mode)
+        what = kind(os.stat(path).st_mode)
     except FileNotFoundError:
-        kind = "a dangling symbolic link" if os.path.islink(path) else None
+        what = "a dangling symbolic link" if os.path.islink(path) else None
     except OSError:
-        kind = None  # opening it will say what is wrong
-    if kind is not None:
-        raise WriteFailed(path, f"it is {kind}, not a regular file: refusing to replace it")
+        what = None  # opening it will say what is wrong
+    if what is not None:
+        raise WriteFailed(path, f"it is {what}, not a regular file: refusing to replace it")
 
 
 @contextmanager
