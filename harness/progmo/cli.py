@@ -178,8 +178,11 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
     root = repo_root()
     sims = list(dict.fromkeys(ns.simulator or SIMULATORS))
     jobs = ns.jobs if ns.jobs is not None else default_jobs()
-    if jobs < 1 or ns.samples < 1 or (ns.step is not None and not ns.step > 0) or (ns.horizon is not None and not ns.horizon > 0):
-        _say("progmo check: error: --jobs and --samples must be >= 1, --step and --horizon > 0")
+    problem = CheckOptions(step=ns.step, horizon=ns.horizon, samples=ns.samples).problem()
+    if problem is None and jobs < 1:
+        problem = f"jobs: must be >= 1, got {jobs}"
+    if problem is not None:  # the message of progmo.check, named by the flag
+        _say(f"progmo check: error: --{problem}")
         return EXIT_USAGE
     out = Path(ns.out)
     try:

@@ -226,8 +226,9 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as e:
         print(f"progmo debug: error: {e}", file=sys.stderr)
         return 2
-    if (a.step is not None and not a.step > 0) or (a.horizon is not None and not a.horizon > 0):
-        print("progmo debug: error: --step and --horizon must be positive", file=sys.stderr)
+    problem = CheckOptions(step=a.step, horizon=a.horizon).problem()  # as progmo check, progmo.check
+    if problem is not None:
+        print(f"progmo debug: error: --{problem}", file=sys.stderr)
         return 2
     # A scene that does not load or that the solver refuses: the located message of `progmo solve`.
     from . import Scene, SceneError
