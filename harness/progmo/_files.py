@@ -94,8 +94,9 @@ def deferred_interrupt() -> Iterator[None]:
     import signal
     import threading
 
-    if threading.current_thread() is not threading.main_thread():
-        yield
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) in (
+            signal.SIG_IGN, None):
+        yield  # elsewhere no signal arrives; an ignored SIGINT stays ignored
         return
     caught: list[int] = []
     old = signal.signal(signal.SIGINT, lambda sig, frame: caught.append(sig))
