@@ -439,29 +439,46 @@ fn flagged(a: &SolveArgs, e: &crate::solve::SettingsError) -> String {
     }
 }
 
+/// A refused solve clears the earlier run's outputs from its folder (when the folder exists), as a
+/// started run does: nothing of that run (a summary saying success) may pass for this one's.
+fn clear_earlier_run(out: Option<&Path>) {
+    if let Some(dir) = out.filter(|d| d.is_dir()) {
+        if let Err(e) = crate::output::remove_previous_run(dir) {
+            errln!("progmo solve: error: {e}");
+        }
+    }
+}
+
 fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
     let mut scene = match load(&a.scene) {
         Ok(s) => s,
-        Err(c) => return c,
+        Err(c) => {
+            clear_earlier_run(a.out.as_deref());
+            return c;
+        }
+    };
+    let out = a
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("out").join(&scene.name));
+    let refused = |msg: std::fmt::Arguments<'_>| {
+        errln!("progmo solve: error: {msg}");
+        clear_earlier_run(Some(&out));
+        ExitCode::from(2)
     };
     let settings = match settings_from(&a, &scene.settings) {
         Ok(s) => s,
-        Err(msg) => {
-            errln!("progmo solve: error: {msg}");
-            return ExitCode::from(2);
-        }
+        Err(msg) => return refused(format_args!("{msg}")),
     };
     if let Some(t1) = a.t1 {
         let (t0, _) = scene.span();
         if !(t1 > t0) {
-            errln!("progmo solve: error: --t1 {t1} must be after t0 = {t0}");
-            return ExitCode::from(2);
+            return refused(format_args!("--t1 {t1} must be after t0 = {t0}"));
         }
         crate::with_problem!(&mut scene.system, p => p.t1 = t1);
     }
     if let Err(e) = crate::solve::validate(scene.span(), &settings) {
-        errln!("progmo solve: error: {}", flagged(&a, &e));
-        return ExitCode::from(2);
+        return refused(format_args!("{}", flagged(&a, &e)));
     }
     for n in &scene.import_notes {
         errln!("progmo solve: note: {n}");
@@ -469,10 +486,6 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
     for line in unmodelled_lines(&scene) {
         errln!("progmo solve: {line}");
     }
-    let out = a
-        .out
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("out").join(&scene.name));
     if let Err(e) = std::fs::create_dir_all(&out) {
         errln!("progmo solve: error: cannot create {}: {e}", out.display());
         return ExitCode::from(3);
@@ -523,7 +536,14 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
         servo: servo.as_ref(),
         robot_file: robot_file.as_ref(),
     };
-    write_errors.extend(write_summary_to_path(out.join("summary.json"), &summary).err());
+    // Beside a data file that could not be written whole (a `.partial`), the summary is partial
+    // too: a summary.json saying success must mean the run's files are whole.
+    let summary_name = if write_errors.is_empty() {
+        "summary.json"
+    } else {
+        "summary.json.partial"
+    };
+    write_errors.extend(write_summary_to_path(out.join(summary_name), &summary).err());
     // --json: the summary's content (and where the files are) on stdout, the line on stderr.
     let json = a.json.then(|| {
         let mut v = crate::output::summary_json(&summary).unwrap_or(serde_json::Value::Null);

@@ -185,7 +185,7 @@ pub fn resolve(file: &str, scene_dir: &Path) -> Result<PathBuf, String> {
 }
 
 /// What a file type is when it is not a regular file.
-fn not_regular(t: &std::fs::FileType) -> Option<&'static str> {
+pub(crate) fn not_regular(t: &std::fs::FileType) -> Option<&'static str> {
     #[cfg(unix)]
     {
         use std::os::unix::fs::FileTypeExt;

@@ -13,14 +13,14 @@ static SIGNAL: AtomicI32 = AtomicI32::new(0);
 
 /// Handlers of SIGINT and SIGTERM replaced while it lives (nested guards share one installation).
 pub struct Guard {
-    _private: (),
+    released: bool,
 }
 
 impl Guard {
     /// Install the handlers (once for nested guards) and clear the flag.
     pub fn install() -> Guard {
         imp::install(&REQUESTED, &SIGNAL);
-        Guard { _private: () }
+        Guard { released: false }
     }
 
     /// Set by the first SIGINT or SIGTERM since the installation.
@@ -35,12 +35,29 @@ impl Guard {
             s => Some(s),
         }
     }
+
+    /// Drop the guard and say which signal it caught, when this was the last guard (the previous
+    /// handlers are back) and a signal came: the caller hands it on to them with [`raise`] once it
+    /// has kept what was computed (a host process, Python, then runs its own handler: a
+    /// KeyboardInterrupt). None while an outer guard still holds the handlers.
+    pub fn release(mut self) -> Option<i32> {
+        self.released = true;
+        let restored = imp::uninstall();
+        restored.then(|| self.signal()).flatten()
+    }
 }
 
 impl Drop for Guard {
     fn drop(&mut self) {
-        imp::uninstall();
+        if !self.released {
+            imp::uninstall();
+        }
     }
+}
+
+/// Deliver `sig` to this process again, to the handler now installed (after [`Guard::release`]).
+pub fn raise(sig: i32) {
+    imp::raise(sig);
 }
 
 #[cfg(unix)]
@@ -102,17 +119,26 @@ mod imp {
         }
     }
 
-    pub(super) fn uninstall() {
+    /// Uninstall one guard; true when this restored the previous handlers (the last guard).
+    pub(super) fn uninstall() -> bool {
         let mut st = STATE.lock().unwrap_or_else(|e| e.into_inner());
         st.depth = st.depth.saturating_sub(1);
         if st.depth > 0 {
-            return;
+            return false;
         }
         for (sig, old) in st.saved.drain(..) {
             // SAFETY: restores a disposition sigaction returned.
             unsafe {
                 libc::sigaction(sig, &old, std::ptr::null_mut());
             }
+        }
+        true
+    }
+
+    pub(super) fn raise(sig: libc::c_int) {
+        // SAFETY: raise(3) with a signal number the handler received.
+        unsafe {
+            libc::raise(sig);
         }
     }
 }
@@ -122,12 +148,18 @@ mod imp {
     use std::sync::atomic::{AtomicBool, AtomicI32};
 
     pub(super) fn install(_flag: &AtomicBool, _signal: &AtomicI32) {}
-    pub(super) fn uninstall() {}
+    pub(super) fn uninstall() -> bool {
+        true
+    }
+    pub(super) fn raise(_sig: i32) {}
 }
 
 #[cfg(all(test, unix))]
 mod tests {
     use super::*;
+
+    /// The tests share the process's handlers: one at a time.
+    static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
     fn handler_of(sig: libc::c_int) -> libc::sighandler_t {
         // SAFETY: query only.
@@ -141,6 +173,7 @@ mod tests {
     #[test]
     fn a_signal_sets_the_flag_and_the_previous_handler_comes_back() {
         // SIGTERM only: the test harness keeps SIGINT for the user.
+        let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
         let before = handler_of(libc::SIGTERM);
         {
             let g = Guard::install();
@@ -155,6 +188,24 @@ mod tests {
             assert!(g.flag().load(Ordering::SeqCst));
             assert_eq!(g.signal(), Some(libc::SIGTERM));
         }
+        assert_eq!(handler_of(libc::SIGTERM), before);
+    }
+
+    #[test]
+    fn release_names_the_signal_only_when_the_handlers_are_back() {
+        let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+        let before = handler_of(libc::SIGTERM);
+        let outer = Guard::install();
+        let inner = Guard::install();
+        // SAFETY: our handler is installed; it only sets the flag.
+        unsafe { libc::raise(libc::SIGTERM) };
+        assert_eq!(
+            inner.release(),
+            None,
+            "an outer guard still holds the handlers"
+        );
+        assert_ne!(handler_of(libc::SIGTERM), before);
+        assert_eq!(outer.release(), Some(libc::SIGTERM));
         assert_eq!(handler_of(libc::SIGTERM), before);
     }
 }

@@ -122,7 +122,9 @@ fn sigterm_finishes_the_files_as_partial_and_exits_130() {
 #[test]
 fn a_file_that_cannot_be_written_is_the_last_line_and_never_has_its_real_name() {
     // A 64 KiB file size limit (works as root, unlike permissions): the CSV and the MCAP fail
-    // mid-run with EFBIG; summary.json (2 KB) is still written. One stream keeps the order.
+    // mid-run with EFBIG; the summary (2 KB) is still written, named summary.json.partial beside
+    // them (a summary.json saying success would vouch for files that are not whole). One stream
+    // keeps the order.
     let out = tmp("fsize");
     let o = Command::new("bash")
         .args([
@@ -153,8 +155,10 @@ fn a_file_that_cannot_be_written_is_the_last_line_and_never_has_its_real_name() 
     // Nothing truncated under a real name; the partial files say what they are.
     assert!(!out.join("trajectory.csv").exists() && !out.join("recording.mcap").exists());
     assert!(out.join("trajectory.csv.partial").is_file());
+    assert!(!out.join("summary.json").exists());
     let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json.partial")).unwrap())
+            .unwrap();
     assert_eq!(summary["code_name"], "success");
 
     // The next run into the folder clears the partial files of this one.

@@ -66,15 +66,20 @@ def check(scene: Scene | str | os.PathLike[str],
     check``. With ``baselines`` (a folder of accepted baselines, e.g. ``progmo.data.baselines_dir()``;
     None: no comparison), a pass worse than its baseline has the status ``regression`` (the verdict
     ``progmo check`` gives it: ``verdict.cell_verdict``) and a ``reason`` naming the regressed
-    metrics. Never raises for a failing scene: ``status`` says what happened."""
+    metrics. Never raises for a failing scene: ``status`` says what happened; bad options raise
+    SettingsError with the message of ``progmo check`` (``step: must be a finite number > 0, got 0``)."""
     from . import baselines as bl
     from .checks import CHECKERS, CheckOptions, run_check
     from .verdict import cell_verdict
 
     if simulator not in CHECKERS:
         raise ValueError(f"unknown simulator {simulator!r} (one of {', '.join(CHECKERS)})")
+    options = CheckOptions(step=step, horizon=horizon, samples=samples)
+    problem = options.problem()  # the check of `progmo check --step/--horizon/--samples`
+    if problem is not None:
+        raise SettingsError(problem)
     sc = _scene(scene)
-    r = run_check(sc.path, simulator, CheckOptions(step=step, horizon=horizon, samples=samples))
+    r = run_check(sc.path, simulator, options)
     if baselines is not None and r.status == "pass":
         worse = bl.regressions(bl.compare(r, bl.load(Path(baselines), r.scene, r.simulator)))
         r.status = cell_verdict(r, regressed=bool(worse))

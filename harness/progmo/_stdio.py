@@ -1,7 +1,10 @@
 """Standard output of the harness's commands, treated as the Rust ``progmo`` treats it: a closed
 pipe (``| head -1``) ends the command quietly with status 141, a write that fails otherwise (a full
 device) is one line on stderr and exit 3, Ctrl-C is exit 130; never a traceback. Paths that are not
-UTF-8 are printed as the bytes they are (``surrogateescape``)."""
+UTF-8 are printed as the bytes they are (``surrogateescape``). A standard stream closed at start
+(``progmo check >&-``) is opened on /dev/null, as the Rust runtime does: its output is dropped and
+no file the command opens can take its descriptor. A result file that cannot be written
+(:class:`progmo._files.WriteFailed`: a full device) is one line naming the file and exit 3."""
 
 from __future__ import annotations
 
@@ -50,6 +53,23 @@ class _Raw(io.RawIOBase):
             raise StdoutFailed(e) from None
 
 
+def sanitize_std_fds() -> None:
+    """Open /dev/null on descriptors 0, 1 and 2 where they are closed (as the Rust runtime does at
+    start), and give Python stream objects for them."""
+    for fd, name, mode in ((0, "stdin", "r"), (1, "stdout", "w"), (2, "stderr", "w")):
+        try:
+            os.fstat(fd)
+            continue
+        except OSError:
+            pass
+        null = os.open(os.devnull, os.O_RDWR)
+        if null != fd:
+            os.dup2(null, fd)
+            os.close(null)
+        if getattr(sys, name) is None:
+            setattr(sys, name, open(fd, mode, closefd=False, encoding="utf-8", errors="surrogateescape"))
+
+
 def _wrap_stdout() -> _Raw | None:
     out = sys.stdout
     try:
@@ -73,6 +93,9 @@ def _stderr(msg: str) -> None:
 
 def run(main: Callable[[], int | None], prog: str) -> int:
     """Run a command's ``main`` and return its exit status, with standard output as above."""
+    from ._files import WriteFailed
+
+    sanitize_std_fds()
     raw = _wrap_stdout()
     try:
         try:
@@ -92,6 +115,9 @@ def run(main: Callable[[], int | None], prog: str) -> int:
         if isinstance(e.error, BrokenPipeError):
             return EXIT_CLOSED_PIPE
         _stderr(f"{prog}: error: cannot write to standard output: {e.error.strerror or e.error}")
+        return EXIT_CANNOT_WRITE
+    except WriteFailed as e:
+        _stderr(f"{prog}: error: {e}")
         return EXIT_CANNOT_WRITE
     except KeyboardInterrupt:
         _stderr(f"{prog}: interrupted")

@@ -146,6 +146,33 @@ class CheckOptions:
     #: Number of sample states of the parity and instantaneous checks.
     samples: int = 8
 
+    def problem(self) -> str | None:
+        """What is wrong with the options, as ``name: message`` (None if nothing): the one check of
+        ``progmo check``/``debug`` (flags ``--step``, ...) and ``progmo.check`` (keywords)."""
+        return options_problem(self.step, self.horizon, self.samples)
+
+
+#: most sample states of the parity and instantaneous checks
+MAX_SAMPLES = 10_000
+
+
+def options_problem(step: Any, horizon: Any, samples: Any) -> str | None:
+    """``name: message`` for the first bad check option (step, horizon: numbers > 0, step finite;
+    samples: an integer from 1 to MAX_SAMPLES), else None."""
+    def number(x: Any) -> bool:
+        return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+    def shown(x: Any) -> str:
+        return f"{x:g}" if number(x) else repr(x)
+
+    if step is not None and not (number(step) and math.isfinite(step) and step > 0):
+        return f"step: must be a finite number > 0, got {shown(step)}"
+    if horizon is not None and not (number(horizon) and horizon > 0):
+        return f"horizon: must be a number > 0 (s), got {shown(horizon)}"
+    if not (isinstance(samples, int) and not isinstance(samples, bool) and 1 <= samples <= MAX_SAMPLES):
+        return f"samples: must be an integer from 1 to {MAX_SAMPLES}, got {samples!r}"
+    return None
+
 
 @dataclass
 class Recording:

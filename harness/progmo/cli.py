@@ -10,9 +10,10 @@ help speaks of ``progmo``. Exit codes of ``check`` (stable; the nightly job bran
 * 2: bad usage, an unknown scene or simulator, a scene file that does not load or whose initial
   state the solver refuses (the same located message as ``progmo solve``), or an unreadable
   baseline (the other scenes still run; 2 wins over 1);
-* 130: interrupted (the results so far and the report are still written);
-* 3: standard output could not be written (a full device), 141: it was closed early (``| head``);
-  see :mod:`progmo._stdio`.
+* 130: interrupted (the results so far and the report are still written, marked INTERRUPTED);
+* 3: a result file or standard output could not be written (a full device): one line naming the
+  file, which keeps its ``.partial`` name (:mod:`progmo._files`); 141: standard output was closed
+  early (``| head``); see :mod:`progmo._stdio`.
 """
 
 from __future__ import annotations
@@ -40,7 +41,8 @@ EXIT_OK, EXIT_FAIL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 EPILOG = """\
 exit codes: 0 all pass (or declared not_checked) and no regression; 1 a fail, error,
 undeclared not_checked or regression; 2 bad usage, or a scene that does not load or that the
-solver refuses (the rest still runs); 130 interrupted.
+solver refuses (the rest still runs); 3 a result file cannot be written (one line naming it; it
+keeps its .partial name); 130 interrupted (the results so far and the report, marked INTERRUPTED).
 Outputs in --out: results.json (every CheckResult), run.json, report.html (self-contained),
 summary.md, summary.csv; written even when the run fails or is interrupted.
 Baselines: <scene>.<simulator>.json in the package's references/baselines (progmo.data), or
@@ -162,9 +164,7 @@ def rerun_command(argv: list[str], cwd: Path, root: Path) -> str:
 
 
 def _save_atomic(results: list[CheckResult], path: Path) -> None:
-    tmp = path.with_suffix(".json.tmp")
-    save(results, str(tmp))
-    os.replace(tmp, path)
+    save(results, str(path))  # through results.json.partial: whole or WriteFailed (exit 3)
 
 
 def _say(msg: str) -> None:
@@ -180,8 +180,11 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
     root = repo_root()
     sims = list(dict.fromkeys(ns.simulator or SIMULATORS))
     jobs = ns.jobs if ns.jobs is not None else default_jobs()
-    if jobs < 1 or ns.samples < 1 or (ns.step is not None and not ns.step > 0) or (ns.horizon is not None and not ns.horizon > 0):
-        _say("progmo check: error: --jobs and --samples must be >= 1, --step and --horizon > 0")
+    problem = CheckOptions(step=ns.step, horizon=ns.horizon, samples=ns.samples).problem()
+    if problem is None and jobs < 1:
+        problem = f"jobs: must be >= 1, got {jobs}"
+    if problem is not None:  # the message of progmo.check, named by the flag
+        _say(f"progmo check: error: --{problem}")
         return EXIT_USAGE
     out = Path(ns.out)
     try:

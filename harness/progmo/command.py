@@ -31,7 +31,9 @@ def main(argv: list[str] | None = None) -> int:
 
         return run(lambda: bench_main(args[1:]), "progmo bench")
     from . import _core, data
+    from ._stdio import sanitize_std_fds
 
+    sanitize_std_fds()
     os.environ.setdefault("PROGMO_REFERENCES", str(data.references()))
     sys.stdout.flush()
     sys.stderr.flush()

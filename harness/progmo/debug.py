@@ -16,8 +16,14 @@ recording and write what a person needs to see where a replay leaves the program
 * on stdout: where and when the first tolerance breach happened (metric, time, value vs budget), or
   that none did.
 
-Exit status: 0 no breach, 1 a breach or an error of the check, 2 bad input, 3 standard output
-cannot be written, 130 interrupted, 141 standard output closed early.
+Each file is written under ``<name>.partial`` and gets its name when whole; an earlier run's files
+of the scene (both simulators' CSVs, the recording) are removed first. Interrupted (Ctrl-C), the
+recording so far is finished as ``<scene>.mcap.partial`` (the CSV of a simulator whose replay was
+complete is whole).
+
+Exit status: 0 no breach, 1 a breach or an error of the check, 2 bad input, 3 a result file or
+standard output cannot be written (one line naming it; the file keeps its ``.partial`` name), 130
+interrupted, 141 standard output closed early.
 ``--corrupt-u-scale F`` multiplies the replayed u by F (a negative control: the run must breach).
 """
 
@@ -30,9 +36,12 @@ import math
 import os
 import sys
 
+from pathlib import Path
+
 import numpy as np
 
-from . import cliutil
+from . import _files, cliutil
+from ._files import WriteFailed
 from .checks import SIMULATORS, CheckOptions, Recording, _run
 
 SCALAR_SCHEMA = {"type": "object", "properties": {"t": {"type": "number"}, "value": {"type": "number"}}}
@@ -174,7 +183,7 @@ def _write_csv(path: str, sim: str, rec: Recording) -> None:
     """Solver columns named as in `progmo solve`'s trajectory.csv (t, q:<q>, v:<v>, u:<v>), the
     replay's as <sim>.q:<q>, <sim>.v:<v>, <sim>.residual:<row>, then deviation."""
     ref, rp = rec.ref, rec.replay
-    with open(path, "w", newline="") as f:
+    with _files.staged(path, "w", newline="") as f:  # whole, or `.partial` and WriteFailed
         w = csv.writer(f)
         w.writerow(["t"] + [f"q:{n}" for n in rec.q_names] + [f"v:{n}" for n in rec.v_names]
                    + [f"u:{n}" for n in rec.v_names] + [f"{sim}.q:{n}" for n in rec.q_names]
@@ -217,8 +226,9 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as e:
         print(f"progmo debug: error: {e}", file=sys.stderr)
         return 2
-    if (a.step is not None and not a.step > 0) or (a.horizon is not None and not a.horizon > 0):
-        print("progmo debug: error: --step and --horizon must be positive", file=sys.stderr)
+    problem = CheckOptions(step=a.step, horizon=a.horizon).problem()  # as progmo check, progmo.check
+    if problem is not None:
+        print(f"progmo debug: error: --{problem}", file=sys.stderr)
         return 2
     # A scene that does not load or that the solver refuses: the located message of `progmo solve`.
     from . import Scene, SceneError
@@ -233,7 +243,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"progmo debug: error: the mcap package is not importable: {e}", file=sys.stderr)
         return 1
     sims = list(SIMULATORS) if a.simulator == "both" else [a.simulator]
-    os.makedirs(a.out, exist_ok=True)
+    try:
+        os.makedirs(a.out, exist_ok=True)
+    except OSError as e:
+        raise WriteFailed(a.out, e) from None
     corrupt = None
     if a.corrupt_u_scale is not None:
         factor = a.corrupt_u_scale
@@ -241,8 +254,20 @@ def main(argv: list[str] | None = None) -> int:
     opts = CheckOptions(step=a.step, horizon=a.horizon)
     stem = os.path.splitext(os.path.basename(a.scene))[0]
     mcap_path = os.path.join(a.out, stem + ".mcap")
+    # Nothing of an earlier run (the other simulator's CSV, an old recording) may pass for this one's.
+    _files.remove([Path(a.out) / f"{stem}{x}" for x in
+                   (".mcap", ".mcap" + _files.PARTIAL,
+                    *(f"_{s}.csv{p}" for s in SIMULATORS for p in ("", _files.PARTIAL)))])
     results = []
-    with open(mcap_path, "wb") as f:
+    part = _files.partial(mcap_path)
+    _files.check_destination(mcap_path)
+    try:
+        f = open(part, "wb")
+    except OSError as e:
+        raise WriteFailed(part, e) from None
+    mc = None
+    written: list[str] = []
+    try:
         mc = _Mcap(f)
         solver_written = False
         for sim in sims:
@@ -251,13 +276,38 @@ def main(argv: list[str] | None = None) -> int:
             r, _ = _run(a.scene, sim, opts, corrupt_u=corrupt, frame_every=-1, record=rec)
             results.append((sim, r, rec))
             if rec.replay is not None:
-                if not solver_written:
-                    _write_solver(mc, rec)
-                    solver_written = True
-                _write_sim(mc, sim, rec, r)
-                csv_path = os.path.join(a.out, f"{stem}_{sim}.csv")
-                _write_csv(csv_path, sim, rec)
+                with _files.deferred_interrupt():  # a simulator's records whole, or not at all
+                    if not solver_written:
+                        _write_solver(mc, rec)
+                        solver_written = True
+                    _write_sim(mc, sim, rec, r)
+                    csv_path = os.path.join(a.out, f"{stem}_{sim}.csv")
+                    _write_csv(csv_path, sim, rec)
+                    written.append(csv_path)
         mc.finish()
+        f.close()
+    except KeyboardInterrupt:
+        # what was recorded so far, a valid recording, under the `.partial` name
+        try:
+            if mc is not None:
+                mc.finish()
+            f.close()
+        except Exception:  # noqa: BLE001 - the interrupt is what is reported
+            pass
+        print(f"progmo debug: interrupted; the recording up to there is {part}"
+              + "".join(f", {w}" for w in written), file=sys.stderr)
+        raise
+    except OSError as e:
+        try:
+            f.close()
+        except OSError:
+            pass
+        raise WriteFailed(part, e) from None
+    _files.check_destination(mcap_path)
+    try:
+        os.replace(part, mcap_path)
+    except OSError as e:
+        raise WriteFailed(part, e) from None
     print(f"wrote {mcap_path}" + "".join(f", {os.path.join(a.out, f'{stem}_{s}.csv')}"
                                          for s, _, rec in results if rec.replay is not None))
     breaches = []

@@ -559,7 +559,9 @@ CSV_FIELDS = ["scene", "simulator", "verdict", "status", "metric", "value", "bud
 
 def write_csv(run: Run, path: Path) -> None:
     """One row per (scene, simulator, metric); a result without metrics gets one row."""
-    with open(path, "w", newline="", encoding="utf-8", errors=TEXT_ERRORS) as f:
+    from ._files import staged
+
+    with staged(path, "w", newline="", encoding="utf-8", errors=TEXT_ERRORS) as f:
         w = csv.writer(f)
         w.writerow(CSV_FIELDS)
         for s in run.scene_names():
@@ -596,10 +598,13 @@ def write(run: Run, out_dir: str | os.PathLike) -> dict[str, Path]:
         "csv": out / "summary.csv",
         "run": out / "run.json",
     }
-    paths["run"].write_text(json.dumps(_jsonable(run.to_json()), indent=1) + "\n")
-    paths["md"].write_text(render_markdown(run), encoding="utf-8", errors=TEXT_ERRORS)
+    from ._files import write_text
+
+    # each file whole under its name, or `.partial` and WriteFailed (a full device: exit 3)
+    write_text(paths["run"], json.dumps(_jsonable(run.to_json()), indent=1) + "\n")
+    write_text(paths["md"], render_markdown(run), errors=TEXT_ERRORS)
     write_csv(run, paths["csv"])
-    paths["html"].write_text(render_html(run), encoding="utf-8", errors=TEXT_ERRORS)
+    write_text(paths["html"], render_html(run), errors=TEXT_ERRORS)
     return paths
 
 

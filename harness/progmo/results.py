@@ -168,7 +168,10 @@ def _clean(x: Any) -> Any:
 
 
 def save(results: list[CheckResult], path: str) -> None:
-    with open(path, "w") as f:
+    """Whole under ``path``, or ``path.partial`` and :class:`progmo._files.WriteFailed`."""
+    from ._files import staged
+
+    with staged(path, "w") as f:
         json.dump([r.to_json() for r in results], f, indent=1)
         f.write("\n")
 

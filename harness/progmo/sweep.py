@@ -28,7 +28,9 @@ Sweep file::
     "solver.rtol" = { grid = [1e-8, 1e-10] }        # every value, crossed with the draws
     "parameters.k" = { loguniform = [1e2, 1e4] }
 
-``where`` is ``parameters``, ``initial.q``, ``initial.v`` or ``solver``. Every name is checked before
+``where`` is ``parameters``, ``initial.q``, ``initial.v`` or ``solver``. A sweep runs at most 100000
+samples (``samples`` x the product of the grid variables' lengths; ``MAX_SAMPLES``): a larger one is
+refused at its ``samples`` (or first grid variable) before any sample is drawn. Every name is checked before
 any sample is made: a key of the file, a distribution, a numeric ``[solver]`` setting
 (``progmo::scene::file::SOLVER_NUMBERS``), and against the scene a parameter, a coordinate or a
 velocity with one value; a misspelt one is refused at its line and column with the nearest valid
@@ -40,6 +42,7 @@ from __future__ import annotations
 import argparse
 import base64
 import dataclasses
+import glob
 import hashlib
 import io
 import itertools
@@ -55,7 +58,7 @@ from typing import Any
 
 import numpy as np
 
-from . import _core, cliutil, data, executors
+from . import _core, _files, cliutil, data, executors
 from .parallel import Task, default_jobs, last_line
 from .results import CheckResult
 
@@ -63,6 +66,10 @@ DISTRIBUTIONS = {"uniform": 2, "normal": 2, "loguniform": 2, "grid": None}
 WHERE = ("parameters", "initial.q", "initial.v", "solver")
 KEYS = ("scene", "samples", "seed", "simulators", "initial_state", "horizon", "step", "vary")
 EXIT_OK, EXIT_FAIL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+#: most samples (draws x grid points) a sweep runs; a larger one is refused before sampling
+MAX_SAMPLES = 100_000
+#: largest sweep file read (bytes)
+MAX_SPEC_BYTES = 1 << 20
 #: suggested budget = SAFETY x the worst sampled value, rounded up to 1, 2 or 5 x 10^k
 SAFETY = 10.0
 
@@ -96,13 +103,24 @@ class Spec:
         gv = [v for v in self.variables if v.dist == "grid"]
         return [dict(zip([v.key for v in gv], combo)) for combo in itertools.product(*[v.args for v in gv])]
 
+    def grid_points(self) -> int:
+        """The number of points of the grid variables (1 without any), not materialized."""
+        return math.prod(len(v.args) for v in self.variables if v.dist == "grid")
+
     def total(self) -> int:
-        return len(self.grid()) * self.samples
+        return self.grid_points() * self.samples
+
+    def grid_point(self, j: int) -> dict[str, float]:
+        """Point j of the grid (``grid()[j]``, the last grid variable varying fastest)."""
+        out: dict[str, float] = {}
+        for v in reversed([v for v in self.variables if v.dist == "grid"]):
+            j, k = divmod(j, len(v.args))
+            out[v.key] = v.args[k]
+        return out
 
     def values(self, i: int) -> dict[str, float]:
         """The values of sample i: a function of (seed, i) only."""
-        grid = self.grid()
-        out = dict(grid[i // self.samples])
+        out = self.grid_point(i // self.samples)
         rng = np.random.default_rng(np.random.SeedSequence([self.seed, i]))
         for v in self.variables:
             if v.dist == "uniform":
@@ -148,9 +166,19 @@ def load_spec(path: str | os.PathLike[str]) -> Spec:
 
     p = Path(path)
     try:
+        # a regular file of at most MAX_SPEC_BYTES: never a FIFO (blocks) or /dev/zero (endless)
+        st = p.stat()
+        kind = _files.kind(st.st_mode)
+        if kind is not None:
+            raise SweepError(f"{p}: cannot read the sweep file: it is {kind}, not a regular file")
+        if st.st_size > MAX_SPEC_BYTES:
+            raise SweepError(f"{p}: cannot read the sweep file: {st.st_size} bytes, more than the "
+                             f"{MAX_SPEC_BYTES} a sweep file may hold")
         text = p.read_text()
     except OSError as e:
         raise SweepError(f"{p}: cannot read the sweep file: {e.strerror or e}") from None
+    except UnicodeDecodeError as e:
+        raise SweepError(f"{p}: cannot read the sweep file: not UTF-8 text (byte {e.start})") from None
     try:
         d = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
@@ -215,6 +243,14 @@ def load_spec(path: str | os.PathLike[str]) -> Spec:
     scene = d.get("scene")
     if scene is not None and not isinstance(scene, str):
         raise err("scene", f"must be a scene name or path, got {scene!r}")
+    grid = [v for v in variables if v.dist == "grid"]
+    points = math.prod(len(v.args) for v in grid)
+    if samples * points > MAX_SAMPLES:
+        # refused before any sample is drawn: a file per sample, a check per sample and simulator
+        where = "samples" if "samples" in d or not grid else f"vary.{grid[0].key}"
+        raise err(where, f"{samples} draw(s) x {points} grid point(s) = {samples * points:.4g} samples, more "
+                  f"than the {MAX_SAMPLES} a sweep runs (progmo.sweep.MAX_SAMPLES)",
+                  "samples" if where == "samples" else grid[0].key)
     return Spec(str(p), scene, samples, seed, list(dict.fromkeys(sims)), init, opt["horizon"], opt["step"],
                 variables)
 
@@ -323,14 +359,20 @@ def make_samples(scene_file: Path, spec: Spec, out: Path) -> list[Sample]:
     check_names(spec, base)
     text = scene_file.read_text()
     d = out / "samples"
-    d.mkdir(parents=True, exist_ok=True)
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise _files.WriteFailed(d, e) from None
+    # sample files of an earlier, larger sweep of this scene must not pass for this one's
+    keep = {f"{base.name}-{i:05d}.toml" for i in range(spec.total())}
+    _files.remove([f for f in d.glob(f"{glob.escape(base.name)}-*.toml*") if f.name not in keep])
     samples = []
     for i in range(spec.total()):
         values = spec.values(i)
         st = sample_text(text, str(scene_file), spec, i, values)
         p = d / f"{base.name}-{i:05d}.toml"
         if not p.is_file() or p.read_text() != st:
-            p.write_text(st)
+            _files.write_text(p, st)  # whole, or `.partial` and exit 3
         s = Sample(i, base.name, str(p), values)
         try:
             sc = Scene(str(p))
@@ -604,20 +646,21 @@ def render_markdown(agg: dict[str, Any], meta: dict[str, Any]) -> str:
 
 def write_report(agg: dict[str, Any], meta: dict[str, Any], out: Path) -> dict[str, Path]:
     paths = {"json": out / "sweep.json", "html": out / "sweep.html", "md": out / "sweep.md"}
-    tmp = out / "sweep.json.tmp"
-    tmp.write_text(json.dumps({**agg, "meta": {k: v for k, v in meta.items() if k != "plots"}}, indent=1,
-                              default=str, allow_nan=True) + "\n")
-    os.replace(tmp, paths["json"])
-    paths["html"].write_text(render_html(agg, meta), encoding="utf-8", errors="backslashreplace")
-    paths["md"].write_text(render_markdown(agg, meta), encoding="utf-8", errors="backslashreplace")
+    # each whole under its name, or `.partial` and WriteFailed (exit 3)
+    _files.write_text(paths["json"], json.dumps({**agg, "meta": {k: v for k, v in meta.items() if k != "plots"}},
+                                                indent=1, default=str, allow_nan=True) + "\n")
+    _files.write_text(paths["html"], render_html(agg, meta), errors="backslashreplace")
+    _files.write_text(paths["md"], render_markdown(agg, meta), errors="backslashreplace")
     return paths
 
 
 # --- command -------------------------------------------------------------------------------------
 EPILOG = """\
 exit codes: 0 every accepted sample passed in every simulator (refused samples are counted, not
-failures); 1 a sample failed, errored or did not run; 2 bad usage or a bad sweep file; 130
-interrupted (rerun the same command to resume: finished checks are kept in OUT/results.jsonl).
+failures); 1 a sample failed, errored or did not run; 2 bad usage or a bad sweep file (also one of
+more than MAX_SAMPLES samples); 3 a result file cannot be written (one line naming it; it keeps its
+.partial name); 130 interrupted (rerun the same command to resume: finished checks are kept in
+OUT/results.jsonl).
 Outputs in --out: samples/*.toml (one reproducer per sample: progmo check FILE), results.jsonl,
 sweep.json, sweep.html, sweep.md. Sweep file format: python -m progmo.sweep --help-format."""
 
@@ -673,6 +716,10 @@ def main(argv: list[str] | None = None) -> int:
         if ns.samples is not None:
             if ns.samples < 1:
                 raise SweepError("--samples must be >= 1")
+            if ns.samples * spec.grid_points() > MAX_SAMPLES:
+                raise SweepError(f"--samples {ns.samples} x {spec.grid_points()} grid point(s) = "
+                                 f"{ns.samples * spec.grid_points():.4g} samples, more than the {MAX_SAMPLES} "
+                                 "a sweep runs (progmo.sweep.MAX_SAMPLES)")
             spec.samples = ns.samples
         scene_files = []
         if not scene_args:
@@ -697,8 +744,8 @@ def main(argv: list[str] | None = None) -> int:
     if ns.fresh or (stamp.is_file() and stamp.read_text().strip() != digest):
         if results_path.is_file() and not ns.fresh:
             _say("progmo sweep: the sweep file or a scene changed since the results in OUT: starting afresh")
-        results_path.unlink(missing_ok=True)
-    stamp.write_text(digest + "\n")
+        _files.remove([results_path])
+    _files.write_text(stamp, digest + "\n")
     drop_torn_tail(results_path)
     records = read_results(results_path)
     by_path = {s.path: s for s in samples}
@@ -714,7 +761,11 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     done = 0
     try:
-        with open(results_path, "a") as sink:
+        sink = open(results_path, "a")
+    except OSError as e:
+        raise _files.WriteFailed(results_path, e) from None
+    try:
+        with sink:
             for task, r in executors.run(tasks, options, executor=ns.executor, jobs=jobs, address=ns.address):
                 s = by_path[task.scene_path]
                 rec = {"scene": s.scene, "sample": s.index, "simulator": task.simulator,
@@ -731,6 +782,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         interrupted = True
         _say(f"progmo sweep: interrupted after {done} of {len(tasks)} checks; rerun the same command to resume")
+    except OSError as e:  # appending a result (a torn last line is dropped when resuming)
+        raise _files.WriteFailed(results_path, e) from None
     wall = time.perf_counter() - t0
     agg = aggregate(samples, spec, records)
     import shlex

@@ -24,8 +24,12 @@
 //! A result file exists under its real name only when it is whole: [`RunFiles`] writes
 //! `trajectory.csv` and `recording.mcap` as `<name>.partial` ([`Staged`]) and renames each when its
 //! writer finishes without error; `summary.json` is written last, through `summary.json.tmp`
-//! ([`write_summary_to_path`]). A `.partial` file is an incomplete write (a full device: the
-//! command's last line names it and the exit code is 3; or a killed process). A solve that stops
+//! ([`write_summary_to_path`]), and named `summary.json.partial` when a data file stayed
+//! `.partial`. A `.partial` file is an incomplete write (a full device: the
+//! command's last line names it and the exit code is 3; or a killed process). A destination
+//! holding something other than a regular file (a device, a FIFO, a directory) is refused, never
+//! replaced ([`writable_destination`]). A refused solve (bad settings) clears the earlier run's
+//! files from its folder as a started one does. A solve that stops
 //! early or is interrupted (Ctrl-C, SIGTERM: [`StopOn`] and [`crate::interrupt`]; code
 //! `interrupted`, exit 130) is not an incomplete write: its files are finished, valid up to the
 //! stop, and the summary's `code` says why it ended. [`remove_previous_run`] clears every one of
@@ -187,7 +191,10 @@ pub use scene3d::{
     SHAPE_COLOR, TARGET_COLOR,
 };
 pub use sinks::{Every, StopOn, Tee};
-pub use staged::{remove_previous_run, with_suffix, RunFiles, Staged, PARTIAL_SUFFIX, RUN_FILES};
+pub use staged::{
+    remove_previous_run, with_suffix, writable_destination, RunFiles, Staged, PARTIAL_SUFFIX,
+    RUN_FILES,
+};
 pub use summary::{summary_json, write_summary, write_summary_to_path, SummaryInput};
 
 use crate::model::Model;

@@ -14,9 +14,10 @@ use crate::solve::{Sample, SampleSink};
 pub const PARTIAL_SUFFIX: &str = ".partial";
 
 /// The files a `progmo solve` run writes into its folder, and the temporary names they pass through.
-pub const RUN_FILES: [&str; 6] = [
+pub const RUN_FILES: [&str; 7] = [
     "summary.json",
     "summary.json.tmp",
+    "summary.json.partial",
     "trajectory.csv",
     "trajectory.csv.partial",
     "recording.mcap",
@@ -28,6 +29,26 @@ pub fn with_suffix(path: &Path, suffix: &str) -> PathBuf {
     let mut s: OsString = path.as_os_str().to_owned();
     s.push(suffix);
     PathBuf::from(s)
+}
+
+/// Refuse to write a result file at `path` when something that is not a regular file is there (a
+/// device, a FIFO, a directory, a socket, or a link to one): a result is written beside it and
+/// renamed over it, which would replace `/dev/null` itself. Nothing there, or a regular file: Ok.
+pub fn writable_destination(path: &Path) -> Result<(), OutputError> {
+    let kind = match std::fs::metadata(path) {
+        Ok(m) => crate::input::not_regular(&m.file_type()),
+        Err(_) => match std::fs::symlink_metadata(path) {
+            Ok(_) => Some("a dangling symbolic link"),
+            Err(_) => None, // nothing there (or no folder: creating the file will say so)
+        },
+    };
+    match kind {
+        None => Ok(()),
+        Some(k) => Err(OutputError::invalid(
+            &path.display().to_string(),
+            format!("it is {k}, not a regular file: refusing to replace it with a result file"),
+        )),
+    }
 }
 
 /// Remove the outputs of an earlier run from `dir` (those of [`RUN_FILES`] that exist), so that
@@ -67,7 +88,9 @@ impl<S: OutputSink> Staged<S> {
         open: impl FnOnce(&Path) -> Result<S, OutputError>,
     ) -> Result<Self, OutputError> {
         let path = path.as_ref().to_path_buf();
+        writable_destination(&path)?;
         let partial = with_suffix(&path, PARTIAL_SUFFIX);
+        writable_destination(&partial)?;
         let inner = open(&partial)?;
         Ok(Staged {
             inner,
@@ -105,6 +128,7 @@ impl<S: OutputSink> OutputSink for Staged<S> {
     fn finish(&mut self) -> Result<(), OutputError> {
         self.inner.finish()?;
         if !self.renamed {
+            writable_destination(&self.path)?;
             std::fs::rename(&self.partial, &self.path).map_err(|e| {
                 OutputError::io(
                     &self.partial.display().to_string(),
@@ -219,6 +243,28 @@ mod tests {
         let e = s.finish().unwrap_err().to_string();
         assert!(e.starts_with("/dev/full: "), "{e}");
         assert!(!s.renamed);
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_device_is_never_a_destination() {
+        let l = layout();
+        for dev in ["/dev/null", "/dev/full"] {
+            let e = Staged::create(dev, |p| CsvSink::create(p, &l))
+                .err()
+                .expect("refused")
+                .to_string();
+            assert!(
+                e.starts_with(&format!("{dev}: it is a character device")),
+                "{e}"
+            );
+        }
+        assert!(!Path::new("/dev/null.partial").exists());
+        let dir = std::env::temp_dir();
+        assert!(writable_destination(&dir)
+            .unwrap_err()
+            .to_string()
+            .contains("it is a directory"));
     }
 
     #[cfg(unix)]

@@ -209,9 +209,13 @@ pub fn write_summary_to_path(
     let mut tmp = path.as_os_str().to_owned();
     tmp.push(".tmp");
     let tmp = std::path::PathBuf::from(tmp);
+    // Never beside or over a device (`/dev/null` would be replaced by the rename).
+    super::staged::writable_destination(path)?;
+    super::staged::writable_destination(&tmp)?;
     let r = File::create(&tmp)
         .map_err(|e| OutputError::io(&name, "create", e))
         .and_then(|f| write_named(BufWriter::new(f), input, &name))
+        .and_then(|()| super::staged::writable_destination(path))
         .and_then(|()| {
             std::fs::rename(&tmp, path).map_err(|e| OutputError::io(&name, "rename", e))
         });

@@ -3,7 +3,8 @@ verdict chosen per (scene, simulator) by the JSON plan in $FAKE_CHECKS_PLAN (rea
 so it also reaches spawned worker processes). Plan values: "pass", "fail", "declared" (a not_checked the scene
 declares), "not_checked" (undeclared), "error",
 "raise", "interrupt", "die", "sleep:SECONDS", "regress" (a pass whose residual is 20x the usual),
-default "pass"."""
+"solve" (says "solving" on stderr, then the first Scene.solve of the process, a long one: the
+interruption tests send Ctrl-C into it), default "pass"."""
 
 from __future__ import annotations
 
@@ -66,6 +67,15 @@ def run_check(scene_path, simulator, options=None):
         raise KeyboardInterrupt
     if kind == "die":  # the worker process dies (segfault, out of memory)
         os._exit(3)
+    if kind == "solve":
+        import sys
+
+        import progmo
+
+        scene = progmo.load("double_pendulum")
+        print("solving", file=sys.stderr, flush=True)
+        scene.solve(t1=1e6, output_dt=1.0)
+        kind = "pass"
     if kind.startswith("sleep"):  # "sleep:5": a slow check (manual interruption tests)
         import time
 

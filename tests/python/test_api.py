@@ -210,3 +210,58 @@ def test_a_check_against_a_baseline_from_other_versions_says_so(tmp_path, monkey
     notes = json.loads((out / "run.json").read_text())["notes"]
     assert any("mujoco 3.9.0 (now" in n and "heavy_top/mujoco" in n for n in notes), notes
     assert "mujoco 3.9.0" in (out / "report.html").read_text()
+
+
+# --- the API checks what the command line checks (issue 29, round two) ----------------------------
+BAD_OPTIONS = [
+    (dict(step=0), ["--step", "0"], "step: must be a finite number > 0, got 0"),
+    (dict(step=-1.0), ["--step", "-1"], "step: must be a finite number > 0, got -1"),
+    (dict(step=float("nan")), ["--step", "nan"], "step: must be a finite number > 0, got nan"),
+    (dict(horizon=0), ["--horizon", "0"], "horizon: must be a number > 0 (s), got 0"),
+    (dict(samples=0), ["--samples", "0"], "samples: must be an integer from 1 to 10000, got 0"),
+    (dict(samples=10**9), ["--samples", "1000000000"], "samples: must be an integer from 1 to 10000, got 1000000000"),
+]
+
+
+@pytest.mark.parametrize("kwargs,flags,message", BAD_OPTIONS)
+def test_check_options_are_refused_by_the_api_as_by_the_command(kwargs, flags, message, monkeypatch, tmp_path):
+    ran = []
+    monkeypatch.setattr(checks, "run_check", lambda *a: ran.append(a))
+    with pytest.raises(progmo.SettingsError) as e:
+        progmo.check("double_pendulum", "mujoco", **kwargs)
+    assert str(e.value) == message and not ran
+    r = progmo_cmd("check", "double_pendulum", "-s", "mujoco", *flags, "-o", tmp_path / "o")
+    assert r.returncode == 2 and r.stderr.splitlines()[-1] == f"progmo check: error: --{message}", r.stderr
+    r = progmo_cmd("debug", "double_pendulum", *flags, "--out", tmp_path / "d") if "samples" not in kwargs else r
+    assert r.returncode == 2 and r.stderr.splitlines()[-1].endswith(f": error: --{message}"), r.stderr
+
+
+@pytest.mark.parametrize("make", ["fifo", "/dev/zero", "/dev/null"])
+def test_scene_files_that_are_not_regular_are_refused_at_once(make, tmp_path):
+    import os
+    import time
+
+    path = tmp_path / "scene.toml"
+    if make == "fifo":
+        os.mkfifo(path)  # nobody writes: reading would block forever
+    else:
+        path = pathlib.Path(make)
+    for door in (progmo.load, progmo.Scene):
+        start = time.monotonic()
+        with pytest.raises(progmo.SceneError, match="not a regular file"):
+            door(str(path))
+        assert time.monotonic() - start < 1
+
+
+def test_a_huge_output_request_is_refused_before_allocating():
+    import resource
+    import time
+
+    scene = progmo.load("double_pendulum")
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    start = time.monotonic()
+    for kw in (dict(output_dt=1e-12), dict(t1=1e12, output_dt=1e-3), dict(output_dt=1e-12, max_samples=10**13)):
+        with pytest.raises(progmo.SettingsError, match="^output_dt: .* samples over .* more than max_samples"):
+            scene.solve(**kw)
+    assert time.monotonic() - start < 1
+    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 50_000  # kB

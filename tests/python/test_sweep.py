@@ -5,10 +5,12 @@ tolerance report (quantiles, worst sample, margin, suggested budget), a negative
 fail, and the page rendered in headless Chromium."""
 
 import json
+import os
 import pathlib
 import re
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -184,3 +186,72 @@ def test_sweep_page_renders_in_headless_chromium(tmp_path):
     assert dom.count('<img class="plot"') == 6 and "progmo check " in dom
     assert "{'" not in dom and "[{" not in dom
     assert shot.stat().st_size > 20_000
+
+
+# --- hostile sweeps (issue 29, round two) ----------------------------------------------------------
+@pytest.mark.parametrize("text,where", [
+    ('samples = 1000000000\n[vary]\n"parameters.amp" = { uniform = [0, 1] }\n',
+     r":1:1: samples: 1000000000 draw\(s\) x 1 grid point\(s\) = 1e\+09 samples, more than the 100000"),
+    ('samples = 1\n[vary]\n' + "".join(f'"solver.{k}" = {{ grid = [{", ".join(str(1 + i) for i in range(40))}] }}\n'
+                                        for k in ("rtol", "atol", "max_step", "projection_tol", "max_drift")),
+     r":1:1: samples: 1 draw\(s\) x 102400000 grid point\(s\) = 1.024e\+08 samples, more than the 100000 .*MAX_SAMPLES"),
+    ('[vary]\n"parameters.amp" = { grid = [' + ", ".join(map(str, range(20000))) + '] }\n',
+     r":2:1: vary.parameters.amp: 10 draw\(s\) x 20000 grid point\(s\)"),
+])
+def test_a_sweep_too_large_is_refused_before_sampling(tmp_path, text, where):
+    p = tmp_path / "big.toml"
+    p.write_text(text)
+    start = time.monotonic()
+    with pytest.raises(sw.SweepError, match=re.escape(str(p)) + where):
+        sw.load_spec(p)
+    assert time.monotonic() - start < 1
+    r = run("double_pendulum", "--spec", str(p), "-o", str(tmp_path / "o"))
+    assert r.returncode == 2 and "Traceback" not in r.stderr and str(p) in r.stderr, r.stderr
+    assert not (tmp_path / "o" / "samples").exists()
+
+
+def test_samples_override_is_bounded_too(tmp_path):
+    r = run("--spec", str(spec(tmp_path)), "--samples", "200000", "-o", str(tmp_path / "o"))
+    assert r.returncode == 2 and "--samples 200000 x 1 grid point(s) = 2e+05 samples, more than the 100000" in r.stderr
+
+
+def test_grid_points_are_those_of_the_product(tmp_path):
+    s = sw.load_spec(spec(tmp_path, vary='"solver.rtol" = { grid = [1e-8, 1e-10] }\n'
+                                          '"solver.atol" = { grid = [1e-9, 1e-11, 1e-12] }\n'))
+    assert s.grid_points() == 6 and [s.grid_point(j) for j in range(6)] == s.grid()
+
+
+@pytest.mark.parametrize("what", ["fifo", "zero"])
+def test_a_sweep_file_that_is_not_a_regular_file_is_refused_at_once(tmp_path, what):
+    p = tmp_path / "spec.toml"
+    if what == "fifo":
+        os.mkfifo(p)
+    else:
+        p = pathlib.Path("/dev/zero")
+    r = run("double_pendulum", "--spec", str(p), "-o", str(tmp_path / "o"), timeout=20)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert f"{p}: cannot read the sweep file: it is a" in r.stderr
+
+
+def test_a_smaller_sweep_leaves_no_sample_of_a_larger_one(tmp_path):
+    out = tmp_path / "o"
+    s = sw.load_spec(spec(tmp_path))
+    sw.make_samples(ROOT / "references" / "scenes" / "double_pendulum.toml", s, out)
+    assert len(list((out / "samples").iterdir())) == 3
+    s.samples = 1
+    sw.make_samples(ROOT / "references" / "scenes" / "double_pendulum.toml", s, out)
+    assert [p.name for p in (out / "samples").iterdir()] == ["double_pendulum-00000.toml"]
+
+
+def test_a_sweep_on_a_full_device_is_one_line_and_exit_3(tmp_path):
+    import resource
+
+    out = tmp_path / "o"
+    r = subprocess.run([sys.executable, "-m", "progmo.command", "sweep", "--spec", str(spec(tmp_path)),
+                        "-o", str(out)], capture_output=True, text=True, timeout=120, cwd=ROOT,
+                       preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (1024, 1024)))
+    assert r.returncode == 3 and "Traceback" not in r.stderr, r.stderr
+    last = r.stderr.splitlines()[-1]
+    assert re.fullmatch(rf"progmo sweep: error: cannot write {re.escape(str(out))}/samples/double_pendulum-0000\d"
+                        r"\.toml\.partial: File too large", last), last
+    assert not (out / "samples" / "double_pendulum-00000.toml").exists()

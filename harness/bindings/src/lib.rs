@@ -6,9 +6,10 @@ use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use progmo::formulation::Formulation;
 use progmo::model::Model;
+use progmo::output::StopOn;
 use progmo::programme::{Constraints, Level, Role};
 use progmo::scene::{Scene, SceneSystem};
-use progmo::solve::{Evaluator, Overrides, Solution};
+use progmo::solve::{Evaluator, Overrides, Solution, Trajectory};
 use progmo::with_problem;
 use pyo3::create_exception;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
@@ -303,9 +304,28 @@ impl PyScene {
             .map_err(|e| SettingsError::new_err(format!("{}: {}", e.field.name(), e.message)))?;
         let layout = with_problem!(&scene.system, p => SampleLayout::from_problem(p));
         let started = std::time::Instant::now();
-        let sol: Solution = py.detach(|| scene.solve(&s));
+        // Ctrl-C / SIGTERM stop the solve after the step in progress (as in `progmo solve`); the
+        // signal then goes to Python's own handler (KeyboardInterrupt carrying `.solution`, the
+        // samples up to the stop), once the solution is built.
+        let (sol, caught): (Solution, Option<i32>) = py.detach(|| {
+            let guard = progmo::interrupt::Guard::install();
+            let traj = with_problem!(&scene.system, p => Trajectory::named_for(p));
+            let mut sink = StopOn::new(traj, guard.flag());
+            let mut sol = scene.solve_into(&s, &mut sink);
+            sol.trajectory = sink.into_inner();
+            (sol, guard.release())
+        });
         let wall = started.elapsed().as_secs_f64();
-        PySolution::new(py, scene, sol, s, layout, wall)
+        let sol = PySolution::new(py, scene, sol, s, layout, wall)?;
+        if let Some(sig) = caught {
+            progmo::interrupt::raise(sig);
+            if let Err(e) = py.check_signals() {
+                let partial = Py::new(py, sol)?;
+                e.value(py).setattr("solution", partial)?;
+                return Err(e);
+            }
+        }
+        Ok(sol)
     }
 
     /// Residuals of every row along a trajectory (n samples): position rows g(t, q), velocity
@@ -909,6 +929,9 @@ fn version() -> &'static str {
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    // numpy's C API now: fetched lazily, it would be imported by the first array made, and a
+    // Ctrl-C pending then (one that ended a solve) failed that import with a panic.
+    let _ = PyArray1::<f64>::zeros(m.py(), 0, false);
     m.add_class::<PyScene>()?;
     m.add_class::<PySolution>()?;
     m.add("SettingsError", m.py().get_type::<SettingsError>())?;

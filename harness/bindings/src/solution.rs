@@ -4,7 +4,7 @@
 use crate::{json_to_py, matrix};
 use numpy::PyArray1;
 use progmo::output::{
-    replay, write_summary_to_path, Bodies, CsvSink, McapSink, OutputError, SampleLayout,
+    replay, write_summary_to_path, Bodies, CsvSink, McapSink, OutputError, SampleLayout, Staged,
     SummaryInput,
 };
 use progmo::scene::Scene;
@@ -275,27 +275,33 @@ impl PySolution {
         self.array(py, "max_residual_rates")
     }
 
-    /// Write the samples as `progmo solve`'s trajectory.csv (format: src/output/csv_sink.rs).
+    /// Write the samples as `progmo solve`'s trajectory.csv (format: src/output/csv_sink.rs),
+    /// whole or under `<path>.partial` (OSError naming it, e.g. on a full device); a path holding
+    /// something other than a regular file (a device) is refused.
     fn write_csv(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         py.detach(|| {
-            let mut sink = CsvSink::create(&path, &self.layout)?;
+            let mut sink = Staged::create(&path, |p| CsvSink::create(p, &self.layout))?;
             replay(&self.sol.trajectory, &self.sol.warnings, &mut sink)
         })
         .map_err(os_error)
     }
-    /// Write the samples as `progmo solve`'s recording.mcap (Foxglove; src/output/mcap_sink.rs).
+    /// Write the samples as `progmo solve`'s recording.mcap (Foxglove; src/output/mcap_sink.rs),
+    /// whole or under `<path>.partial`, as `write_csv`.
     fn write_mcap(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         py.detach(|| {
-            let mut sink = McapSink::create(&path, &self.layout)?;
-            if let Some(b) = &self.bodies {
-                sink = sink.with_bodies(b.clone());
-            }
+            let mut sink = Staged::create(&path, |p| {
+                let m = McapSink::create(p, &self.layout)?;
+                Ok(match &self.bodies {
+                    Some(b) => m.with_bodies(b.clone()),
+                    None => m,
+                })
+            })?;
             replay(&self.sol.trajectory, &self.sol.warnings, &mut sink)
         })
         .map_err(os_error)
     }
     /// Write `progmo solve`'s summary.json (return code, statistics, settings, max residuals),
-    /// whole or not at all.
+    /// whole or not at all (through `<path>.tmp`; a device at `path` is refused, never replaced).
     /// Servo scenes: with the servo analysis and the internal dynamics along the motion (two more
     /// solves, as `progmo solve` does).
     fn write_summary(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
