@@ -34,7 +34,9 @@ refused at its ``samples`` (or first grid variable) before any sample is drawn. 
 any sample is made: a key of the file, a distribution, a numeric ``[solver]`` setting
 (``progmo::scene::file::SOLVER_NUMBERS``), and against the scene a parameter, a coordinate or a
 velocity with one value; a misspelt one is refused at its line and column with the nearest valid
-name ("did you mean `amp`?").
+name ("did you mean `amp`?"). A solver number the scene's method ignores (``step`` without rk4,
+``max_step`` with it, ``projection_tol`` without projection, the Baumgarte gains without
+Baumgarte) is refused too: every sample would be the same run.
 """
 
 from __future__ import annotations
@@ -257,14 +259,28 @@ def load_spec(path: str | os.PathLike[str]) -> Spec:
 
 def check_names(spec: Spec, scene: Any) -> None:
     """Every varied name exists in the scene (a loaded ``Scene``): a parameter, a coordinate or a
-    velocity with one value (hinge, slide, lagrangian); else a located :class:`SweepError` with the
-    nearest valid name. A misspelt name would otherwise refuse every sample, or vary nothing."""
+    velocity with one value (hinge, slide, lagrangian), and a solver number the scene's method reads;
+    else a located :class:`SweepError` (with the nearest valid name). A misspelt name would otherwise
+    refuse every sample, or vary nothing."""
     text = Path(spec.path).read_text()
     have = {"parameters": [n for n, _ in scene.parameters],
             "initial.q": [n for n in scene.q_names if "." not in n],
             "initial.v": [n for n in scene.v_names if "." not in n]}
     what = {"parameters": "parameter", "initial.q": "coordinate", "initial.v": "velocity"}
+    st = scene.settings
+    integ, drift = st["integrator"], st["drift"]["kind"]
+    #: a solver number the scene's method would ignore: varying it would vary nothing
+    ignored = {"step": integ != "rk4" and f"its integrator is {integ} (step is rk4's fixed step)",
+               "max_step": integ == "rk4" and "its integrator is rk4, whose step is fixed",
+               "projection_tol": drift != "projection" and f"its drift control is {drift}, not projection",
+               "baumgarte_alpha": drift != "baumgarte" and f"its drift control is {drift}, not baumgarte",
+               "baumgarte_beta": drift != "baumgarte" and f"its drift control is {drift}, not baumgarte"}
     for v in spec.variables:
+        why = ignored.get(v.name) if v.where == "solver" else None
+        if why:
+            raise _located(spec.path, text, f"vary.{v.key}",
+                           f"the scene {scene.path} ignores solver.{v.name}: {why}; "
+                           "varying it would vary nothing", v.key)
         names = have.get(v.where)
         if names is not None and v.name not in names:
             raise _located(spec.path, text, f"vary.{v.key}",

@@ -14,6 +14,7 @@ import time
 
 import pytest
 
+import progmo
 from progmo import sweep as sw
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
@@ -71,6 +72,21 @@ def test_a_parameter_the_scene_lacks_is_an_error(tmp_path):
     r = run("--spec", str(p), "-o", str(tmp_path / "o"))
     assert r.returncode == 2, r.stderr
     assert re.search(r"s\.toml:10:1: vary\.parameters\.nope: the scene .*double_pendulum\.toml has no parameter 'nope'", r.stderr), r.stderr
+
+
+@pytest.mark.parametrize("key,why", [("solver.step", "its integrator is dop853"),
+                                     ("solver.baumgarte_alpha", "its drift control is projection, not baumgarte")])
+def test_a_solver_number_the_scene_ignores_is_refused(tmp_path, key, why):
+    # double_pendulum: dop853 with projection; varying rk4's step or a Baumgarte gain would vary
+    # nothing, every sample the same run
+    p = spec(tmp_path, vary=f'"{key}" = {{ uniform = [0.001, 0.002] }}\n')
+    r = run("--spec", str(p), "-o", str(tmp_path / "o"))
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert re.search(rf"s\.toml:10:1: vary\.{re.escape(key)}: the scene .* ignores {re.escape(key)}: {why}", r.stderr), \
+        r.stderr
+    # what it does read is accepted
+    ok = sw.load_spec(spec(tmp_path, vary='"solver.projection_tol" = { grid = [1e-12] }\n', name="ok.toml"))
+    sw.check_names(ok, progmo.load("double_pendulum"))
 
 
 @pytest.mark.parametrize("key,near", [("parameters.ampp", "amp"), ("initial.q.q11", "q1"), ("initial.v.q22", "q2")])
