@@ -592,7 +592,9 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
             && solution.t_end == t0
             && matches!(
                 code,
-                ReturnCode::InconsistentInitialState { .. } | ReturnCode::SingularProgramme { .. }
+                ReturnCode::InconsistentInitialState { .. }
+                    | ReturnCode::SingularProgramme { .. }
+                    | ReturnCode::UnrealizableProgramme { .. }
             ) =>
         {
             errln!("{}", scene.initial_error(code, &settings));

@@ -25,6 +25,89 @@ pub const SCENE_LIMIT: u64 = 4 << 20;
 /// Largest robot file (URDF, MJCF) read (bytes): example-robot-data's largest is under 1 MiB.
 pub const ROBOT_LIMIT: u64 = 64 << 20;
 
+/// Most bodies of a model: a tree scene's `[[model.bodies]]`, a URDF's links, an MJCF's
+/// `<body>`s, `[[model.frames]]` included. Real robots have tens to a few hundred.
+pub const MAX_BODIES: usize = 4096;
+
+/// Most coordinates: a lagrangian model's `coordinates`, a tree's velocity coordinates. The mass
+/// matrix and the formulations' factors are dense n x n (32 MiB each at this limit).
+pub const MAX_COORDINATES: usize = 2048;
+
+/// Deepest nesting of XML elements in a robot file (an MJCF chain of bodies nests as deep as it
+/// is long; real files nest a few tens).
+pub const MAX_XML_DEPTH: usize = 1024;
+
+/// Most XML elements of a robot file (real files: a few thousand), counted before parsing: the
+/// parser keeps about 80 bytes per node, and a 64 MiB file of `<a/>` holds 16 million.
+pub const MAX_XML_ELEMENTS: usize = 200_000;
+
+/// Most XML attributes of a robot file, counted before parsing (about 40 bytes each in the parser).
+pub const MAX_XML_ATTRIBUTES: usize = 1_000_000;
+
+/// Where an XML text first passes [`MAX_XML_ELEMENTS`], [`MAX_XML_ATTRIBUTES`] or
+/// [`MAX_XML_DEPTH`]: (byte offset, message). A scan of the tags (comments, CDATA, processing
+/// instructions and quoted values skipped), run before the parser allocates anything; a malformed
+/// file that passes is left to the parser's own error.
+pub fn xml_limits(text: &str) -> Result<(), (usize, String)> {
+    let b = text.as_bytes();
+    let find = |from: usize, pat: &[u8]| {
+        b[from..]
+            .windows(pat.len())
+            .position(|w| w == pat)
+            .map_or(b.len(), |k| from + k + pat.len())
+    };
+    let (mut i, mut depth, mut elements, mut attributes) = (0, 0usize, 0usize, 0usize);
+    while let Some(k) = b[i..].iter().position(|&c| c == b'<') {
+        let at = i + k;
+        let rest = &b[at..];
+        i = if rest.starts_with(b"<!--") {
+            find(at + 4, b"-->")
+        } else if rest.starts_with(b"<![CDATA[") {
+            find(at + 9, b"]]>")
+        } else if rest.starts_with(b"<?") {
+            find(at + 2, b"?>")
+        } else if rest.starts_with(b"<!") {
+            at + 2 // a DTD: the parser refuses it
+        } else if rest.starts_with(b"</") {
+            depth = depth.saturating_sub(1);
+            at + 2
+        } else {
+            // a start tag, up to the first `>` outside quotes
+            let (mut j, mut quote) = (at + 1, None);
+            while j < b.len() {
+                match (quote, b[j]) {
+                    (None, q @ (b'"' | b'\'')) => quote = Some(q),
+                    (Some(q), c) if c == q => quote = None,
+                    (None, b'=') => attributes += 1,
+                    (None, b'>') => break,
+                    _ => {}
+                }
+                j += 1;
+            }
+            elements += 1;
+            if elements > MAX_XML_ELEMENTS {
+                return Err((
+                    at,
+                    format!(
+                        "more than {MAX_XML_ELEMENTS} XML elements (the limit for a robot file)"
+                    ),
+                ));
+            }
+            if attributes > MAX_XML_ATTRIBUTES {
+                return Err((at, format!("more than {MAX_XML_ATTRIBUTES} XML attributes (the limit for a robot file)")));
+            }
+            if b[j.saturating_sub(1)] != b'/' {
+                depth += 1;
+                if depth > MAX_XML_DEPTH {
+                    return Err((at, format!("XML elements nested more than {MAX_XML_DEPTH} deep (the limit for a robot file)")));
+                }
+            }
+            j + 1
+        };
+    }
+    Ok(())
+}
+
 /// Longest line an error quotes (characters); a longer line is shown as a window around the column.
 pub const QUOTE_WIDTH: usize = 120;
 

@@ -201,3 +201,29 @@ fn a_missing_file_is_a_clear_error() {
         "{shown}"
     );
 }
+
+/// A tree of more bodies than the limit (100k used to load) is refused at the first body past it,
+/// before the model is built; a tree at the limit loads. Generated: the file is 300 KB.
+#[test]
+fn a_tree_over_the_body_limit_is_refused_at_the_first_body_past_it() {
+    let max = progmo::input::MAX_BODIES;
+    let text = |n: usize| {
+        let mut t = String::from("name = \"big\"\n[model]\nkind = \"tree\"\n");
+        for k in 0..n {
+            let joint = if k == 0 {
+                "\ninertia = [1.0, 1.0, 1.0]\njoints = [{ name = \"q\", type = \"hinge\", axis = [0.0, 0.0, 1.0] }]"
+            } else {
+                ""
+            };
+            t += &format!("[[model.bodies]]\nname = \"b{k}\"\nmass = 1.0{joint}\n");
+        }
+        t + "[initial]\n[time]\nt1 = 1.0\n"
+    };
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/bad_scenes/generated.toml");
+    let e = Scene::from_text(&path, &text(max + 1)).expect_err("over the limit");
+    // 3 lines of header, body 0 takes 5 lines, the others 3
+    assert_eq!((e.line, e.column), (3 + 5 + 3 * (max - 1) + 1, 1), "{e}");
+    assert_eq!(e.field, format!("model.bodies[{max}]"));
+    assert!(e.message.contains("more than 4096 bodies"), "{e}");
+    Scene::from_text(&path, &text(max)).unwrap_or_else(|e| panic!("{e}"));
+}

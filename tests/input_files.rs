@@ -166,6 +166,8 @@ fn only_regular_text_files_are_read_and_never_quoted() {
     ] {
         let (code, text) = validate(&scene(&d, file), "", "");
         assert!(code == 2 && text.contains(phrase), "{file}: {text}");
+        // a directory or FIFO exists: never "not found" (issue 29)
+        assert!(!text.contains("not found"), "{file}: {text}");
         // an excerpt (indented) shows at most 120 characters and two `…`
         let quoted = text.lines().filter(|l| l.starts_with("    "));
         assert!(quoted.clone().all(|l| l.chars().count() <= 126), "{text}");

@@ -251,3 +251,85 @@ fn every_bad_mjcf_fails_where_its_header_says() {
     }
     assert!(failures.is_empty(), "\n{}", failures.join("\n"));
 }
+
+/// Bodies, XML nesting and XML size are bounded before anything is allocated for them: each limit
+/// is a located error naming it (never quoting the file), and a file just inside loads. A chain
+/// nested 50k deep used to cost 4.8 GB in the export.
+#[test]
+fn bodies_nesting_and_elements_are_bounded() {
+    let dir = std::env::temp_dir().join(format!("progmo-mjcf-limit-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let body = |k: usize| {
+        format!("<body name=\"b{k}\"><inertial pos=\"0 0 0\" mass=\"1\" diaginertia=\"1 1 1\"/>")
+    };
+    let load_xml = |xml: String| {
+        std::fs::write(dir.join("m.xml"), xml).unwrap();
+        Scene::from_text(&dir.join("scene.toml"), &scene_text(&dir.join("m.xml"), ""))
+    };
+    // nested: <mujoco><worldbody> and then one body per line
+    let nested = |n: usize| {
+        let mut x = String::from("<mujoco>\n<worldbody>\n");
+        for k in 0..n {
+            x += &body(k);
+            x += if k == 0 {
+                "<freejoint name=\"root\"/>\n"
+            } else {
+                "\n"
+            };
+        }
+        x += &"</body>".repeat(n);
+        x + "\n</worldbody>\n</mujoco>\n"
+    };
+    let depth = progmo::input::MAX_XML_DEPTH;
+    // <mujoco> and <worldbody> are 2 levels: body k is at depth k + 3
+    let Err(e) = load_xml(nested(depth - 1)) else {
+        panic!("too deep")
+    };
+    assert_eq!(
+        (e.line, e.column, e.field.as_str()),
+        (depth + 1, 1, "xml"),
+        "{e}"
+    );
+    assert!(e.message.contains("nested more than 1024 deep"), "{e}");
+    assert!(e.excerpt.is_empty(), "{e}");
+    let s = load_xml(nested(depth - 2)).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.v_names().len(), 6);
+    // flat: bodies side by side
+    let flat = |n: usize| {
+        let mut x = String::from("<mujoco>\n<worldbody>\n");
+        for k in 0..n {
+            x += &body(k);
+            x += if k == 0 {
+                "<freejoint name=\"root\"/>"
+            } else {
+                ""
+            };
+            x += "</body>\n";
+        }
+        x + "</worldbody>\n</mujoco>\n"
+    };
+    let max = progmo::input::MAX_BODIES;
+    let Err(e) = load_xml(flat(max + 1)) else {
+        panic!("too many bodies")
+    };
+    assert_eq!(
+        (e.line, e.column, e.field.as_str()),
+        (max + 3, 1, "body"),
+        "{e}"
+    );
+    assert!(e.message.contains("more than 4096 bodies"), "{e}");
+    load_xml(flat(max)).unwrap_or_else(|e| panic!("{e}"));
+    // elements: a comment of tags does not count, the elements after it do
+    let n = progmo::input::MAX_XML_ELEMENTS;
+    let xml = format!(
+        "<mujoco>\n<!-- {} -->\n{}\n<worldbody/>\n</mujoco>\n",
+        "<a/>".repeat(n),
+        "<custom/>".repeat(n - 1)
+    );
+    let Err(e) = load_xml(xml) else {
+        panic!("too many elements")
+    };
+    assert_eq!((e.line, e.field.as_str()), (4, "xml"), "{e}");
+    assert!(e.message.contains("more than 200000 XML elements"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

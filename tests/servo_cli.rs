@@ -97,3 +97,42 @@ fn the_summary_holds_the_servo_analysis_along_the_motion() {
     assert!(s.get("servo").is_none());
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// A programme the actuators cannot realize at t0 is bad input at both doors: `validate` and
+/// `solve` refuse it with exit 2 (solve said 1, as for a solve that failed on the way).
+#[test]
+fn an_unrealizable_programme_exits_2_in_solve_as_in_validate() {
+    // tests/servo.rs: a third car, uncoupled; pushing car 1 never moves it
+    let t = std::fs::read_to_string(scene("two_car_chain"))
+        .unwrap()
+        .replace(
+            "[[model.sites]]",
+            "[[model.bodies]]\nname = \"car3\"\nmass = 1.0\njoints = [{ name = \"x3\", type = \"slide\", axis = [1.0, 0.0, 0.0] }]\n\n[[model.sites]]",
+        )
+        .replace("expr = \"c2.x - A*sin(w*t)\"", "expr = \"x3 - A*sin(w*t)\"")
+        .replace("q = { x1 = 0.0, d = 0.0 }", "q = { x1 = 0.0, d = 0.0, x3 = 0.0 }")
+        .replace("d = \"m2*A*w^3/k\" }", "d = \"m2*A*w^3/k\", x3 = \"A*w\" }");
+    let dir = std::env::temp_dir().join(format!("progmo-servo-exit-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("unreached.toml");
+    std::fs::write(&path, t).unwrap();
+    let o = progmo()
+        .args(["validate", path.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let o = progmo()
+        .args(["solve", path.to_str().unwrap(), "--quiet", "--out"])
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("do not reach"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -202,3 +202,101 @@ fn dynamics_damping_is_modelled_and_the_rest_recorded() {
         .collect();
     assert_eq!(und, ["frictionloss"]);
 }
+
+/// A locked joint used in a row is named as locked (and where), not "unknown symbol (did you
+/// mean ...)"; a frame named like a joint is refused where it is written; a link named like a
+/// joint (ANYmal's `LF_HAA`) is no site, and a row using its signals is told why.
+#[test]
+fn locked_joints_and_name_clashes_are_explained_where_they_are_used() {
+    let urdf = robots().join("two_link.urdf");
+    let row = |e: &str| format!("[[programme]]\nname = \"h\"\nexpr = \"{e}\"\n");
+    let Err(e) = load(&scene_text(
+        &urdf,
+        "locked_joints = [\"slide\"]",
+        &row("slide - sin(t)"),
+    )) else {
+        panic!("a locked joint in a row")
+    };
+    assert_eq!((e.line, e.field.as_str()), (9, "programme[0].expr"), "{e}");
+    assert!(
+        e.message.contains(
+            "`slide` is a locked joint, welded at q = 0 by model.locked_joints[0] (line 6)"
+        ),
+        "{e}"
+    );
+    let frame = "[[model.frames]]\nname = \"elbow\"\nparent = \"tool\"\n";
+    let Err(e) = load(&scene_text(&urdf, frame, "")) else {
+        panic!("a frame named like a joint")
+    };
+    assert_eq!(
+        (e.line, e.field.as_str()),
+        (6, "model.frames[0].name"),
+        "{e}"
+    );
+    assert!(e.message.contains("also a joint name"), "{e}");
+    // a link named like a joint
+    let dir = std::env::temp_dir().join(format!("progmo-urdf-clash-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let text = std::fs::read_to_string(&urdf)
+        .unwrap()
+        .replace("\"lower\"", "\"elbow\"");
+    std::fs::write(dir.join("clash.urdf"), text).unwrap();
+    let sc = |rows: &str| {
+        Scene::from_text(
+            &dir.join("scene.toml"),
+            &scene_text(&dir.join("clash.urdf"), "", rows),
+        )
+    };
+    let Err(e) = sc(&row("elbow.z - sin(t)")) else {
+        panic!("the signal of a link named like a joint")
+    };
+    assert!(
+        e.message
+            .contains("link `elbow` has the name of a joint, so it is not a site"),
+        "{e}"
+    );
+    sc(&row("elbow")).unwrap_or_else(|e| panic!("{e}"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A file over the limit of bodies is refused at the first link past it; a chain at the limit
+/// loads, in linear time (the joints were looked up in a list: 100k links took over 20 s).
+#[test]
+fn links_are_bounded_and_read_in_linear_time() {
+    let dir = std::env::temp_dir().join(format!("progmo-urdf-limit-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let chain = |n: usize| {
+        let mut x = String::from("<robot name=\"chain\">\n");
+        for k in 0..n {
+            x += &format!("<link name=\"l{k}\"><inertial><mass value=\"1\"/><inertia ixx=\"1\" iyy=\"1\" izz=\"1\"/></inertial></link>\n");
+        }
+        for k in 1..n {
+            // fixed joints: the limit of bodies, not of coordinates
+            x += &format!("<joint name=\"j{k}\" type=\"fixed\"><parent link=\"l{}\"/><child link=\"l{k}\"/></joint>\n", k - 1);
+        }
+        x + "</robot>\n"
+    };
+    let max = progmo::input::MAX_BODIES;
+    let sc = |n: usize| {
+        std::fs::write(dir.join("chain.urdf"), chain(n)).unwrap();
+        Scene::from_text(
+            &dir.join("scene.toml"),
+            &scene_text(&dir.join("chain.urdf"), "root_joint = \"free\"", ""),
+        )
+    };
+    let Err(e) = sc(max + 1) else {
+        panic!("over the limit")
+    };
+    assert_eq!((e.line, e.column), (max + 2, 1), "{e}");
+    assert_eq!(e.field, format!("link[l{max}]"));
+    assert!(e.message.contains("more than 4096 links"), "{e}");
+    let started = std::time::Instant::now();
+    let s = sc(max).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.q_names().len(), 7);
+    assert!(
+        started.elapsed().as_secs_f64() < 20.0,
+        "{:?}",
+        started.elapsed()
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

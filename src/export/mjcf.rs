@@ -162,7 +162,8 @@ pub fn mjcf_closed(
     let mut stack: Vec<(usize, usize, bool)> =
         ch[n].iter().rev().map(|&b| (b, 2usize, false)).collect();
     while let Some((b, depth, closing)) = stack.pop() {
-        let ind = "  ".repeat(depth);
+        // indentation stops growing at MAX_INDENT levels: a deep chain's document stays linear
+        let ind = "  ".repeat(depth.min(super::MAX_INDENT));
         if closing {
             let _ = writeln!(x, "{ind}</body>");
             continue;

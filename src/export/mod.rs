@@ -170,6 +170,10 @@ pub struct ArmatureExport {
 /// timeconst = this many steps of `<option timestep>` (dampratio 1); the harness keeps the ratio
 /// when it replays at another step.
 pub const MUJOCO_SOLREF_STEPS: f64 = 4.0;
+/// Deepest indentation (levels) of a written document: nesting goes on, the indentation stops
+/// growing, so a chain of n bodies writes O(n) bytes, not O(n^2).
+pub const MAX_INDENT: usize = 32;
+
 /// MuJoCo equality solimp of exported closures (near-rigid; the measured best).
 pub const MUJOCO_SOLIMP: [f64; 3] = [0.9999, 0.9999, 0.001];
 

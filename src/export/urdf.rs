@@ -20,12 +20,14 @@ const OPEN: f64 = 1e10;
 type ChildJoints = HashMap<String, Vec<(String, String, Option<usize>)>>;
 
 /// Depth-first joint order from link `l` (reached by our joint `j`), child joints by name.
+/// Iterative: a chain of thousands of links must not exhaust the stack.
 fn dfs(l: String, j: Option<usize>, map: &mut ChildJoints, order: &mut Vec<usize>) {
-    order.extend(j);
-    let mut cj = map.remove(&l).unwrap_or_default();
-    cj.sort_by(|a, b| a.0.as_bytes().cmp(b.0.as_bytes()));
-    for (_, c, cj) in cj {
-        dfs(c, cj, map, order);
+    let mut stack = vec![(l, j)];
+    while let Some((l, j)) = stack.pop() {
+        order.extend(j);
+        let mut cj = map.remove(&l).unwrap_or_default();
+        cj.sort_by(|a, b| a.0.as_bytes().cmp(b.0.as_bytes()));
+        stack.extend(cj.into_iter().rev().map(|(_, c, cj)| (c, cj)));
     }
 }
 

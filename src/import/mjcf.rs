@@ -21,7 +21,7 @@ use crate::scene::{SceneError, Source};
 use crate::tree::{BodySpec, JointSpec, WORLD};
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 use roxmltree::Node;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 type R<T> = Result<T, SceneError>;
 
@@ -283,6 +283,14 @@ impl<'a, 'i> Defaults<'a, 'i> {
                 format!("default class `{name}` is defined twice"),
             ));
         }
+        if let Some(i) = elements(n).find(|c| c.has_tag_name("include")) {
+            return Err(err(
+                src,
+                i,
+                &format!("default[{name}].include"),
+                "<include> is not supported (write the file out, e.g. with MuJoCo's mj_saveLastXML)",
+            ));
+        }
         let joint = elements(n).find(|c| c.has_tag_name("joint"));
         let geom = elements(n).find(|c| c.has_tag_name("geom"));
         self.classes
@@ -472,6 +480,7 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
     let mut joints = vec![];
     let mut used_locked = vec![false; locked.len()];
     let mut names: HashMap<String, Node> = HashMap::new();
+    let mut joint_set: HashSet<String> = HashSet::new();
     // depth-first, parents first: (element, parent body name, inherited childclass)
     let mut stack: Vec<(Node, String, String)> = vec![];
     for w in worldbodies.iter().rev() {
@@ -483,8 +492,8 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         {
             stack.push((b, WORLD.to_string(), MAIN.to_string()));
         }
-        if let Some(f) =
-            elements(*w).find(|b| ["frame", "replicate", "attach"].contains(&b.tag_name().name()))
+        if let Some(f) = elements(*w)
+            .find(|b| ["frame", "replicate", "attach", "include"].contains(&b.tag_name().name()))
         {
             return Err(err(
                 src,
@@ -496,6 +505,17 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
     }
     while let Some((b, parent, class)) = stack.pop() {
         let k = bodies.len();
+        if k == crate::input::MAX_BODIES {
+            return Err(err(
+                src,
+                b,
+                "body",
+                format!(
+                    "more than {} bodies (the limit of bodies of a model)",
+                    crate::input::MAX_BODIES
+                ),
+            ));
+        }
         let name = b
             .attribute("name")
             .map(String::from)
@@ -584,7 +604,7 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
             if !is_identifier(jname) {
                 return Err(err(src, e, &jwhat, format!("joint name `{jname}` is not an identifier (letters, digits, _): it names a coordinate in rows")));
             }
-            if joints.contains(&jname.to_string()) {
+            if !joint_set.insert(jname.to_string()) {
                 return Err(err(
                     src,
                     e,

@@ -70,6 +70,10 @@ pub(crate) fn rotate_inertia(r: &Matrix3<f64>, local: &Matrix3<f64>) -> [[f64; 3
     [0, 1, 2].map(|a| [0, 1, 2].map(|b| 0.5 * (m[(a, b)] + m[(b, a)])))
 }
 
+fn options_limit() -> usize {
+    3 * crate::input::MAX_XML_ELEMENTS + 16
+}
+
 /// Parse a robot description file as XML; a malformed document is a located error (the parser's
 /// row and column turned into a byte offset of `src`).
 pub(crate) fn parse_xml(
@@ -88,7 +92,34 @@ pub(crate) fn parse_xml(
             excerpt: String::new(),
         });
     }
-    roxmltree::Document::parse(&src.text).map_err(|e| {
+    // bounded before the parser allocates: located, never quoted (the file did not parse)
+    let unquoted = |offset: usize, message: String| {
+        let (line, column) = src.line_col(offset);
+        crate::scene::SceneError {
+            file: src.file.clone(),
+            line,
+            column,
+            field: "xml".into(),
+            message,
+            excerpt: String::new(),
+        }
+    };
+    crate::input::xml_limits(&src.text).map_err(|(at, m)| unquoted(at, m))?;
+    let options = roxmltree::ParsingOptions {
+        // a backstop: text nodes lie between tags, so at most about twice the elements
+        nodes_limit: options_limit() as u32,
+        ..Default::default()
+    };
+    roxmltree::Document::parse_with_options(&src.text, options).map_err(|e| {
+        if let roxmltree::Error::NodesLimitReached = e {
+            return unquoted(
+                0,
+                format!(
+                    "more than {} XML nodes (elements, text, comments): the limit for a robot file",
+                    options_limit()
+                ),
+            );
+        }
         let p = e.pos();
         let offset = src
             .text

@@ -11,10 +11,11 @@
 //! `<transmission>`. Visuals, calibration and materials are not read (no dynamics).
 
 use super::unmodelled::{JointRange, Recorder, Unmodelled};
+use crate::input::MAX_BODIES;
 use crate::scene::{SceneError, Source};
 use crate::tree::{BodySpec, JointSpec, WORLD};
 use roxmltree::Node;
-use std::collections::{HashMap, VecDeque};
+use std::collections::{HashMap, HashSet, VecDeque};
 
 /// An imported robot.
 #[derive(Clone, Debug)]
@@ -161,6 +162,54 @@ fn link_body(src: &Source, link: Node, name: &str, parent: &str) -> R<BodySpec> 
     Ok(BodySpec::new(name, parent, mass, com, inertia))
 }
 
+/// The kinematic loop above link `start` (every link on the way up has a parent joint), located
+/// at a joint of the loop and naming its links in order.
+fn loop_error(
+    src: &Source,
+    parent_joint: &HashMap<&str, Node>,
+    start: &str,
+    root: Option<&str>,
+) -> SceneError {
+    let parent_of = |l: &str| {
+        child(parent_joint[l], "parent")
+            .and_then(|n| n.attribute("link"))
+            .unwrap_or("")
+            .to_string()
+    };
+    // walk up until a link repeats: that link lies on the loop
+    let mut on_path = HashSet::new();
+    let mut l = start.to_string();
+    while on_path.insert(l.clone()) {
+        l = parent_of(&l);
+    }
+    let mut cycle = vec![l.clone()];
+    let mut k = parent_of(&l);
+    while k != l {
+        cycle.push(k.clone());
+        k = parent_of(&k);
+    }
+    cycle.reverse(); // parents first
+    let names = cycle
+        .iter()
+        .map(|c| format!("`{c}`"))
+        .collect::<Vec<_>>()
+        .join(" -> ");
+    let j = parent_joint[l.as_str()];
+    let unreached = match root {
+        Some(r) => format!(" (not reached from the root link `{r}`)"),
+        None => " (every link has a parent: no root)".to_string(),
+    };
+    err(
+        src,
+        j,
+        &format!("joint[{}]", j.attribute("name").unwrap_or("")),
+        format!(
+            "links {names} -> `{}` form a kinematic loop, which URDF trees cannot express{unreached}",
+            cycle[0]
+        ),
+    )
+}
+
 /// Read a URDF document (`src` is the file and its text).
 pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot> {
     let doc = super::parse_xml(src)?;
@@ -179,6 +228,14 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
         let name = l
             .attribute("name")
             .ok_or_else(|| err(src, l, "link", "a <link> needs a name"))?;
+        if link_order.len() == MAX_BODIES {
+            return Err(err(
+                src,
+                l,
+                &format!("link[{name}]"),
+                format!("more than {MAX_BODIES} links (the limit of bodies of a model)"),
+            ));
+        }
         if links.insert(name, l).is_some() {
             return Err(err(
                 src,
@@ -192,13 +249,13 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
     // joint of each child link
     let mut parent_joint: HashMap<&str, Node> = HashMap::new();
     let mut children: HashMap<&str, Vec<Node>> = HashMap::new();
-    let mut joint_names: Vec<&str> = vec![];
+    let mut joint_names: HashSet<&str> = HashSet::new();
     for j in robot.children().filter(|c| c.has_tag_name("joint")) {
         let name = j
             .attribute("name")
             .ok_or_else(|| err(src, j, "joint", "a <joint> needs a name"))?;
         let what = format!("joint[{name}]");
-        if joint_names.contains(&name) {
+        if !joint_names.insert(name) {
             return Err(err(
                 src,
                 j,
@@ -206,7 +263,6 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
                 format!("joint `{name}` is defined twice"),
             ));
         }
-        joint_names.push(name);
         let link_of = |tag: &str| -> R<&str> {
             let n =
                 child(j, tag).ok_or_else(|| err(src, j, &what, format!("missing <{tag} link>")))?;
@@ -224,6 +280,14 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
             Ok(l)
         };
         let (p, c) = (link_of("parent")?, link_of("child")?);
+        if p == c {
+            return Err(err(
+                src,
+                j,
+                &what,
+                format!("link `{c}` is both the parent and the child of joint `{name}`: a kinematic loop, which URDF trees cannot express"),
+            ));
+        }
         if let Some(first) = parent_joint.get(c) {
             return Err(err(
                 src,
@@ -253,7 +317,7 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
                 if links.is_empty() {
                     "no <link>".to_string()
                 } else {
-                    "every link has a parent: the joints form a kinematic loop".to_string()
+                    return Err(loop_error(src, &parent_joint, link_order[0], None));
                 },
             ))
         }
@@ -313,6 +377,7 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
     let mut used_locked = vec![false; locked.len()];
     let mut queue: VecDeque<&str> = VecDeque::from([root]);
     let mut seen = 1usize;
+    let mut reached: HashSet<&str> = HashSet::from([root]);
     while let Some(p) = queue.pop_front() {
         for j in children.get(p).map(|v| v.as_slice()).unwrap_or(&[]) {
             let name = j.attribute("name").unwrap_or("");
@@ -420,10 +485,19 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
             }
             bodies.push(b);
             seen += 1;
+            reached.insert(c);
             queue.push_back(c);
         }
     }
-    debug_assert_eq!(seen, links.len()); // one root, one parent each: a tree reaches every link
+    if seen < links.len() {
+        // one parent each and one root: the links not reached form a loop (with what hangs on it)
+        let start = link_order
+            .iter()
+            .copied()
+            .find(|l| !reached.contains(l))
+            .unwrap_or(root);
+        return Err(loop_error(src, &parent_joint, start, Some(root)));
+    }
     if let Some(k) = used_locked.iter().position(|u| !u) {
         return Err(src.error(
             0..0,

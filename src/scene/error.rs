@@ -94,6 +94,29 @@ impl Source {
         }
     }
 
+    /// Span of the value of `key = value` written on a line of its own in the table whose header
+    /// starts at byte `header` (0: the top level), up to the next table header; None when the key
+    /// is written otherwise (inline, dotted) or not at all.
+    pub fn key_value_span(&self, header: usize, key: &str) -> Option<Range<usize>> {
+        let mut start = header.min(self.text.len());
+        for (k, line) in self.text[start..].split_inclusive('\n').enumerate() {
+            let t = line.trim_start();
+            if k > 0 && t.starts_with('[') {
+                return None;
+            }
+            let value = t
+                .strip_prefix(key)
+                .and_then(|r| r.trim_start().strip_prefix('='))
+                .map(str::trim_start);
+            if let Some(v) = value.filter(|v| !v.is_empty()) {
+                let from = start + line.len() - v.len();
+                return Some(from..start + line.trim_end().len());
+            }
+            start += line.len();
+        }
+        None
+    }
+
     /// An error without a position.
     pub fn general(&self, field: &str, message: impl Into<String>) -> SceneError {
         SceneError {
@@ -154,8 +177,8 @@ impl Source {
             Some(span) => {
                 let (field, on_header) = self.field_at(span.start);
                 if missing.is_some() && !on_header && field.is_empty() {
-                    // A missing top-level key: the span is the whole document, no place to show.
-                    return self.general(&join(field), msg);
+                    // A missing top-level key: the span is the whole document, shown at its start.
+                    return self.error(0..0, &join(field), msg);
                 }
                 let field = if on_header { join(field) } else { field };
                 self.error(span, &field, msg)
@@ -215,6 +238,19 @@ impl Source {
                 .and_then(|r| r.strip_suffix(']'))
                 .and_then(header_name);
             if here && array.is_none() && plain.is_none() {
+                let inner = l.trim_matches(|c: char| c == '[' || c == ']' || c.is_whitespace());
+                let header_like = l.starts_with('[')
+                    && !l.contains([',', '='])
+                    && inner.starts_with(|c: char| c.is_ascii_alphabetic() || c == '_');
+                if header_like {
+                    // a malformed header (not a row of an array): the table it names, never the
+                    // one above it
+                    let name: String = inner
+                        .chars()
+                        .filter(|c| c.is_ascii_alphanumeric() || "_-.".contains(*c))
+                        .collect();
+                    return (name, false);
+                }
                 break;
             }
             if !here {

@@ -29,6 +29,9 @@ struct Symbols {
     signals: Signals,
     /// Level of each signal slot (index k = slot - layout.signals).
     signal_levels: Vec<Level>,
+    /// Why a name is no symbol (a locked joint, a link named like a joint): (name, reason), told
+    /// when an expression uses it or one of its signals.
+    hints: Vec<(String, String)>,
 }
 
 impl Symbols {
@@ -47,7 +50,16 @@ impl Symbols {
                 }
             }
         }
-        Expr::compile(text, &self.table).map_err(|e| src.expr_error(s.span(), field, &e))
+        Expr::compile(text, &self.table).map_err(|e| {
+            let mut se = src.expr_error(s.span(), field, &e);
+            if let expr::ExprErrorKind::UnknownSymbol { name, .. } = &e.kind {
+                let base = name.split(['.', '\'']).next().unwrap_or("");
+                if let Some((_, why)) = self.hints.iter().find(|h| h.0 == base) {
+                    se.message = format!("unknown symbol `{name}`: {why}");
+                }
+            }
+            se
+        })
     }
 
     /// Level of the highest-level slot an expression reads (None if it reads no slot).
@@ -77,7 +89,11 @@ impl Symbols {
 pub(super) fn load(src: Source) -> R<Scene> {
     let file: SceneFile = toml::from_str(&src.text).map_err(|e| src.toml_error(&e))?;
     if file.name.trim().is_empty() {
-        return Err(src.general("name", "the scene needs a non-empty name"));
+        let message = "the scene needs a non-empty name";
+        return Err(match src.key_value_span(0, "name") {
+            Some(span) => src.error(span, "name", message),
+            None => src.general("name", message),
+        });
     }
     let settings = solver(&src, &file)?;
     validate_settings(&src, &file, &settings)?;
@@ -634,6 +650,7 @@ fn symbols(q: &[String], v: &[String], params: &[(String, f64)], signals: Signal
         layout,
         signals,
         signal_levels: vec![],
+        hints: vec![],
     }
 }
 
@@ -670,7 +687,18 @@ fn lagrangian(
             "a lagrangian model needs coordinates",
         ));
     }
+    if let Some(c) = m.coordinates.get(crate::input::MAX_COORDINATES) {
+        return Err(src.error(
+            c.span(),
+            "model.coordinates",
+            format!(
+                "more than {} coordinates (the limit of coordinates of a model)",
+                crate::input::MAX_COORDINATES
+            ),
+        ));
+    }
     let mut names: Vec<String> = vec![];
+    let mut seen = std::collections::HashSet::new();
     for c in &m.coordinates {
         let n = c.get_ref();
         if !is_identifier(n) || n == "t" || n == "pi" || params.iter().any(|p| &p.0 == n) {
@@ -680,7 +708,7 @@ fn lagrangian(
                 format!("`{n}` is not a valid coordinate name (an identifier, not `t`, `pi` or a parameter)"),
             ));
         }
-        if names.contains(n) {
+        if !seen.insert(n) {
             return Err(src.error(
                 c.span(),
                 "model.coordinates",
@@ -831,13 +859,14 @@ fn tree_scene(
     params: &[(String, f64)],
 ) -> R<(TreeSceneModel, Symbols, ImportInfo, ClosureRows)> {
     let imported = matches!(m.kind.get_ref().as_str(), "urdf" | "mjcf");
-    let (specs, joint_names, link_sites, notes) = if imported {
+    let (specs, joint_names, link_sites, notes, mut hints) = if imported {
         import_specs(src, m, params)?
     } else {
         let (specs, joint_names) = tree_specs(src, m, params)?;
-        (specs, joint_names, vec![], (vec![], None))
+        (specs, joint_names, vec![], (vec![], None), vec![])
     };
     let joint_names: Vec<&str> = joint_names.iter().map(|s| s.as_str()).collect();
+    let joint_set: std::collections::HashSet<&str> = joint_names.iter().copied().collect();
     let fields = Fields {
         gravity: m.gravity.unwrap_or([0.0; 3]),
         attractors: m
@@ -857,7 +886,20 @@ fn tree_scene(
             }
             _ => (None, e.to_string()),
         };
-        let idx = body.and_then(|b| m.bodies.iter().position(|x| x.get_ref().name == b));
+        let mut idx = body
+            .as_ref()
+            .and_then(|b| m.bodies.iter().position(|x| &x.get_ref().name == b));
+        if msg.contains("duplicate body name") {
+            // the second body of that name is the duplicate
+            idx = body.as_ref().and_then(|b| {
+                let mut same = m
+                    .bodies
+                    .iter()
+                    .enumerate()
+                    .filter(|x| &x.1.get_ref().name == b);
+                same.nth(1).map(|x| x.0)
+            });
+        }
         // Bodies are sorted parents first here, so an unplaced parent is missing or in a cycle.
         let msg = match idx.map(|i| &m.bodies[i].get_ref().parent) {
             Some(parent) if msg.contains("unknown parent") => {
@@ -875,22 +917,84 @@ fn tree_scene(
             }
             _ => msg,
         };
+        let joint = match &e {
+            ModelError::Joint { joint, .. } => idx.and_then(|i| {
+                let js = &m.bodies[i].get_ref().joints;
+                js.iter()
+                    .position(|j| &j.get_ref().name == joint)
+                    .map(|k| (i, k, js[k].span()))
+            }),
+            _ => None,
+        };
+        // a name or parent on a line of its own: the caret on its value
+        let key = |i: usize, key: &str| src.key_value_span(m.bodies[i].span().start, key);
         match idx {
+            _ if joint.is_some() => {
+                let (i, k, span) = joint.expect("some");
+                src.error(span, &format!("model.bodies[{i}].joints[{k}]"), msg)
+            }
             // Inertia problems point at the inertia itself.
             Some(i) if msg.contains("inertia") && m.bodies[i].get_ref().inertia.is_some() => {
                 let span = m.bodies[i].get_ref().inertia.as_ref().unwrap().span();
                 src.error(span, &format!("model.bodies[{i}].inertia"), msg)
             }
+            Some(i) if msg.contains("parent") && key(i, "parent").is_some() => src.error(
+                key(i, "parent").expect("some"),
+                &format!("model.bodies[{i}].parent"),
+                msg,
+            ),
+            Some(i) if msg.contains("duplicate body name") && key(i, "name").is_some() => src
+                .error(
+                    key(i, "name").expect("some"),
+                    &format!("model.bodies[{i}].name"),
+                    msg,
+                ),
             Some(i) => src.error(m.bodies[i].span(), &format!("model.bodies[{i}]"), msg),
             None => src.error(m.kind.span(), "model", msg),
         }
     })?;
+    if tree.nv() > crate::input::MAX_COORDINATES {
+        let limit = crate::input::MAX_COORDINATES;
+        let message = format!(
+            "{} velocity coordinates, more than {limit} (the limit of coordinates of a model)",
+            tree.nv()
+        );
+        // the body whose joints pass the limit (a tree scene), else the robot file
+        let mut nv = 0;
+        let over = m.bodies.iter().position(|b| {
+            nv += b
+                .get_ref()
+                .joints
+                .iter()
+                .map(|j| match j.get_ref().kind.get_ref().as_str() {
+                    "ball" => 3,
+                    "free" => 6,
+                    _ => 1,
+                })
+                .sum::<usize>();
+            nv > limit
+        });
+        return Err(match (over, &m.file) {
+            (Some(i), _) => src.error(m.bodies[i].span(), &format!("model.bodies[{i}]"), message),
+            (None, Some(f)) => src.error(f.span(), "model.file", message),
+            (None, None) => src.error(m.kind.span(), "model", message),
+        });
+    }
     let tree = Arc::new(tree);
     // Imported robots: every link and frame is a site at its origin (its orientation signals are
-    // the body's own).
+    // the body's own), unless a joint has its name.
+    for n in link_sites.iter().filter(|n| joint_set.contains(n.as_str())) {
+        hints.push((
+            n.clone(),
+            format!(
+                "link `{n}` has the name of a joint, so it is not a site (its signals would read \
+                 as the joint's): add a `[[model.frames]]` of another name with parent = \"{n}\""
+            ),
+        ));
+    }
     let mut sites: Vec<Site> = link_sites
         .iter()
-        .filter(|n| !joint_names.contains(&n.as_str()))
+        .filter(|n| !joint_set.contains(n.as_str()))
         .map(|n| Site {
             name: n.clone(),
             body: tree.body_id(n).expect("imported body"),
@@ -921,7 +1025,7 @@ fn tree_scene(
             ));
         }
         // `j.qw` would name both the site's orientation and ball joint j's coordinate.
-        if joint_names.contains(&sf.name.as_str()) {
+        if joint_set.contains(sf.name.as_str()) {
             return Err(src.error(
                 s.span(),
                 &format!("model.sites[{si}].name"),
@@ -943,6 +1047,7 @@ fn tree_scene(
         params,
         Signals::new(tree.clone(), sites),
     );
+    sym.hints = hints;
     #[allow(clippy::single_range_in_vec_init)] // a list of allowed slot ranges, here one
     let state = [sym.layout.t..sym.layout.a];
     let mut point_forces = vec![];
@@ -1004,8 +1109,14 @@ fn tree_scene(
 }
 
 /// Bodies, joint names, link and frame names (sites), notes and robot file of a `urdf` or `mjcf`
-/// model.
-type Imported = (Vec<BodySpec>, Vec<String>, Vec<String>, ImportInfo);
+/// model, and why names are no symbols (locked joints).
+type Imported = (
+    Vec<BodySpec>,
+    Vec<String>,
+    Vec<String>,
+    ImportInfo,
+    Vec<(String, String)>,
+);
 
 /// The bodies of a `urdf` or `mjcf` model: the file's links or bodies ([`crate::import::urdf`],
 /// [`crate::import::mjcf`]) plus `frames` as massless welded bodies.
@@ -1100,10 +1211,34 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
         .map(|b| b.name.clone())
         .filter(|n| is_identifier(n))
         .collect();
+    let mut body_names: std::collections::HashSet<String> =
+        specs.iter().map(|b| b.name.clone()).collect();
+    let joint_set: std::collections::HashSet<&str> =
+        robot.joints.iter().map(String::as_str).collect();
     for (fi, f) in m.frames.iter().enumerate() {
         let ff = f.get_ref();
         let field = format!("model.frames[{fi}]");
-        if !is_identifier(&ff.name) || specs.iter().any(|b| b.name == ff.name) {
+        if specs.len() == crate::input::MAX_BODIES {
+            return Err(src.error(
+                f.span(),
+                &field,
+                format!(
+                    "more than {} bodies with the file's (the limit of bodies of a model)",
+                    crate::input::MAX_BODIES
+                ),
+            ));
+        }
+        if joint_set.contains(ff.name.as_str()) {
+            return Err(src.error(
+                f.span(),
+                &format!("{field}.name"),
+                format!(
+                    "frame name `{}` is also a joint name: its signals would collide with the joint's coordinates",
+                    ff.name
+                ),
+            ));
+        }
+        if !is_identifier(&ff.name) || body_names.contains(&ff.name) {
             return Err(src.error(
                 f.span(),
                 &format!("{field}.name"),
@@ -1113,7 +1248,7 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
                 ),
             ));
         }
-        if !specs.iter().any(|b| b.name == ff.parent) && ff.parent != tree::WORLD {
+        if !body_names.contains(&ff.parent) && ff.parent != tree::WORLD {
             return Err(src.error(
                 f.span(),
                 &format!("{field}.parent"),
@@ -1128,6 +1263,7 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
                 "pos must be finite and quat a nonzero (w, x, y, z)",
             ));
         }
+        body_names.insert(ff.name.clone());
         specs.push(
             BodySpec::massless(&ff.name, &ff.parent)
                 .at(ff.pos)
@@ -1135,6 +1271,21 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
         );
         sites.push(ff.name.clone());
     }
+    let hints = robot
+        .locked
+        .iter()
+        .map(|(j, q)| {
+            let k = m.locked_joints.iter().position(|l| l.get_ref() == j);
+            let at = k.map_or(String::new(), |k| {
+                let (line, _) = src.line_col(m.locked_joints[k].span().start);
+                format!(" by model.locked_joints[{k}] (line {line})")
+            });
+            (
+                j.clone(),
+                format!("`{j}` is a locked joint, welded at q = {q}{at}: it is no coordinate"),
+            )
+        })
+        .collect();
     for j in &robot.joints {
         if params.iter().any(|p| &p.0 == j) {
             return Err(src.error(
@@ -1152,7 +1303,7 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
         ranges: robot.ranges,
         unmodelled,
     };
-    Ok((specs, robot.joints, sites, (robot.notes, Some(info))))
+    Ok((specs, robot.joints, sites, (robot.notes, Some(info)), hints))
 }
 
 /// `[model] ignore` checked against the closed vocabulary and the file's records: each key a
@@ -1266,8 +1417,19 @@ fn tree_specs(
             "a tree model needs at least one body",
         ));
     }
+    if let Some(b) = m.bodies.get(crate::input::MAX_BODIES) {
+        return Err(src.error(
+            b.span(),
+            &format!("model.bodies[{}]", crate::input::MAX_BODIES),
+            format!(
+                "more than {} bodies (the limit of bodies of a model)",
+                crate::input::MAX_BODIES
+            ),
+        ));
+    }
     let mut specs = vec![];
     let mut joint_names: Vec<String> = vec![];
+    let mut joint_set = std::collections::HashSet::new();
     for (bi, b) in m.bodies.iter().enumerate() {
         let bf = b.get_ref();
         let field = format!("model.bodies[{bi}]");
@@ -1289,7 +1451,7 @@ fn tree_specs(
                     format!("`{n}` is not a valid joint name (an identifier, not `t`, `pi` or a parameter)"),
                 ));
             }
-            if joint_names.iter().any(|x| x == n) {
+            if !joint_set.insert(n.to_string()) {
                 return Err(src.error(
                     j.span(),
                     &jfield,

@@ -18,7 +18,9 @@ pub use overrides::{
     DEFAULT_PROJECTION_TOL, DRIFT_NAMES, FORMULATION_NAMES, INTEGRATOR_NAMES,
 };
 pub use project::{ProjectionReport, Projector};
-pub use validate::{validate, SettingsError, SettingsField, DEFAULT_MAX_SAMPLES};
+pub use validate::{
+    validate, validate_replay_step, SettingsError, SettingsField, DEFAULT_MAX_SAMPLES,
+};
 
 use crate::formulation::{Formulation, RankTolerances};
 use crate::integrate::{DriverOptions, Integrator, IntegratorStats, Method};

@@ -31,6 +31,9 @@ pub enum SettingsField {
     ConsistencyTol,
     RankDependent,
     RankVanishing,
+    /// The check's replay step (`progmo check/debug --step`, the scene's `replay_step` budget):
+    /// its reference solve samples every half step.
+    ReplayStep,
 }
 
 impl SettingsField {
@@ -60,6 +63,7 @@ impl SettingsField {
             ConsistencyTol => "settings.consistency_tol",
             RankDependent => "settings.rank_dependent",
             RankVanishing => "settings.rank_vanishing",
+            ReplayStep => "tolerances.replay_step",
         }
     }
 
@@ -138,6 +142,32 @@ fn advances(field: SettingsField, (t0, t1): (f64, f64), h: f64) -> Result<(), Se
 /// Number of intervals of width `h` in the span, rounded up (saturating).
 fn intervals((t0, t1): (f64, f64), h: f64) -> f64 {
     ((t1 - t0) / h).ceil()
+}
+
+/// Check the check's replay step `h` over `span`: its reference solve samples every h / 2
+/// ([`validate`] with that spacing), so a step that cannot advance time or gives more than
+/// `max_samples` samples is refused naming the step ([`SettingsField::ReplayStep`]), not the
+/// spacing derived from it.
+pub fn validate_replay_step(span: (f64, f64), h: f64, s: &Settings) -> Result<(), SettingsError> {
+    use SettingsField::*;
+    positive(ReplayStep, h)?;
+    advances(ReplayStep, span, h)?;
+    let sampled = Settings {
+        output: Output::Every(h / 2.0),
+        ..s.clone()
+    };
+    validate(span, &sampled).map_err(|e| match e.field {
+        OutputDt => err(
+            ReplayStep,
+            h,
+            format!(
+                "{h:?}: its reference solve samples every h/2 = {:?}: {}",
+                h / 2.0,
+                e.message
+            ),
+        ),
+        _ => e,
+    })
 }
 
 /// Check a time span and settings before integrating. Refuses non-finite spans, t1 <= t0,
@@ -238,6 +268,18 @@ mod tests {
 
     fn field(span: (f64, f64), s: &Settings) -> Option<SettingsField> {
         validate(span, s).err().map(|e| e.field)
+    }
+
+    /// `progmo check --step 1e-300` named `output_dt` (the spacing the check derives from it).
+    #[test]
+    fn a_replay_step_is_named_as_itself() {
+        let d = Settings::default();
+        for h in [1e-300, 0.0, -1.0, f64::NAN, 1e-12] {
+            let e = validate_replay_step((0.0, 1.0), h, &d).expect_err("refused");
+            assert_eq!(e.field, SettingsField::ReplayStep, "{h}: {e}");
+            assert_eq!(e.field.name(), "replay_step");
+        }
+        assert_eq!(validate_replay_step((0.0, 1.0), 1e-3, &d), Ok(()));
     }
 
     #[test]

@@ -256,6 +256,16 @@ impl PyScene {
         json_to_py(py, &self.scene.settings)
     }
 
+    /// Check the check's replay step `h` over the span up to `t1` (default the scene's) with the
+    /// scene's settings (`progmo::solve::validate_replay_step`): SettingsError naming
+    /// `replay_step`, never the `output_dt = h/2` its reference solve uses.
+    #[pyo3(signature = (h, *, t1=None))]
+    fn check_replay_step(&self, h: f64, t1: Option<f64>) -> PyResult<()> {
+        let (t0, own) = self.scene.span();
+        progmo::solve::validate_replay_step((t0, t1.unwrap_or(own)), h, &self.scene.settings)
+            .map_err(|e| SettingsError::new_err(format!("{}: {}", e.field.name(), e.message)))
+    }
+
     /// Solve (the GIL is released meanwhile). Keyword overrides in the core's one vocabulary
     /// (`progmo::solve::Overrides`, the scene file's `[solver]`/`[time]` names): output_dt, t1,
     /// rtol, atol, integrator ("dop853", "dopri5", "radau5", "rk4" with step), formulation
