@@ -367,8 +367,13 @@ def _budgets(c: _Check) -> None:
 
 def _solve_reference(c: _Check, h: float):
     """The solver's motion at every RK4 stage time of step h (output_dt = h/2)."""
+    from ._core import SettingsError
     from .simulators.replay import Reference
 
+    try:  # the step named as itself (replay_step), not as the output_dt = h/2 of the solve below
+        c.scene.check_replay_step(h, t1=c.scene.t0 + c.horizon)
+    except SettingsError as e:
+        raise _Stop("error", str(e)) from None
     n = int(round(c.horizon / h))
     if n < 2 or abs(n * h - c.horizon) > 1e-9 * max(1.0, c.horizon):
         raise _Stop("error", f"replay step {h:g} does not divide the replayed span {c.horizon:g} s")

@@ -236,6 +236,15 @@ def test_check_options_are_refused_by_the_api_as_by_the_command(kwargs, flags, m
     assert r.returncode == 2 and r.stderr.splitlines()[-1].endswith(f": error: --{message}"), r.stderr
 
 
+def test_a_step_that_cannot_advance_time_is_named_as_the_replay_step(tmp_path):
+    # --step 1e-300 was reported as the reference solve's output_dt (h/2); the core names it
+    r = progmo.check("double_pendulum", "mujoco", step=1e-300)
+    assert r.status == "error" and r.reason.startswith("replay_step: ") and "output_dt" not in r.reason, r.reason
+    with pytest.raises(progmo.SettingsError, match=r"^replay_step: "):
+        progmo.load("double_pendulum").check_replay_step(1e-300)
+    progmo.load("double_pendulum").check_replay_step(1e-3)  # a usable step passes
+
+
 @pytest.mark.parametrize("make", ["fifo", "/dev/zero", "/dev/null"])
 def test_scene_files_that_are_not_regular_are_refused_at_once(make, tmp_path):
     import os
