@@ -32,7 +32,10 @@ Sweep file::
 any sample is made: a key of the file, a distribution, a numeric ``[solver]`` setting
 (``progmo::scene::file::SOLVER_NUMBERS``), and against the scene a parameter, a coordinate or a
 velocity with one value; a misspelt one is refused at its line and column with the nearest valid
-name ("did you mean `amp`?").
+name ("did you mean `amp`?"). Numbers are finite floats (an integer beyond 1e308 is refused, as is a
+uniform range wider than the floats'); a sweep makes at most ``MAX_SAMPLES`` (100,000) samples
+(samples x grid points); a file that is not UTF-8 is refused at the line and column of its first
+invalid byte, without quoting it.
 """
 
 from __future__ import annotations
@@ -65,6 +68,8 @@ KEYS = ("scene", "samples", "seed", "simulators", "initial_state", "horizon", "s
 EXIT_OK, EXIT_FAIL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 #: suggested budget = SAFETY x the worst sampled value, rounded up to 1, 2 or 5 x 10^k
 SAFETY = 10.0
+#: most samples a sweep file may ask for (samples x the grid points): each is a scene file and a check
+MAX_SAMPLES = 100_000
 
 
 class SweepError(ValueError):
@@ -97,12 +102,19 @@ class Spec:
         return [dict(zip([v.key for v in gv], combo)) for combo in itertools.product(*[v.args for v in gv])]
 
     def total(self) -> int:
-        return len(self.grid()) * self.samples
+        return math.prod(len(v.args) for v in self.variables if v.dist == "grid") * self.samples
+
+    def grid_point(self, k: int) -> dict[str, float]:
+        """Point k of :meth:`grid` (the last grid variable varies fastest), without forming the grid."""
+        out = {}
+        for v in reversed([v for v in self.variables if v.dist == "grid"]):
+            k, j = divmod(k, len(v.args))
+            out[v.key] = v.args[j]
+        return out
 
     def values(self, i: int) -> dict[str, float]:
         """The values of sample i: a function of (seed, i) only."""
-        grid = self.grid()
-        out = dict(grid[i // self.samples])
+        out = self.grid_point(i // self.samples)
         rng = np.random.default_rng(np.random.SeedSequence([self.seed, i]))
         for v in self.variables:
             if v.dist == "uniform":
@@ -129,6 +141,18 @@ def _locate(text: str, needle: str) -> tuple[int, int]:
     return 0, 0
 
 
+def _number(x: Any) -> float | None:
+    """A TOML number as a finite float; None for anything else (a bool, a string, nan, inf, an
+    integer beyond the floats' range)."""
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        return None
+    try:
+        f = float(x)
+    except OverflowError:
+        return None
+    return f if math.isfinite(f) else None
+
+
 def _did_you_mean(name: str, candidates: "list[str] | tuple[str, ...]") -> str:
     """`` (did you mean `x`?)`` by the core's rule (``progmo::check::nearest``), or ""."""
     from ._core import nearest
@@ -148,9 +172,18 @@ def load_spec(path: str | os.PathLike[str]) -> Spec:
 
     p = Path(path)
     try:
-        text = p.read_text()
+        raw = p.read_bytes()
     except OSError as e:
         raise SweepError(f"{p}: cannot read the sweep file: {e.strerror or e}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        # located, never quoted (the core's rule for files that are not text, src/input.rs)
+        before = raw[:e.start]
+        line = before.count(b"\n") + 1
+        col = len(before[before.rfind(b"\n") + 1:].decode("utf-8")) + 1
+        raise SweepError(f"{p}:{line}:{col}: the sweep file is not valid UTF-8 (an invalid byte at line {line}, "
+                         f"column {col}): save it as UTF-8") from None
     try:
         d = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
@@ -176,9 +209,10 @@ def load_spec(path: str | os.PathLike[str]) -> Spec:
     opt: dict[str, float | None] = {}
     for k in ("horizon", "step"):
         x = d.get(k)
-        if x is not None and not (isinstance(x, (int, float)) and not isinstance(x, bool) and x > 0):
-            raise err(k, f"must be a number > 0, got {x!r}")
-        opt[k] = None if x is None else float(x)
+        f = _number(x)
+        if x is not None and not (f is not None and f > 0):
+            raise err(k, f"must be a finite number > 0, got {x!r}")
+        opt[k] = f
     vary = d.get("vary", {})
     if not isinstance(vary, dict) or not vary:
         raise err("vary", "a sweep needs a [vary] table with at least one variable", "vary")
@@ -199,24 +233,30 @@ def load_spec(path: str | os.PathLike[str]) -> Spec:
         if kind not in DISTRIBUTIONS:
             raise err(f"vary.{key}", f"unknown distribution {kind!r}{_did_you_mean(kind, list(DISTRIBUTIONS))} "
                       f"(one of {', '.join(DISTRIBUTIONS)})", key)
-        if not isinstance(args, list) or not args or not all(
-                isinstance(a, (int, float)) and not isinstance(a, bool) and math.isfinite(a) for a in args):
+        if not isinstance(args, list) or not args or any(_number(a) is None for a in args):
             raise err(f"vary.{key}", f"{kind} needs a list of finite numbers, got {args!r}", key)
+        args = [float(a) for a in args]
         n = DISTRIBUTIONS[kind]
         if n is not None and len(args) != n:
             raise err(f"vary.{key}", f"{kind} takes {n} numbers, got {len(args)}", key)
         if kind in ("uniform", "loguniform") and not args[0] < args[1]:
             raise err(f"vary.{key}", f"{kind} needs a < b, got {args}", key)
+        if kind == "uniform" and not math.isfinite(args[1] - args[0]):
+            raise err(f"vary.{key}", f"uniform needs b - a finite, got {args}", key)
         if kind == "loguniform" and args[0] <= 0:
             raise err(f"vary.{key}", "loguniform needs a > 0", key)
         if kind == "normal" and not args[1] > 0:
             raise err(f"vary.{key}", "normal needs a standard deviation > 0", key)
-        variables.append(Variable(key, where, name, kind, [float(a) for a in args]))
+        variables.append(Variable(key, where, name, kind, args))
     scene = d.get("scene")
     if scene is not None and not isinstance(scene, str):
         raise err("scene", f"must be a scene name or path, got {scene!r}")
-    return Spec(str(p), scene, samples, seed, list(dict.fromkeys(sims)), init, opt["horizon"], opt["step"],
+    spec = Spec(str(p), scene, samples, seed, list(dict.fromkeys(sims)), init, opt["horizon"], opt["step"],
                 variables)
+    if spec.total() > MAX_SAMPLES:
+        raise err("samples" if "samples" in d else "vary",
+                  f"{spec.total()} samples (samples x grid points): more than {MAX_SAMPLES}, the most a sweep makes")
+    return spec
 
 
 def check_names(spec: Spec, scene: Any) -> None:
@@ -246,13 +286,16 @@ def spec_scene(spec: Spec) -> Path:
     assert spec.scene is not None
     folder = Path(spec.path).parent
     p = Path(spec.scene)
-    if p.parent == Path(".") and p.suffix in ("", ".toml") and not (folder / p).exists():
-        return data.scene_file(spec.scene)
     try:
+        if p.parent == Path(".") and p.suffix in ("", ".toml") and not (folder / p).exists():
+            return data.scene_file(spec.scene)
         return Path(resolve_file(spec.scene, folder))
     except SceneError as e:
         line = _line_of(Path(spec.path).read_text(), "scene")
         raise SweepError(f"{spec.path}:{line}: scene: {e}") from None
+    except OSError as e:  # a name the file system refuses (too long, ...): its reason, not the name
+        line = _line_of(Path(spec.path).read_text(), "scene")
+        raise SweepError(f"{spec.path}:{line}: scene: not a usable path: {e.strerror or type(e).__name__}") from None
 
 
 def bundled_spec(scene_name: str) -> Path | None:
@@ -674,6 +717,9 @@ def main(argv: list[str] | None = None) -> int:
             if ns.samples < 1:
                 raise SweepError("--samples must be >= 1")
             spec.samples = ns.samples
+            if spec.total() > MAX_SAMPLES:
+                raise SweepError(f"--samples {ns.samples}: {spec.total()} samples (samples x grid points): "
+                                 f"more than {MAX_SAMPLES}, the most a sweep makes")
         scene_files = []
         if not scene_args:
             if spec.scene is None:
