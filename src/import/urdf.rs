@@ -423,7 +423,23 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
             queue.push_back(c);
         }
     }
-    debug_assert_eq!(seen, links.len()); // one root, one parent each: a tree reaches every link
+    if seen != links.len() {
+        // one parent each and one root, yet a link the root does not reach: it is on a loop of
+        // joints that the root's tree never enters
+        let reached: std::collections::HashSet<&str> = std::iter::once(root)
+            .chain(bodies.iter().map(|b| b.name.as_str()))
+            .collect();
+        let l = link_order
+            .iter()
+            .find(|l| !reached.contains(*l))
+            .expect("an unreached link");
+        return Err(err(
+            src,
+            links[l],
+            &format!("link[{l}]"),
+            format!("link `{l}` is not reached from the root link `{root}`: its joints form a kinematic loop, which URDF trees cannot express"),
+        ));
+    }
     if let Some(k) = used_locked.iter().position(|u| !u) {
         return Err(src.error(
             0..0,
