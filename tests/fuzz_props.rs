@@ -321,9 +321,9 @@ fn robot_error(text: &str, kind: &str) -> progmo::scene::SceneError {
     let scene = format!(
         "name = \"t\"\n[model]\nkind = \"{kind}\"\nfile = \"{file}\"\n[initial]\n[time]\nt1 = 1.0\n"
     );
-    let e = progmo::scene::Scene::from_text(&dir.join("scene.toml"), &scene)
-        .err()
-        .expect("a malformed robot file");
+    let Err(e) = progmo::scene::Scene::from_text(&dir.join("scene.toml"), &scene) else {
+        panic!("a malformed robot file loaded")
+    };
     std::fs::remove_dir_all(&dir).unwrap();
     assert!(e.file.ends_with(&file), "{e}");
     e
