@@ -36,7 +36,9 @@ any sample is made: a key of the file, a distribution, a numeric ``[solver]`` se
 velocity with one value; a misspelt one is refused at its line and column with the nearest valid
 name ("did you mean `amp`?"). A solver number the scene's method ignores (``step`` without rk4,
 ``max_step`` with it, ``projection_tol`` without projection, the Baumgarte gains without
-Baumgarte) is refused too: every sample would be the same run.
+Baumgarte) is refused too: every sample would be the same run. Numbers are finite floats (an integer beyond
+1e308 is refused, as is a uniform range wider than the floats'); a file that is not UTF-8 is refused
+at the line and column of its first invalid byte, without quoting it.
 """
 
 from __future__ import annotations
@@ -149,6 +151,18 @@ def _locate(text: str, needle: str) -> tuple[int, int]:
     return 0, 0
 
 
+def _number(x: Any) -> float | None:
+    """A TOML number as a finite float; None for anything else (a bool, a string, nan, inf, an
+    integer beyond the floats' range)."""
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        return None
+    try:
+        f = float(x)
+    except OverflowError:
+        return None
+    return f if math.isfinite(f) else None
+
+
 def _did_you_mean(name: str, candidates: "list[str] | tuple[str, ...]") -> str:
     """`` (did you mean `x`?)`` by the core's rule (``progmo::check::nearest``), or ""."""
     from ._core import nearest
@@ -176,11 +190,18 @@ def load_spec(path: str | os.PathLike[str]) -> Spec:
         if st.st_size > MAX_SPEC_BYTES:
             raise SweepError(f"{p}: cannot read the sweep file: {st.st_size} bytes, more than the "
                              f"{MAX_SPEC_BYTES} a sweep file may hold")
-        text = p.read_text()
+        raw = p.read_bytes()
     except OSError as e:
         raise SweepError(f"{p}: cannot read the sweep file: {e.strerror or e}") from None
+    try:
+        text = raw.decode("utf-8")
     except UnicodeDecodeError as e:
-        raise SweepError(f"{p}: cannot read the sweep file: not UTF-8 text (byte {e.start})") from None
+        # located, never quoted (the core's rule for files that are not text, src/input.rs)
+        before = raw[:e.start]
+        line = before.count(b"\n") + 1
+        col = len(before[before.rfind(b"\n") + 1:].decode("utf-8")) + 1
+        raise SweepError(f"{p}:{line}:{col}: the sweep file is not valid UTF-8 (an invalid byte at line {line}, "
+                         f"column {col}): save it as UTF-8") from None
     try:
         d = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
@@ -206,9 +227,10 @@ def load_spec(path: str | os.PathLike[str]) -> Spec:
     opt: dict[str, float | None] = {}
     for k in ("horizon", "step"):
         x = d.get(k)
-        if x is not None and not (isinstance(x, (int, float)) and not isinstance(x, bool) and x > 0):
-            raise err(k, f"must be a number > 0, got {x!r}")
-        opt[k] = None if x is None else float(x)
+        f = _number(x)
+        if x is not None and not (f is not None and f > 0):
+            raise err(k, f"must be a finite number > 0, got {x!r}")
+        opt[k] = f
     vary = d.get("vary", {})
     if not isinstance(vary, dict) or not vary:
         raise err("vary", "a sweep needs a [vary] table with at least one variable", "vary")
@@ -229,19 +251,21 @@ def load_spec(path: str | os.PathLike[str]) -> Spec:
         if kind not in DISTRIBUTIONS:
             raise err(f"vary.{key}", f"unknown distribution {kind!r}{_did_you_mean(kind, list(DISTRIBUTIONS))} "
                       f"(one of {', '.join(DISTRIBUTIONS)})", key)
-        if not isinstance(args, list) or not args or not all(
-                isinstance(a, (int, float)) and not isinstance(a, bool) and math.isfinite(a) for a in args):
+        if not isinstance(args, list) or not args or any(_number(a) is None for a in args):
             raise err(f"vary.{key}", f"{kind} needs a list of finite numbers, got {args!r}", key)
+        args = [float(a) for a in args]
         n = DISTRIBUTIONS[kind]
         if n is not None and len(args) != n:
             raise err(f"vary.{key}", f"{kind} takes {n} numbers, got {len(args)}", key)
         if kind in ("uniform", "loguniform") and not args[0] < args[1]:
             raise err(f"vary.{key}", f"{kind} needs a < b, got {args}", key)
+        if kind == "uniform" and not math.isfinite(args[1] - args[0]):
+            raise err(f"vary.{key}", f"uniform needs b - a finite, got {args}", key)
         if kind == "loguniform" and args[0] <= 0:
             raise err(f"vary.{key}", "loguniform needs a > 0", key)
         if kind == "normal" and not args[1] > 0:
             raise err(f"vary.{key}", "normal needs a standard deviation > 0", key)
-        variables.append(Variable(key, where, name, kind, [float(a) for a in args]))
+        variables.append(Variable(key, where, name, kind, args))
     scene = d.get("scene")
     if scene is not None and not isinstance(scene, str):
         raise err("scene", f"must be a scene name or path, got {scene!r}")
@@ -298,13 +322,16 @@ def spec_scene(spec: Spec) -> Path:
     assert spec.scene is not None
     folder = Path(spec.path).parent
     p = Path(spec.scene)
-    if p.parent == Path(".") and p.suffix in ("", ".toml") and not (folder / p).exists():
-        return data.scene_file(spec.scene)
     try:
+        if p.parent == Path(".") and p.suffix in ("", ".toml") and not (folder / p).exists():
+            return data.scene_file(spec.scene)
         return Path(resolve_file(spec.scene, folder))
     except SceneError as e:
         line = _line_of(Path(spec.path).read_text(), "scene")
         raise SweepError(f"{spec.path}:{line}: scene: {e}") from None
+    except OSError as e:  # a name the file system refuses (too long, ...): its reason, not the name
+        line = _line_of(Path(spec.path).read_text(), "scene")
+        raise SweepError(f"{spec.path}:{line}: scene: not a usable path: {e.strerror or type(e).__name__}") from None
 
 
 def bundled_spec(scene_name: str) -> Path | None:

@@ -120,19 +120,23 @@ pub(crate) fn parse_xml(
                 ),
             );
         }
+        // roxmltree counts rows by '\n' and columns in characters: back to a byte offset (the
+        // start of that character; a multi-byte character or a CR before it moves no byte)
         let p = e.pos();
-        let offset = src
-            .text
-            .lines()
-            .take(p.row as usize - 1)
-            .map(|l| l.len() + 1)
-            .sum::<usize>()
-            + p.col as usize
-            - 1;
-        src.error(
-            offset..offset + 1,
-            "xml",
-            format!("not well-formed XML: {e}"),
-        )
+        let text = &src.text;
+        let line_start: usize = text
+            .split_inclusive('\n')
+            .take((p.row as usize).saturating_sub(1))
+            .map(str::len)
+            .sum();
+        let offset = text[line_start..]
+            .char_indices()
+            .nth((p.col as usize).saturating_sub(1))
+            .map_or(text.len(), |(i, _)| line_start + i);
+        let end = text[offset..]
+            .chars()
+            .next()
+            .map_or(offset, |c| offset + c.len_utf8());
+        src.error(offset..end, "xml", format!("not well-formed XML: {e}"))
     })
 }
