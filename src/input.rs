@@ -57,7 +57,8 @@ pub fn xml_limits(text: &str) -> Result<(), (usize, String)> {
             .map_or(b.len(), |k| from + k + pat.len())
     };
     let (mut i, mut depth, mut elements, mut attributes) = (0, 0usize, 0usize, 0usize);
-    while let Some(k) = b[i..].iter().position(|&c| c == b'<') {
+    // `i` passes the end after an unterminated start tag (`j + 1` below): `get` ends the scan there
+    while let Some(k) = b.get(i..).and_then(|r| r.iter().position(|&c| c == b'<')) {
         let at = i + k;
         let rest = &b[at..];
         i = if rest.starts_with(b"<!--") {
@@ -455,6 +456,16 @@ pub fn xml_start(text: &str) -> Option<(usize, usize)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_unterminated_tag_ends_the_xml_scan() {
+        // found by tests/fuzz_props.rs on a mutated MJCF file: the scan indexed past the end
+        for t in ["<robot name='a'", "<a><b c=\"1\"", "<a", "<"] {
+            assert_eq!(xml_limits(t), Ok(()), "{t}");
+        }
+        let deep = "<a>".repeat(MAX_XML_DEPTH + 1);
+        assert!(xml_limits(&deep).unwrap_err().1.contains("nested"));
+    }
 
     #[test]
     fn normalize_removes_dots_lexically() {
