@@ -15,11 +15,7 @@ use crate::output::{
     write_summary_to_path, OutputSink, Progress, RunFiles, SampleLayout, StopOn, SummaryInput,
 };
 use crate::scene::{Scene, SceneError};
-use crate::solve::{
-    OverrideError, Overrides, ReturnCode, Settings, DRIFT_NAMES, FORMULATION_NAMES,
-    INTEGRATOR_NAMES,
-};
-use clap::builder::PossibleValuesParser;
+use crate::solve::{OverrideError, Overrides, ReturnCode, Settings};
 use clap::{Parser, Subcommand, ValueEnum};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -79,7 +75,7 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Solve a scene: writes trajectory.csv, summary.json and recording.mcap into the output folder.
-    Solve(SolveArgs),
+    Solve(Box<SolveArgs>),
     /// Check scenes without solving: parse, dimensions, consistency of the initial state.
     Validate {
         /// Scene files (TOML) or names of bundled scenes.
@@ -160,43 +156,16 @@ struct SolveArgs {
     /// Output folder [default: out/<scene name>].
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Override the scene's formulation.
-    #[arg(long, value_parser = PossibleValuesParser::new(FORMULATION_NAMES))]
-    formulation: Option<String>,
-    /// Override the scene's integrator (rk4 needs --step).
-    #[arg(long, value_parser = PossibleValuesParser::new(INTEGRATOR_NAMES))]
-    integrator: Option<String>,
-    /// Fixed step for rk4.
-    #[arg(long)]
-    step: Option<f64>,
-    /// Relative tolerance.
-    #[arg(long)]
-    rtol: Option<f64>,
-    /// Absolute tolerance.
-    #[arg(long)]
-    atol: Option<f64>,
-    /// Drift control.
-    #[arg(long, value_parser = PossibleValuesParser::new(DRIFT_NAMES))]
-    drift: Option<String>,
-    /// End time (overrides the scene's time.t1).
-    #[arg(long)]
-    t1: Option<f64>,
-    /// Output sample spacing (overrides time.output_dt).
-    #[arg(long)]
-    output_dt: Option<f64>,
-    /// Most output samples (overrides time.max_samples; default 10^7).
-    #[arg(long)]
-    max_samples: Option<usize>,
+    /// Settings: each overrides the scene file's key of the same name (`progmo::solve::Overrides`,
+    /// the one definition shared with the scene file and `Scene.solve`).
+    #[command(
+        flatten,
+        next_help_heading = "Settings (override the scene file's keys of the same name)"
+    )]
+    settings: Overrides,
     /// Do not write the MCAP recording.
     #[arg(long)]
     no_mcap: bool,
-    /// Stop at the first conditioning warning (exit 1) instead of reporting it and going on.
-    #[arg(long)]
-    strict: bool,
-    /// With a fixed step (rk4): skip the companion solve at twice the step that estimates the
-    /// global error (summary.json `global_error`; it costs about half the solve again).
-    #[arg(long)]
-    no_richardson: bool,
     /// Never show a progress bar (it is shown only on a terminal anyway).
     #[arg(long)]
     quiet: bool,
@@ -215,6 +184,21 @@ impl ExitCode {
     pub fn from(code: u8) -> Self {
         Self(code)
     }
+}
+
+/// Every long flag of `progmo solve` (`tests/schema.rs` checks that those other than the run's own
+/// options are the settings of [`crate::solve::settings`], the names of the scene file's keys).
+pub fn solve_flags() -> Vec<String> {
+    use clap::CommandFactory;
+    let cli = Cli::command();
+    let solve = cli
+        .find_subcommand("solve")
+        .expect("progmo has a solve command");
+    solve
+        .get_arguments()
+        .filter_map(|a| a.get_long())
+        .map(str::to_string)
+        .collect()
 }
 
 /// Run the command line `args` (the first item is the program name); returns the exit code.
@@ -242,7 +226,7 @@ where
         Err(e) => return usage(e),
     };
     match cli.command {
-        Command::Solve(a) => solve(a, &line),
+        Command::Solve(a) => solve(*a, &line),
         Command::Validate { scenes, json } => validate(&scenes, json),
         Command::Export {
             scene,
@@ -400,22 +384,14 @@ fn say_json(v: &serde_json::Value) -> Result<(), ExitCode> {
 }
 
 fn settings_from(a: &SolveArgs, base: &Settings) -> Result<Settings, String> {
-    // The flags are overrides in the one vocabulary of `Settings::apply`; values are checked with
-    // the span by `solve::validate`, which names the flag.
-    let o = Overrides {
-        formulation: a.formulation.clone(),
-        integrator: a.integrator.clone(),
-        step: a.step,
-        rtol: a.rtol,
-        atol: a.atol,
-        drift: a.drift.clone(),
-        output_dt: a.output_dt,
-        max_samples: a.max_samples,
-        strict: a.strict.then_some(true),
-        richardson: a.no_richardson.then_some(false),
-        ..Default::default()
-    };
-    base.apply(&o).map_err(|e| match e {
+    // The flags are the one definition's overrides (ranges checked here, names by clap); the
+    // values' consistency with the span is checked by `solve::validate`, which names the flag.
+    a.settings.check().map_err(|e| {
+        let value = a.settings.to_table().get(&e.name).map(ToString::to_string);
+        let flag = e.name.replace('_', "-");
+        format!("--{flag} {}: {}", value.unwrap_or_default(), e.message)
+    })?;
+    base.apply(&a.settings).map_err(|e| match e {
         OverrideError::StepRequired => "--integrator rk4 needs --step".to_string(),
         e => format!("--{}: {e}", e.field()),
     })
@@ -423,19 +399,11 @@ fn settings_from(a: &SolveArgs, base: &Settings) -> Result<Settings, String> {
 
 /// A settings error named by the flag that set the value (`--t1 inf: ...`), else by its scene key.
 fn flagged(a: &SolveArgs, e: &crate::solve::SettingsError) -> String {
-    use crate::solve::SettingsField as F;
-    let given = match e.field {
-        F::T1 => a.t1.is_some(),
-        F::OutputDt => a.output_dt.is_some(),
-        F::MaxSamples => a.max_samples.is_some(),
-        F::Step => a.step.is_some(),
-        F::Rtol => a.rtol.is_some(),
-        F::Atol => a.atol.is_some(),
-        _ => false,
-    };
-    match e.field.flag().filter(|_| given) {
-        Some(flag) => format!("{flag} {:?}: {}", e.value, e.message),
-        None => format!("{}: {}", a.scene.display(), e),
+    let name = e.field.name();
+    if a.settings.has(name) {
+        format!("--{} {:?}: {}", name.replace('_', "-"), e.value, e.message)
+    } else {
+        format!("{}: {}", a.scene.display(), e)
     }
 }
 
@@ -470,7 +438,7 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
         Ok(s) => s,
         Err(msg) => return refused(format_args!("{msg}")),
     };
-    if let Some(t1) = a.t1 {
+    if let Some(t1) = a.settings.t1 {
         let (t0, _) = scene.span();
         if !(t1 > t0) {
             return refused(format_args!("--t1 {t1} must be after t0 = {t0}"));

@@ -307,7 +307,8 @@ fn the_maximal_examples_load_match_the_schema_and_use_every_key() {
 // FORMAT.md against the schema.
 
 /// The key tables of FORMAT.md: for each `<!-- keys: PATH... -->` marker, the backticked names
-/// in the first column of the table that follows it (blank lines between allowed), for each
+/// in the first column of the table that follows it (blank lines and a generated-table marker
+/// between allowed), for each
 /// path the marker names (union over the markers of one path).
 fn format_md_tables(page: &str) -> BTreeMap<String, BTreeSet<String>> {
     let mut out: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
@@ -324,7 +325,11 @@ fn format_md_tables(page: &str) -> BTreeMap<String, BTreeSet<String>> {
             TOP => vec![TOP],
             p => p.split_whitespace().collect(),
         };
-        while lines.next_if(|l| l.trim().is_empty()).is_some() {}
+        // blank lines, and a `<!-- generated: ... -->` marker, between
+        while lines
+            .next_if(|l| l.trim().is_empty() || l.starts_with("<!-- generated:"))
+            .is_some()
+        {}
         let mut keys = BTreeSet::new();
         let mut rows = 0;
         while let Some(row) = lines.next_if(|l| l.starts_with('|')) {
@@ -492,6 +497,7 @@ baumgarte_alpha = 2.0
 baumgarte_beta = 1.0
 max_drift = 1e-3
 strict = false
+richardson = false
 
 [tolerances]
 programme_residual = { value = 1e-6, reason = "Baumgarte keeps the drift small, not zero" }
@@ -619,7 +625,12 @@ const BUDGETS_MARKER: &str = "<!-- generated: progmo::check::default_budget_tabl
 
 /// FORMAT.md with the table after `BUDGETS_MARKER` replaced by `table` (None: no marker).
 fn with_budget_table(page: &str, table: &str) -> Option<String> {
-    let at = page.find(BUDGETS_MARKER)? + BUDGETS_MARKER.len() + 1;
+    with_table_after(page, BUDGETS_MARKER, table)
+}
+
+/// `page` with the Markdown table right after the line `marker` replaced by `table`.
+fn with_table_after(page: &str, marker: &str, table: &str) -> Option<String> {
+    let at = page.find(marker)? + marker.len() + 1;
     let rest = &page[at..];
     let len: usize = rest
         .split_inclusive('\n')
@@ -654,19 +665,74 @@ fn format_md_default_budgets_are_the_cores() {
     assert_ne!(with_budget_table(&page, &short).unwrap(), page);
 }
 
-/// `file::SOLVER_NUMBERS` (what a sweep may vary in `[solver]`) are exactly the solver table's
-/// numeric keys.
+const SETTINGS_MARKER: &str = "<!-- generated: progmo::solve::settings_table(\"solver\") -->";
+
+/// FORMAT.md's `[solver]` key table is generated from the one definition of the settings
+/// (`progmo::solve::Overrides`' fields and doc comments).
 #[test]
-fn the_numeric_solver_keys_are_the_schemas() {
+fn format_md_solver_keys_are_the_settings() {
+    let path = root().join("src/scene/FORMAT.md");
+    let page = std::fs::read_to_string(&path).unwrap();
+    let generated = progmo::solve::settings_table("solver");
+    let want = with_table_after(&page, SETTINGS_MARKER, &generated)
+        .unwrap_or_else(|| panic!("FORMAT.md lacks the marker {SETTINGS_MARKER}"));
+    if std::env::var_os("PROGMO_BLESS").is_some() {
+        std::fs::write(&path, &want).unwrap();
+        return;
+    }
+    assert!(
+        page == want,
+        "FORMAT.md's [solver] table differs from progmo::solve::Overrides; regenerate it with \
+         `PROGMO_BLESS=1 cargo test --release --test schema` and commit it"
+    );
+}
+
+/// One name per setting at every door: the settings of the one definition
+/// (`progmo::solve::settings`) are exactly the scene file's keys that set them (`[solver]`, `[time]`
+/// but its origin t0, `[initial] assemble`) and `progmo solve`'s setting flags; the Python keyword
+/// arguments are checked against the same list by tests/python/test_settings.py.
+#[test]
+fn every_door_takes_the_same_setting_names() {
+    let names: BTreeSet<String> = progmo::solve::settings()
+        .iter()
+        .map(|s| s.name.clone())
+        .collect();
     let s = json_schema();
-    let props = s["$defs"]["solver"]["properties"].as_object().unwrap();
-    let numeric: BTreeSet<&str> = props
+    let keys = |def: &str| -> BTreeSet<String> {
+        s["$defs"][def]["properties"]
+            .as_object()
+            .unwrap()
+            .keys()
+            .cloned()
+            .collect()
+    };
+    let mut file: BTreeSet<String> = keys("solver");
+    file.extend(keys("time").into_iter().filter(|k| k != "t0"));
+    file.extend(keys("initial").into_iter().filter(|k| k == "assemble"));
+    assert_eq!(file, names, "scene file keys vs progmo::solve::settings()");
+    // the run's own options (where to write, what to print) are not settings
+    let own = ["out", "no-mcap", "quiet", "json", "help"];
+    let flags: BTreeSet<String> = progmo::cli::solve_flags()
+        .into_iter()
+        .filter(|f| !own.contains(&f.as_str()))
+        .map(|f| f.replace('-', "_"))
+        .collect();
+    assert_eq!(
+        flags, names,
+        "progmo solve flags vs progmo::solve::settings()"
+    );
+    // the numeric [solver] settings a sweep may vary are the schema's numeric [solver] keys
+    let numeric: BTreeSet<&str> = s["$defs"]["solver"]["properties"]
+        .as_object()
+        .unwrap()
         .iter()
         .filter(|(_, v)| v["type"] == "number")
         .map(|(k, _)| k.as_str())
         .collect();
-    let listed: BTreeSet<&str> = progmo::scene::file::SOLVER_NUMBERS.into_iter().collect();
-    assert_eq!(listed, numeric);
+    assert!(
+        numeric.contains("rtol") && numeric.contains("max_step"),
+        "{numeric:?}"
+    );
 }
 
 /// The rows of the table after `marker` in FORMAT.md: (first cell, second cell).

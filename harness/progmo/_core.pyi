@@ -4,7 +4,7 @@ Shapes: n = number of samples, nq / nv = sizes of q / v, s = number of constrain
 """
 
 import os
-from typing import Sequence, Any, Literal, NotRequired, TypedDict, final
+from typing import Sequence, Any, Literal, NotRequired, TypedDict, Unpack, final
 
 import numpy as np
 import numpy.typing as npt
@@ -33,6 +33,38 @@ class SolveStopped(RuntimeError):
 
 class ExportUnsupported(ValueError):
     """The scene holds an element the simulator format cannot carry; the message names it."""
+
+# generated: SolveSettings from progmo::solve::settings (PROGMO_BLESS=1 pytest tests/python/test_settings.py)
+class SolveSettings(TypedDict, total=False):
+    """The settings of ``Scene.solve`` (``progmo::solve::Overrides``); None keeps the scene's."""
+    assemble: bool | None
+    atol: float | None
+    baumgarte_alpha: float | None
+    baumgarte_beta: float | None
+    drift: Literal["projection", "baumgarte", "none"] | None
+    formulation: Literal["auto", "null_space", "null_space_stacked", "kkt", "range_space", "udwadia_kalaba", "articulated_body"] | None
+    integrator: Literal["dop853", "dopri5", "radau5", "rk4"] | None
+    max_drift: float | None
+    max_samples: int | None
+    max_step: float | None
+    output_dt: float | None
+    projection_tol: float | None
+    richardson: bool | None
+    rtol: float | None
+    step: float | None
+    strict: bool | None
+    t1: float | None
+# end generated
+
+class SettingInfo(TypedDict):
+    name: str
+    table: Literal["solver", "time", "initial"]
+    kind: Literal["number", "integer", "string", "boolean"]
+    description: str
+    above: float | None
+    at_least: float | None
+    choices: list[str]
+    default: Any
 
 class Warning(TypedDict):
     kind: Literal["row_gradient", "singular_value", "u_cancellation", "global_error"]
@@ -155,7 +187,7 @@ class Dynamics(TypedDict):
 
 __all__ = ["Scene", "Solution", "SceneError", "SettingsError", "SolveStopped", "ExportUnsupported", "FORMULATIONS", "INTEGRATORS", "DRIFTS", "version",
            "chain_toml", "drift_cost", "cli", "REFERENCE_RTOL", "REFERENCE_ATOL", "SIMULATORS", "SOLVER_ONLY",
-           "CHECK_OPTIONS", "SOLVER_NUMBERS", "check_metrics", "default_budgets", "tolerance_keys", "nearest", "resolve_file"]
+           "CHECK_OPTIONS", "SOLVER_NUMBERS", "SETTINGS", "check_metrics", "default_budgets", "tolerance_keys", "nearest", "resolve_file"]
 
 #: The core's method vocabulary (progmo::solve::FORMULATION_NAMES, ...); the Literal types below
 #: spell the same names (tests/python/test_bindings.py checks it).
@@ -199,20 +231,10 @@ class Scene:
     @property
     def settings(self) -> dict[str, Any]: ...
     def check_replay_step(self, h: float, *, t1: float | None = None) -> None: ...
-    def solve(
-        self,
-        *,
-        output_dt: float | None = None,
-        t1: float | None = None,
-        rtol: float | None = None,
-        atol: float | None = None,
-        integrator: Literal["dop853", "dopri5", "radau5", "rk4"] | None = None,
-        step: float | None = None,
-        formulation: Literal["auto", "null_space", "null_space_stacked", "kkt", "range_space", "udwadia_kalaba", "articulated_body"] | None = None,
-        drift: Literal["projection", "baumgarte", "none"] | None = None,
-        max_samples: int | None = None,
-        strict: bool | None = None,
-    ) -> Solution: ...
+    def solve(self, **settings: Unpack[SolveSettings]) -> Solution:
+        """Solve with settings overridden by name (``SolveSettings``; ``SETTINGS`` documents each):
+        the names of the scene file's keys and ``progmo solve``'s flags. Unknown names, wrong types
+        and values out of range raise SettingsError (``.field``, ``.message``)."""
     def check_initial(self) -> None:
         """Raises SceneError with the located message `progmo solve` gives when the solver refuses
         the initial state."""
@@ -312,6 +334,7 @@ SOLVER_ONLY: str
 CHECK_OPTIONS: list[str]
 #: The numeric keys of `[solver]` (what a sweep may vary there).
 SOLVER_NUMBERS: list[str]
+SETTINGS: list[SettingInfo]
 
 def check_metrics() -> list[dict[str, str]]:
     """Every metric the check judges, in the order budgets are listed: name, table (its budget's

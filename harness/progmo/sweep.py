@@ -32,7 +32,7 @@ Sweep file::
 samples (``samples`` x the product of the grid variables' lengths; ``MAX_SAMPLES``): a larger one is
 refused at its ``samples`` (or first grid variable) before any sample is drawn. Every name is checked before
 any sample is made: a key of the file, a distribution, a numeric ``[solver]`` setting
-(``progmo::scene::file::SOLVER_NUMBERS``), and against the scene a parameter, a coordinate or a
+(``_core.SOLVER_NUMBERS``: those of ``progmo::solve::Overrides``), and against the scene a parameter, a coordinate or a
 velocity with one value; a misspelt one is refused at its line and column with the nearest valid
 name ("did you mean `amp`?"). A solver number the scene's method ignores (``step`` without rk4,
 ``max_step`` with it, ``projection_tol`` without projection, the Baumgarte gains without

@@ -124,7 +124,7 @@
 //!   (max |dv| / max |v| per sample) over the samples before `t` and after `t_worst`.
 //!   `global_error`: the fixed-step estimate below is over its budget (`value`, `worst`: `scaled`;
 //!   `threshold`: `budget`; `rows` empty).
-//! - `global_error` (fixed-step solves only: `rk4`, or `fixed_step`, unless `--no-richardson`):
+//! - `global_error` (fixed-step solves only: `rk4`, or `fixed_step`, unless `--richardson=false`):
 //!   the Richardson estimate of the global error ([`GlobalError`](crate::solve::GlobalError)):
 //!   a companion solve at twice the step, compared at the output samples both runs have:
 //!   `{"method": "richardson", "step", "companion_step", "order" (p), "estimate" (max over
@@ -146,12 +146,12 @@
 //!   assembled.
 //! - `settings`: the [`Settings`](crate::solve::Settings) as serialized by serde, e.g. the
 //!   default: `{"formulation": "auto", "integrator": "dop853", "rtol": 1e-10,
-//!   "atol": 1e-12, "h_max": null, "max_steps": 10000000, "drift": {"kind": "projection",
+//!   "atol": 1e-12, "max_step": null, "max_steps": 10000000, "drift": {"kind": "projection",
 //!   "tol": 1e-12, "max_iter": 8}, "rank_dependent": 1e-10, "rank_vanishing": 1e-12,
 //!   "output": "steps", "max_drift": null, "consistency_tol": 1e-10, "assemble": false,
 //!   "conditioning": {"row_gradient": 0.001, "singular_value": 0.001, "u_cancellation": 1e8},
 //!   "strict": false, "richardson": true}`
-//!   (`h_max: null` is the unlimited default; `output` is `"steps"` or `{"every": dt}`).
+//!   (`max_step: null` is the unlimited default; `output` is `"steps"` or `{"every": dt}`).
 //! - `wall_seconds`: wall-clock duration of the run, as measured by the caller.
 //! - `versions`: `{"progmo": crate version, "git_revision": string or null}`.
 //! - `command_line`: array of strings, the arguments to rerun (program first).

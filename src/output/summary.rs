@@ -299,7 +299,7 @@ mod tests {
         assert_eq!(v["statistics"]["integrator"]["steps"], 17);
         assert_eq!(v["initial_correction"]["position"], 1e-9);
         assert_eq!(v["settings"]["rtol"], 1e-10);
-        assert!(v["settings"]["h_max"].is_null());
+        assert!(v["settings"]["max_step"].is_null());
         assert_eq!(v["wall_seconds"], 0.5);
         assert_eq!(v["versions"]["progmo"], env!("CARGO_PKG_VERSION"));
         assert_eq!(v["versions"]["git_revision"], "abc123");

@@ -3,7 +3,7 @@
 //! comments become its descriptions) and `FORMAT.md` is checked against it (`tests/schema.rs`).
 
 use super::schema::{self, Expression, Identifier};
-use crate::solve::{self, Settings};
+use crate::solve;
 use schemars::JsonSchema;
 use serde::de::{self, Deserializer, SeqAccess, Visitor};
 use serde::Deserialize;
@@ -160,6 +160,7 @@ pub struct SceneFile {
     #[schemars(with = "TimeFile")]
     pub time: Spanned<TimeFile>,
     #[serde(default)]
+    #[schemars(with = "schema::SolverTable")]
     pub solver: SolverFile,
     /// Check tolerances by name, each with a reason: the budgets of the check's metrics
     /// (programme_residual is required for catalog scenes) and its replay options; an unknown
@@ -669,69 +670,10 @@ pub struct TimeFile {
     pub max_samples: Option<Spanned<i64>>,
 }
 
-/// The numeric keys of `[solver]` (those a sweep may vary; `tests/schema.rs` checks them
-/// against [`SolverFile`]).
-pub const SOLVER_NUMBERS: [&str; 8] = [
-    "step",
-    "rtol",
-    "atol",
-    "max_step",
-    "projection_tol",
-    "baumgarte_alpha",
-    "baumgarte_beta",
-    "max_drift",
-];
-
-/// Solver settings; every key optional, defaults those of `Settings::default()`.
-#[derive(Clone, Debug, Default, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-#[schemars(rename = "solver")]
-pub struct SolverFile {
-    /// How the accelerations are computed (null_space: the paper's D A dv/dt = D (G + Q)).
-    #[serde(default)]
-    #[schemars(schema_with = "schema::formulation", extend("default" = Settings::default().formulation.name()))]
-    pub formulation: Option<Spanned<String>>,
-    /// Integrator (rk4 needs a step).
-    #[serde(default)]
-    #[schemars(schema_with = "schema::integrator", extend("default" = Settings::default().integrator.name()))]
-    pub integrator: Option<Spanned<String>>,
-    /// Fixed step of rk4 (s); required with rk4.
-    #[schemars(with = "Option<f64>", extend("exclusiveMinimum" = 0.0))]
-    pub step: Option<Spanned<f64>>,
-    /// Relative local error tolerance.
-    #[schemars(with = "Option<f64>", extend("exclusiveMinimum" = 0.0, "default" = Settings::default().rtol))]
-    pub rtol: Option<Spanned<f64>>,
-    /// Absolute local error tolerance.
-    #[schemars(with = "Option<f64>", extend("exclusiveMinimum" = 0.0, "default" = Settings::default().atol))]
-    pub atol: Option<Spanned<f64>>,
-    /// Largest step (s). Default unlimited.
-    #[schemars(with = "Option<f64>", extend("exclusiveMinimum" = 0.0))]
-    pub max_step: Option<Spanned<f64>>,
-    /// Drift control.
-    #[serde(default)]
-    #[schemars(schema_with = "schema::drift", extend("default" = Settings::default().drift.name()))]
-    pub drift: Option<Spanned<String>>,
-    /// Residual the post-step projection reaches.
-    #[schemars(
-        with = "Option<f64>",
-        extend("exclusiveMinimum" = 0.0, "default" = solve::DEFAULT_PROJECTION_TOL)
-    )]
-    pub projection_tol: Option<Spanned<f64>>,
-    /// Baumgarte alpha (with drift = baumgarte).
-    #[schemars(with = "Option<f64>", extend("default" = solve::DEFAULT_BAUMGARTE.0))]
-    pub baumgarte_alpha: Option<Spanned<f64>>,
-    /// Baumgarte beta.
-    #[schemars(with = "Option<f64>", extend("default" = solve::DEFAULT_BAUMGARTE.1))]
-    pub baumgarte_beta: Option<Spanned<f64>>,
-    /// Stop (drift_exceeded) when a position- or velocity-level residual exceeds this after a
-    /// step. Default: monitor only.
-    #[schemars(with = "Option<f64>", extend("exclusiveMinimum" = 0.0))]
-    pub max_drift: Option<Spanned<f64>>,
-    /// Stop at the first conditioning warning (return code ill_conditioned) instead of
-    /// reporting it.
-    #[schemars(extend("default" = Settings::default().strict))]
-    pub strict: Option<bool>,
-}
+/// `[solver]`: settings of [`crate::solve::Overrides`] whose table is `solver`, by name (the loader
+/// reads them through [`crate::solve::Overrides::from_table`]; the schema lists them from the same
+/// definition, [`schema::SolverTable`]).
+pub type SolverFile = BTreeMap<String, Spanned<toml::Value>>;
 
 /// A check tolerance with its reason.
 #[derive(Clone, Debug, Deserialize, JsonSchema)]

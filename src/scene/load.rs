@@ -1800,20 +1800,14 @@ fn validate_settings(src: &Source, file: &SceneFile, settings: &Settings) -> R<(
     let t = file.time.get_ref();
     let f = &file.solver;
     let at = |x: &Option<Spanned<f64>>| x.as_ref().map(|x| x.span());
+    let key = |k: &str| f.get(k).map(|x| x.span());
     let place = match e.field {
         F::T0 => at(&t.t0),
         F::T1 => Some(t.t1.span()),
         F::OutputDt => at(&t.output_dt),
         F::MaxSamples => t.max_samples.as_ref().map(|x| x.span()),
-        F::Step => at(&f.step).or(f.integrator.as_ref().map(|x| x.span())),
-        F::Rtol => at(&f.rtol),
-        F::Atol => at(&f.atol),
-        F::MaxStep => at(&f.max_step),
-        F::ProjectionTol => at(&f.projection_tol),
-        F::BaumgarteAlpha => at(&f.baumgarte_alpha),
-        F::BaumgarteBeta => at(&f.baumgarte_beta),
-        F::MaxDrift => at(&f.max_drift),
-        _ => None,
+        F::Step => key("step").or(key("integrator")),
+        other => other.key().strip_prefix("solver.").and_then(key),
     };
     // A span or rate that is too long is about the time table as a whole when no key is at fault.
     let place = place.or_else(|| (e.field == F::MaxSamples).then(|| file.time.span()));
@@ -1823,94 +1817,67 @@ fn validate_settings(src: &Source, file: &SceneFile, settings: &Settings) -> R<(
     })
 }
 
+/// The file's settings: the `[solver]` keys, `[time]` output_dt / max_samples and `[initial]`
+/// assemble, read through [`Overrides::from_table`] (names, types and ranges of the one definition)
+/// and applied to the defaults; an error is located at the value, named by its table and key.
 fn solver(src: &Source, file: &SceneFile) -> R<Settings> {
-    let f = &file.solver;
-    let num = |x: &Option<Spanned<f64>>| x.as_ref().map(|x| *x.get_ref());
-    for (name, x) in [
-        ("step", &f.step),
-        ("rtol", &f.rtol),
-        ("atol", &f.atol),
-        ("max_step", &f.max_step),
-        ("projection_tol", &f.projection_tol),
-        ("max_drift", &f.max_drift),
-    ] {
-        // Checked even when unused (a `step` without rk4); validate() checks what is used.
-        if let Some(x) = x {
-            let v = *x.get_ref();
-            if !(v > 0.0) || !v.is_finite() {
-                return Err(src.error(
-                    x.span(),
-                    &format!("solver.{name}"),
-                    format!("must be positive, got {v}"),
-                ));
-            }
-        }
-    }
-    for (name, x) in [
-        ("baumgarte_alpha", &f.baumgarte_alpha),
-        ("baumgarte_beta", &f.baumgarte_beta),
-    ] {
-        if let Some(x) = x.as_ref().filter(|x| !x.get_ref().is_finite()) {
+    let time = file.time.get_ref();
+    let mut given = toml::Table::new();
+    let mut spans: BTreeMap<String, (String, Range<usize>)> = BTreeMap::new();
+    for (name, v) in &file.solver {
+        let ok = crate::solve::setting(name).is_some_and(|s| s.table == "solver");
+        if !ok {
+            let names = crate::solve::settings()
+                .iter()
+                .filter(|s| s.table == "solver")
+                .map(|s| s.name.as_str());
             return Err(src.error(
-                x.span(),
+                v.span(),
                 &format!("solver.{name}"),
-                format!("must be a finite number, got {}", x.get_ref()),
+                format!(
+                    "unknown key `{name}`{}: [solver] takes {}",
+                    check::did_you_mean(name, names.clone()),
+                    names.collect::<Vec<_>>().join(", ")
+                ),
             ));
         }
+        given.insert(name.clone(), v.get_ref().clone());
+        spans.insert(name.clone(), (format!("solver.{name}"), v.span()));
     }
-    let name = |x: &Option<Spanned<String>>| x.as_ref().map(|x| x.get_ref().clone());
-    let time = file.time.get_ref();
-    let max_samples = match &time.max_samples {
-        Some(n) => Some(usize::try_from(*n.get_ref()).map_err(|_| {
-            src.error(
-                n.span(),
-                "time.max_samples",
-                format!("must be a positive count, got {}", n.get_ref()),
-            )
-        })?),
-        None => None,
+    if let Some(x) = &time.output_dt {
+        given.insert("output_dt".into(), toml::Value::Float(*x.get_ref()));
+        spans.insert("output_dt".into(), ("time.output_dt".into(), x.span()));
+    }
+    if let Some(n) = &time.max_samples {
+        given.insert("max_samples".into(), toml::Value::Integer(*n.get_ref()));
+        spans.insert("max_samples".into(), ("time.max_samples".into(), n.span()));
+    }
+    given.insert(
+        "assemble".into(),
+        toml::Value::Boolean(file.initial.get_ref().assemble),
+    );
+    let located = |name: &str, message: String| match spans.get(name) {
+        Some((key, span)) => src.error(span.clone(), key, message),
+        None => src.general("solver", message),
     };
-    // The file's keys are overrides of the defaults: the one vocabulary of `Settings::apply`.
-    let o = Overrides {
-        formulation: name(&f.formulation),
-        integrator: name(&f.integrator),
-        step: num(&f.step),
-        rtol: num(&f.rtol),
-        atol: num(&f.atol),
-        max_step: num(&f.max_step),
-        drift: name(&f.drift),
-        projection_tol: num(&f.projection_tol),
-        baumgarte_alpha: num(&f.baumgarte_alpha),
-        baumgarte_beta: num(&f.baumgarte_beta),
-        max_drift: num(&f.max_drift),
-        output_dt: time.output_dt.as_ref().map(|x| *x.get_ref()),
-        max_samples,
-        strict: f.strict,
-        assemble: Some(file.initial.get_ref().assemble),
-        richardson: None,
-    };
+    let o = Overrides::from_table(&given).map_err(|e| located(&e.name, e.message))?;
     Settings::default().apply(&o).map_err(|e| match e {
-        OverrideError::UnknownName(u) => {
-            let spanned = match u.what {
-                "formulation" => &f.formulation,
-                "integrator" => &f.integrator,
-                _ => &f.drift,
-            };
-            let span = spanned.as_ref().map(|x| x.span()).unwrap_or(0..0);
-            src.error(
-                span,
-                &format!("solver.{}", u.what),
-                format!(
-                    "unknown value `{}`: expected one of {}",
-                    u.value,
-                    u.expected.join(", ")
-                ),
-            )
-        }
-        OverrideError::StepRequired => {
-            let span = f.integrator.as_ref().map(|x| x.span()).unwrap_or(0..0);
-            src.error(span, "solver.step", "rk4 needs a positive fixed `step`")
-        }
+        OverrideError::UnknownName(u) => located(
+            u.what,
+            format!(
+                "unknown value `{}`: expected one of {}",
+                u.value,
+                u.expected.join(", ")
+            ),
+        ),
+        OverrideError::StepRequired => match spans.get("integrator") {
+            Some((_, span)) => src.error(
+                span.clone(),
+                "solver.step",
+                "rk4 needs a positive fixed `step`",
+            ),
+            None => src.general("solver.step", "rk4 needs a positive fixed `step`"),
+        },
     })
 }
 

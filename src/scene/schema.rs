@@ -6,7 +6,6 @@ use super::file::{
     SceneFile, CLOSURE_KINDS, JOINTS_WITH_AXIS, JOINT_TYPES, LAGRANGIAN_ONLY, MODEL_KINDS,
     ROOT_JOINTS, SIMULATORS, TARGET_KINDS, TREE_ONLY, URDF_ONLY,
 };
-use crate::solve::{DRIFT_NAMES, FORMULATION_NAMES, INTEGRATOR_NAMES};
 use schemars::transform::{RecursiveTransform, RestrictFormats};
 use schemars::{json_schema, JsonSchema, Schema, SchemaGenerator};
 use serde_json::{json, Value};
@@ -113,19 +112,36 @@ pub(super) fn target_kind(_: &mut SchemaGenerator) -> Schema {
     string_enum(&TARGET_KINDS)
 }
 
-/// `[solver] formulation`: the names of the one method vocabulary (`solve::overrides`).
-pub(super) fn formulation(_: &mut SchemaGenerator) -> Schema {
-    string_enum(&FORMULATION_NAMES)
-}
+/// `[solver]`: the settings of [`crate::solve::Overrides`] whose table is `solver` (their names,
+/// types, ranges, defaults and doc comments: the one definition of the settings).
+pub struct SolverTable;
 
-/// `[solver] integrator`.
-pub(super) fn integrator(_: &mut SchemaGenerator) -> Schema {
-    string_enum(&INTEGRATOR_NAMES)
-}
+impl JsonSchema for SolverTable {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "solver".into()
+    }
 
-/// `[solver] drift`.
-pub(super) fn drift(_: &mut SchemaGenerator) -> Schema {
-    string_enum(&DRIFT_NAMES)
+    fn json_schema(_: &mut SchemaGenerator) -> Schema {
+        let full = schemars::SchemaGenerator::default()
+            .into_root_schema_for::<crate::solve::Overrides>()
+            .to_value();
+        let mut props = serde_json::Map::new();
+        for (name, p) in full["properties"].as_object().into_iter().flatten() {
+            if p["x-table"] == "solver" {
+                let mut p = p.clone();
+                if let Some(o) = p.as_object_mut() {
+                    o.remove("x-table");
+                }
+                props.insert(name.clone(), p);
+            }
+        }
+        json_schema!({
+            "type": "object",
+            "description": "Solver settings; every key optional, defaults those of `Settings::default()`.",
+            "properties": props,
+            "additionalProperties": false,
+        })
+    }
 }
 
 /// `[parameters]` keys: identifiers other than `t` and `pi`.

@@ -14,8 +14,9 @@ mod validate;
 
 pub use evaluator::{Baumgarte, Evaluator};
 pub use overrides::{
-    OverrideError, Overrides, UnknownName, DEFAULT_BAUMGARTE, DEFAULT_PROJECTION_ITER,
-    DEFAULT_PROJECTION_TOL, DRIFT_NAMES, FORMULATION_NAMES, INTEGRATOR_NAMES,
+    setting, settings, settings_table, OverrideError, Overrides, SettingError, SettingInfo,
+    UnknownName, DEFAULT_BAUMGARTE, DEFAULT_PROJECTION_ITER, DEFAULT_PROJECTION_TOL, DRIFT_NAMES,
+    FORMULATION_NAMES, INTEGRATOR_NAMES,
 };
 pub use project::{ProjectionReport, Projector};
 pub use validate::{
@@ -83,7 +84,7 @@ pub struct Settings {
     /// Absolute local error tolerance. Default 1e-12.
     pub atol: f64,
     /// Largest step. Default: unlimited.
-    pub h_max: f64,
+    pub max_step: f64,
     /// Force a fixed step on the adaptive methods (convergence studies). Default: None.
     pub fixed_step: Option<f64>,
     /// Maximum step attempts. Default 10_000_000.
@@ -313,7 +314,7 @@ impl Default for Settings {
             integrator: Method::Dop853,
             rtol: crate::integrate::DEFAULT_RTOL,
             atol: crate::integrate::DEFAULT_ATOL,
-            h_max: f64::INFINITY,
+            max_step: f64::INFINITY,
             fixed_step: None,
             max_steps: crate::integrate::DEFAULT_MAX_STEPS,
             max_samples: DEFAULT_MAX_SAMPLES,
@@ -345,7 +346,7 @@ impl Settings {
         DriverOptions {
             rtol: self.rtol,
             atol: self.atol,
-            h_max: self.h_max,
+            h_max: self.max_step,
             fixed_step: self.fixed_step,
             max_steps: self.max_steps,
             ..Default::default()

@@ -7,6 +7,8 @@
 use super::{DriftControl, Output, Settings};
 use crate::formulation::Formulation;
 use crate::integrate::Method;
+use clap::builder::PossibleValuesParser;
+use schemars::JsonSchema;
 use std::fmt;
 use std::str::FromStr;
 
@@ -128,29 +130,293 @@ impl DriftControl {
     }
 }
 
-/// Changes to a [`Settings`], as a scene file, the command line or a Python call give them. `None`
-/// keeps the current value. Names are those of the scene file's `[solver]` and `[time]` keys.
-#[derive(Clone, Debug, Default, PartialEq)]
+/// The overridable settings: the one definition every door reads. A scene file gives them as keys
+/// of the table each names (`[solver]`, `[time]`, `[initial]`), `progmo solve` as flags
+/// (`--max-step`), the Python binding as keyword arguments (`Scene.solve(max_step=...)`), a sweep
+/// as `vary.solver.<name>` (the numeric `[solver]` ones). `None` keeps the current value. Ranges are
+/// the schema's (`exclusiveMinimum`, `minimum`: [`settings`] reads them; [`Overrides::from_table`]
+/// and [`Overrides::check`] enforce them); a new setting is a field here and its effect in
+/// [`Settings::apply`].
+#[derive(
+    Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, JsonSchema, clap::Args,
+)]
+#[serde(deny_unknown_fields)]
 pub struct Overrides {
+    /// How the accelerations are computed: `auto` (`null_space`, except on tree models with at
+    /// least `progmo::formulation::AUTO_ARTICULATED_NV` velocities, the crossover `progmo bench
+    /// --only anchor` measures: `articulated_body`), `null_space` (the paper: orthonormal basis D of
+    /// null(B), D A v' = D (G + Q), solved in that basis with a Cholesky factorization of the reduced
+    /// inertia), `null_space_stacked` (the same equations as the stacked square system (2.10), by
+    /// LU), `kkt` (Lagrange multipliers), `range_space` (the earlier method the paper criticises),
+    /// `udwadia_kalaba`, `articulated_body` (range space with A^-1 applied by the articulated-body
+    /// factorization of a tree: O(n) per row, A never formed; on lagrangian models A^-1 from a dense
+    /// Cholesky factor).
+    #[arg(long, value_parser = PossibleValuesParser::new(FORMULATION_NAMES))]
+    #[schemars(extend("enum" = FORMULATION_NAMES, "default" = "auto", "x-table" = "solver"))]
     pub formulation: Option<String>,
+    /// Integrator: `dop853`, `dopri5` (adaptive explicit), `radau5` (implicit), `rk4` (fixed
+    /// step; needs `step`).
+    #[arg(long, value_parser = PossibleValuesParser::new(INTEGRATOR_NAMES))]
+    #[schemars(extend("enum" = INTEGRATOR_NAMES, "default" = "dop853", "x-table" = "solver"))]
     pub integrator: Option<String>,
-    /// Fixed step of `rk4`.
+    /// Fixed step of `rk4` (s); required with it, ignored by the others.
+    #[arg(long)]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "x-table" = "solver"))]
     pub step: Option<f64>,
+    /// Relative local error tolerance.
+    #[arg(long)]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "default" = 1e-10, "x-table" = "solver"))]
     pub rtol: Option<f64>,
+    /// Absolute local error tolerance.
+    #[arg(long)]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "default" = 1e-12, "x-table" = "solver"))]
     pub atol: Option<f64>,
+    /// Largest step (s). Default unlimited.
+    #[arg(long)]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "x-table" = "solver"))]
     pub max_step: Option<f64>,
+    /// Drift control: `projection` (after every accepted step, Newton projection of q onto the
+    /// position rows and of v onto the velocity rows, in the kinetic-energy metric), `baumgarte`,
+    /// `none` (monitor only).
+    #[arg(long, value_parser = PossibleValuesParser::new(DRIFT_NAMES))]
+    #[schemars(extend("enum" = DRIFT_NAMES, "default" = "projection", "x-table" = "solver"))]
     pub drift: Option<String>,
+    /// Residual the projection reaches (up to 8 Newton iterations per level).
+    #[arg(long)]
+    #[schemars(extend(
+        "exclusiveMinimum" = 0.0,
+        "default" = DEFAULT_PROJECTION_TOL,
+        "x-table" = "solver"
+    ))]
     pub projection_tol: Option<f64>,
+    /// Baumgarte alpha (with `drift = "baumgarte"`).
+    #[arg(long)]
+    #[schemars(extend("default" = DEFAULT_BAUMGARTE.0, "x-table" = "solver"))]
     pub baumgarte_alpha: Option<f64>,
+    /// Baumgarte beta.
+    #[arg(long)]
+    #[schemars(extend("default" = DEFAULT_BAUMGARTE.1, "x-table" = "solver"))]
     pub baumgarte_beta: Option<f64>,
+    /// Stop with `drift_exceeded` when a position- or velocity-level residual exceeds this after a
+    /// step. Default: monitor only.
+    #[arg(long)]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "x-table" = "solver"))]
     pub max_drift: Option<f64>,
-    /// Output spacing (`Output::Every`).
-    pub output_dt: Option<f64>,
-    pub max_samples: Option<usize>,
+    /// Stop at the first conditioning warning (return code `ill_conditioned`) instead of
+    /// reporting it and going on.
+    #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true", value_name = "BOOL")]
+    #[schemars(extend("default" = false, "x-table" = "solver"))]
     pub strict: Option<bool>,
-    pub assemble: Option<bool>,
-    /// [`Settings::richardson`] (the global error estimate of a fixed-step solve).
+    /// With a fixed step (`rk4`): the companion solve at twice the step whose Richardson estimate
+    /// of the global error summary.json reports as `global_error` (about half the solve again).
+    #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true", value_name = "BOOL")]
+    #[schemars(extend("default" = true, "x-table" = "solver"))]
     pub richardson: Option<bool>,
+    /// End time (s), > t0.
+    #[arg(long)]
+    #[schemars(extend("x-table" = "time"))]
+    pub t1: Option<f64>,
+    /// Output sample spacing (s); absent: one sample per accepted step.
+    #[arg(long)]
+    #[schemars(extend("exclusiveMinimum" = 0.0, "x-table" = "time"))]
+    pub output_dt: Option<f64>,
+    /// Most output samples a run may write, t0 and t1 included (a longer span or a finer
+    /// output_dt is refused before integrating).
+    #[arg(long)]
+    #[schemars(extend("minimum" = 2, "default" = super::DEFAULT_MAX_SAMPLES, "x-table" = "time"))]
+    pub max_samples: Option<usize>,
+    /// Project an inconsistent initial state onto the constraints instead of refusing it.
+    #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true", value_name = "BOOL")]
+    #[schemars(extend("default" = false, "x-table" = "initial"))]
+    pub assemble: Option<bool>,
+}
+
+/// What [`settings`] says of one overridable setting (from [`Overrides`]' schema).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct SettingInfo {
+    /// Its name at every door (`max_step`; the flag is `--max-step`).
+    pub name: String,
+    /// The scene file's table that holds it (`solver`, `time`, `initial`).
+    pub table: String,
+    /// `number`, `integer`, `string` or `boolean`.
+    pub kind: String,
+    /// The field's documentation.
+    pub description: String,
+    /// A number must be above this (`exclusiveMinimum`) ...
+    pub above: Option<f64>,
+    /// ... or at least this (`minimum`).
+    pub at_least: Option<f64>,
+    /// The names a string setting accepts.
+    pub choices: Vec<String>,
+    /// The default, where it is a value (JSON).
+    pub default: Option<serde_json::Value>,
+}
+
+/// Every overridable setting, by name: read from [`Overrides`]' JSON Schema, so the
+/// names, tables, ranges and descriptions are those of the fields.
+pub fn settings() -> &'static [SettingInfo] {
+    static LIST: std::sync::OnceLock<Vec<SettingInfo>> = std::sync::OnceLock::new();
+    LIST.get_or_init(|| {
+        let schema = schemars::SchemaGenerator::default()
+            .into_root_schema_for::<Overrides>()
+            .to_value();
+        let props = schema["properties"]
+            .as_object()
+            .expect("Overrides is a struct");
+        props
+            .iter()
+            .map(|(name, p)| {
+                let kind = match &p["type"] {
+                    serde_json::Value::Array(t) => t.iter().find(|t| *t != "null").cloned(),
+                    t => Some(t.clone()),
+                };
+                let text = |k: &str| p[k].as_str().unwrap_or_default().to_string();
+                SettingInfo {
+                    name: name.clone(),
+                    table: text("x-table"),
+                    kind: kind
+                        .and_then(|k| k.as_str().map(str::to_string))
+                        .unwrap_or_default(),
+                    description: text("description").replace('\n', " "),
+                    above: p["exclusiveMinimum"].as_f64(),
+                    at_least: p["minimum"].as_f64(),
+                    choices: p["enum"]
+                        .as_array()
+                        .map(|a| {
+                            a.iter()
+                                .filter_map(|x| x.as_str().map(str::to_string))
+                                .collect()
+                        })
+                        .unwrap_or_default(),
+                    default: p.get("default").filter(|d| !d.is_null()).cloned(),
+                }
+            })
+            .collect()
+    })
+}
+
+/// The setting of a name.
+pub fn setting(name: &str) -> Option<&'static SettingInfo> {
+    settings().iter().find(|s| s.name == name)
+}
+
+/// The Markdown table of the settings of a scene file's `table` (FORMAT.md's, generated: `PROGMO_BLESS=1
+/// cargo test --release --test schema`): key, type and range, default, meaning.
+pub fn settings_table(table: &str) -> String {
+    let mut out = String::from("| key | type | default | meaning |\n|---|---|---|---|\n");
+    for s in settings().iter().filter(|s| s.table == table) {
+        let kind = match (s.kind.as_str(), s.above, s.at_least) {
+            ("number", Some(m), _) => format!("number > {m}"),
+            ("number", _, _) => "finite number".to_string(),
+            ("integer", _, Some(m)) => format!("integer ≥ {m}"),
+            (k, _, _) => k.to_string(),
+        };
+        let default = match &s.default {
+            Some(d) => format!("`{d}`"),
+            None => "—".to_string(),
+        };
+        out += &format!(
+            "| `{}` | {kind} | {default} | {} |\n",
+            s.name, s.description
+        );
+    }
+    out
+}
+
+/// A setting refused by its name, type or range: `name` is the setting (`rtol`), `message` what is
+/// wrong without it. Each door locates it its own way (the scene file's key, the flag, the
+/// keyword argument).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SettingError {
+    pub name: String,
+    pub message: String,
+}
+
+impl fmt::Display for SettingError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}: {}", self.name, self.message)
+    }
+}
+
+impl std::error::Error for SettingError {}
+
+impl Overrides {
+    /// The overrides of a table of named values (a scene file's keys, a Python call's keyword
+    /// arguments): every name must be a setting, every value of its type and range.
+    pub fn from_table(values: &toml::Table) -> Result<Overrides, SettingError> {
+        for (name, value) in values {
+            let Some(info) = setting(name) else {
+                let names = settings().iter().map(|s| s.name.as_str());
+                return Err(SettingError {
+                    name: name.clone(),
+                    message: format!(
+                        "unknown setting `{name}`{}: expected one of {}",
+                        crate::check::did_you_mean(name, names.clone()),
+                        names.collect::<Vec<_>>().join(", ")
+                    ),
+                });
+            };
+            check_range(info, value)?;
+            let one = toml::Table::from_iter([(name.clone(), value.clone())]);
+            if let Err(e) = toml::Value::Table(one).try_into::<Overrides>() {
+                return Err(SettingError {
+                    name: name.clone(),
+                    message: format!("expected {}: {}", info.kind, e.message().trim()),
+                });
+            }
+        }
+        toml::Value::Table(values.clone())
+            .try_into()
+            .map_err(|e: toml::de::Error| SettingError {
+                name: String::new(),
+                message: e.message().trim().to_string(),
+            })
+    }
+
+    /// The given values as a table (names of [`settings`]; `None` left out).
+    pub fn to_table(&self) -> toml::Table {
+        match toml::Value::try_from(self) {
+            Ok(toml::Value::Table(t)) => t,
+            _ => unreachable!("Overrides serializes to a table"),
+        }
+    }
+
+    /// Every given value within its setting's range (the command line's typed flags: their type is
+    /// clap's).
+    pub fn check(&self) -> Result<(), SettingError> {
+        for (name, value) in &self.to_table() {
+            let info = setting(name).expect("a field of Overrides is a setting");
+            check_range(info, value)?;
+        }
+        Ok(())
+    }
+
+    /// Whether the value of `name` is given.
+    pub fn has(&self, name: &str) -> bool {
+        self.to_table().contains_key(name)
+    }
+}
+
+/// A number finite and within the setting's schema range.
+fn check_range(info: &SettingInfo, value: &toml::Value) -> Result<(), SettingError> {
+    let x = match value {
+        toml::Value::Float(x) => *x,
+        toml::Value::Integer(i) => *i as f64,
+        _ => return Ok(()),
+    };
+    let bad = |message: String| {
+        Err(SettingError {
+            name: info.name.clone(),
+            message,
+        })
+    };
+    match (info.above, info.at_least) {
+        (Some(0.0), _) if !(x > 0.0) || !x.is_finite() => bad(format!("must be positive, got {x}")),
+        _ if !x.is_finite() => bad(format!("must be a finite number, got {x}")),
+        (Some(m), _) if !(x > m) => bad(format!("must be above {m}, got {x}")),
+        (_, Some(m)) if !(x >= m) => bad(format!("must be at least {m}, got {x}")),
+        _ => Ok(()),
+    }
 }
 
 /// An override that does not name a method of the vocabulary.
@@ -203,7 +469,7 @@ impl Settings {
         }
         s.rtol = o.rtol.unwrap_or(s.rtol);
         s.atol = o.atol.unwrap_or(s.atol);
-        s.h_max = o.max_step.unwrap_or(s.h_max);
+        s.max_step = o.max_step.unwrap_or(s.max_step);
         let (tol, max_iter) = match s.drift {
             DriftControl::Projection { tol, max_iter } => (tol, max_iter),
             _ => (DEFAULT_PROJECTION_TOL, DEFAULT_PROJECTION_ITER),
@@ -333,5 +599,67 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(base.apply(&bad).unwrap_err().field(), "drift");
+    }
+
+    #[test]
+    fn settings_come_from_the_one_definition() {
+        let names: Vec<&str> = settings().iter().map(|s| s.name.as_str()).collect();
+        assert_eq!(names.len(), 17, "{names:?}");
+        for s in settings() {
+            assert!(
+                ["solver", "time", "initial"].contains(&s.table.as_str()),
+                "{s:?}"
+            );
+            assert!(!s.description.is_empty(), "{s:?}");
+        }
+        let rtol = setting("rtol").unwrap();
+        assert_eq!((rtol.kind.as_str(), rtol.above), ("number", Some(0.0)));
+        assert_eq!(setting("max_samples").unwrap().at_least, Some(2.0));
+        assert_eq!(setting("drift").unwrap().choices, DRIFT_NAMES);
+        assert_eq!(setting("assemble").unwrap().table, "initial");
+        // a name-keyed lookup refuses what is not a field (negative control)
+        assert!(setting("h_max").is_none());
+    }
+
+    #[test]
+    fn tables_of_values_are_checked_by_name_type_and_range() {
+        let t = |s: &str| s.parse::<toml::Table>().unwrap();
+        let o = Overrides::from_table(&t("rtol = 1e-8\nmax_samples = 10\nstrict = true")).unwrap();
+        assert_eq!(
+            (o.rtol, o.max_samples, o.strict),
+            (Some(1e-8), Some(10), Some(true))
+        );
+        // integers are numbers
+        assert_eq!(
+            Overrides::from_table(&t("atol = 1")).unwrap().atol,
+            Some(1.0)
+        );
+        let e = Overrides::from_table(&t("rtl = 1e-8")).unwrap_err();
+        assert_eq!(e.name, "rtl");
+        assert!(e.message.contains("did you mean `rtol`"), "{e}");
+        let e = Overrides::from_table(&t("rtol = \"tight\"")).unwrap_err();
+        assert!(e.message.starts_with("expected number"), "{e}");
+        for (text, want) in [
+            ("rtol = -1.0", "must be positive, got -1"),
+            ("max_step = inf", "must be positive, got inf"),
+            ("baumgarte_alpha = nan", "must be a finite number, got NaN"),
+            ("max_samples = 1", "must be at least 2"),
+        ] {
+            let e = Overrides::from_table(&t(text)).unwrap_err();
+            assert!(e.message.contains(want), "{text}: {e}");
+        }
+        // the typed door (clap) is range-checked the same way
+        let o = Overrides {
+            projection_tol: Some(0.0),
+            ..Default::default()
+        };
+        assert_eq!(o.check().unwrap_err().name, "projection_tol");
+        // to_table leaves out what is not given
+        let given = Overrides {
+            step: Some(0.1),
+            ..Default::default()
+        };
+        assert_eq!(given.to_table().len(), 1);
+        assert!(given.has("step") && !given.has("rtol"));
     }
 }

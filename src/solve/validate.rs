@@ -11,7 +11,7 @@ use std::fmt;
 pub const DEFAULT_MAX_SAMPLES: usize = 10_000_000;
 
 /// The setting an error is about. Each door names it its own way ([`SettingsField::key`] in a
-/// scene file, [`SettingsField::flag`] on the command line, [`SettingsField::name`] in Python).
+/// scene file, `--` and [`SettingsField::name`] on the command line, the name in Python).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SettingsField {
     T0,
@@ -65,20 +65,6 @@ impl SettingsField {
             RankVanishing => "settings.rank_vanishing",
             ReplayStep => "tolerances.replay_step",
         }
-    }
-
-    /// `progmo solve` flag that sets it, if any.
-    pub fn flag(self) -> Option<&'static str> {
-        use SettingsField::*;
-        Some(match self {
-            T1 => "--t1",
-            OutputDt => "--output-dt",
-            MaxSamples => "--max-samples",
-            Step => "--step",
-            Rtol => "--rtol",
-            Atol => "--atol",
-            _ => return None,
-        })
     }
 }
 
@@ -238,11 +224,11 @@ pub fn validate(span: (f64, f64), s: &Settings) -> Result<(), SettingsError> {
     }
     positive(Rtol, s.rtol)?;
     positive(Atol, s.atol)?;
-    if s.h_max.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+    if s.max_step.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
         return Err(err(
             MaxStep,
-            s.h_max,
-            format!("must be positive, got {:?}", s.h_max),
+            s.max_step,
+            format!("must be positive, got {:?}", s.max_step),
         ));
     }
     match s.drift {
@@ -352,7 +338,6 @@ mod tests {
     fn messages_name_the_field_and_the_value() {
         let e = validate((0.0, f64::INFINITY), &Settings::default()).unwrap_err();
         assert_eq!(e.to_string(), "time.t1: must be a finite number, got inf");
-        assert_eq!(e.field.flag(), Some("--t1"));
         assert_eq!(e.field.name(), "t1");
     }
 }

@@ -95,9 +95,17 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
         "CHECK_OPTIONS",
         check::OPTIONS.iter().map(|(n, _)| *n).collect::<Vec<_>>(),
     )?;
+    // The settings of the one definition (progmo::solve::Overrides) and the numeric [solver] ones,
+    // which a sweep may vary.
+    let settings = progmo::solve::settings();
+    m.add("SETTINGS", crate::json_to_py(m.py(), &settings.to_vec())?)?;
     m.add(
         "SOLVER_NUMBERS",
-        progmo::scene::file::SOLVER_NUMBERS.to_vec(),
+        settings
+            .iter()
+            .filter(|s| s.table == "solver" && s.kind == "number")
+            .map(|s| s.name.as_str())
+            .collect::<Vec<_>>(),
     )?;
     m.add_function(wrap_pyfunction!(check_metrics, m)?)?;
     m.add_function(wrap_pyfunction!(default_budgets, m)?)?;

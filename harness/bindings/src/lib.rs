@@ -53,6 +53,49 @@ create_exception!(
     "The scene holds an element the simulator format cannot carry; the message names it."
 );
 
+/// Python's `SettingsError` for the setting `field`: `args[0]` is "field: message", the attributes
+/// `field` and `message`.
+fn settings_error(field: &str, message: &str) -> PyErr {
+    let e = SettingsError::new_err(format!("{field}: {message}"));
+    Python::attach(|py| {
+        let v = e.value(py);
+        let _ = v.setattr("field", field);
+        let _ = v.setattr("message", message);
+    });
+    e
+}
+
+/// Keyword arguments as the core's overrides (`progmo::solve::Overrides::from_table`: names, types
+/// and ranges of the one definition); None values are left out.
+fn overrides(kw: Option<&Bound<'_, PyDict>>) -> PyResult<Overrides> {
+    let mut table = toml::Table::new();
+    for (k, v) in kw.into_iter().flat_map(|d| d.iter()) {
+        let name: String = k.extract()?;
+        if v.is_none() {
+            continue;
+        }
+        let value = if let Ok(b) = v.cast::<pyo3::types::PyBool>() {
+            toml::Value::Boolean(b.is_true())
+        } else if let Ok(i) = v.extract::<i64>() {
+            toml::Value::Integer(i)
+        } else if let Ok(x) = v.extract::<f64>() {
+            toml::Value::Float(x)
+        } else if let Ok(t) = v.extract::<String>() {
+            toml::Value::String(t)
+        } else {
+            let kind = v.get_type().name()?;
+            let want =
+                progmo::solve::setting(&name).map_or("a setting's value", |s| s.kind.as_str());
+            return Err(settings_error(
+                &name,
+                &format!("expected {want}, got {kind}"),
+            ));
+        };
+        table.insert(name, value);
+    }
+    Overrides::from_table(&table).map_err(|e| settings_error(&e.name, &e.message))
+}
+
 /// A located scene error as Python's `SceneError`: the one-line message as `args[0]` and the
 /// location as attributes, `file`, `line` and `column` (None without a position), `field` (None
 /// when not applicable), `message` (what is wrong, without the location) and `excerpt`.
@@ -266,52 +309,32 @@ impl PyScene {
             .map_err(|e| SettingsError::new_err(format!("{}: {}", e.field.name(), e.message)))
     }
 
-    /// Solve (the GIL is released meanwhile). Keyword overrides in the core's one vocabulary
-    /// (`progmo::solve::Overrides`, the scene file's `[solver]`/`[time]` names): output_dt, t1,
-    /// rtol, atol, integrator ("dop853", "dopri5", "radau5", "rk4" with step), formulation
-    /// (`progmo::solve::FORMULATION_NAMES`: "auto", "null_space", ..., "articulated_body"), drift
-    /// ("projection", "baumgarte", "none"), max_samples (default 10^7), strict. The span and
-    /// settings are checked by `progmo::solve::validate` first (ValueError naming the argument).
-    /// Returns a `Solution` (partial on an early stop: see its `code` / `raise_if_stopped`).
-    #[pyo3(signature = (*, output_dt=None, t1=None, rtol=None, atol=None, integrator=None, step=None, formulation=None, drift=None, max_samples=None, strict=None))]
-    #[allow(clippy::too_many_arguments)]
+    /// Solve (the GIL is released meanwhile). Keyword arguments are the settings of the core's one
+    /// definition (`progmo::solve::Overrides`; `SETTINGS` lists them with their tables, types,
+    /// ranges and documentation: the scene file's keys and `progmo solve`'s flags of the same
+    /// names); None leaves a setting at the scene's value. An unknown name, a wrong type or a value
+    /// out of range, then the span and settings together (`progmo::solve::validate`), raise
+    /// SettingsError naming the argument (`.field`). Returns a `Solution` (partial on an early
+    /// stop: see its `code` / `raise_if_stopped`).
+    #[pyo3(signature = (**settings))]
     fn solve<'py>(
         &self,
         py: Python<'py>,
-        output_dt: Option<f64>,
-        t1: Option<f64>,
-        rtol: Option<f64>,
-        atol: Option<f64>,
-        integrator: Option<String>,
-        step: Option<f64>,
-        formulation: Option<String>,
-        drift: Option<String>,
-        max_samples: Option<usize>,
-        strict: Option<bool>,
+        settings: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<PySolution> {
-        let o = Overrides {
-            formulation,
-            integrator,
-            step,
-            rtol,
-            atol,
-            drift,
-            output_dt,
-            max_samples,
-            strict,
-            ..Default::default()
-        };
+        let o = overrides(settings)?;
         let s = self
             .scene
             .settings
             .apply(&o)
-            .map_err(|e| SettingsError::new_err(format!("{}: {e}", e.field())))?;
+            .map_err(|e| settings_error(e.field(), &e.to_string()))?;
+        let t1 = o.t1;
         let mut scene = self.scene.clone();
         if let Some(t1) = t1 {
             with_problem!(&mut scene.system, p => p.t1 = t1);
         }
         progmo::solve::validate(scene.span(), &s)
-            .map_err(|e| SettingsError::new_err(format!("{}: {}", e.field.name(), e.message)))?;
+            .map_err(|e| settings_error(e.field.name(), &e.message))?;
         let layout = with_problem!(&scene.system, p => SampleLayout::from_problem(p));
         let started = std::time::Instant::now();
         // Ctrl-C / SIGTERM stop the solve after the step in progress (as in `progmo solve`); the
