@@ -498,6 +498,7 @@ baumgarte_beta = 1.0
 max_drift = 1e-3
 strict = false
 richardson = false
+max_steps = 1000000
 
 [tolerances]
 programme_residual = { value = 1e-6, reason = "Baumgarte keeps the drift small, not zero" }

@@ -1812,8 +1812,8 @@ fn validate_settings(src: &Source, file: &SceneFile, settings: &Settings) -> R<(
     // A span or rate that is too long is about the time table as a whole when no key is at fault.
     let place = place.or_else(|| (e.field == F::MaxSamples).then(|| file.time.span()));
     Err(match place {
-        Some(span) => src.error(span, e.field.key(), e.message),
-        None => src.general(e.field.key(), e.message),
+        Some(span) => src.error(span, &e.field.key(), e.message),
+        None => src.general(&e.field.key(), e.message),
     })
 }
 

