@@ -13,7 +13,7 @@
 //!
 //! File names start with their category (`time_output_dt_tiny.toml`), one of [`CATEGORIES`].
 
-mod common;
+use crate::common;
 
 use progmo::scene::{Scene, SceneError};
 use std::path::{Path, PathBuf};

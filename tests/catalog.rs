@@ -2,7 +2,7 @@
 //! reproduce what their `purpose` claims (exact solutions, invariants). The scene format's schema
 //! and its agreement with the loader and FORMAT.md: `tests/schema.rs`.
 
-mod common;
+use crate::common;
 
 use progmo::scene::Scene;
 use std::path::PathBuf;

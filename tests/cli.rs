@@ -1,6 +1,6 @@
 //! The `progmo` command line as a user runs it: outputs, messages and exit codes.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -26,7 +26,7 @@
 //! round-off class, 1e3 eps relative to the largest entry of the compared quantity; the shared
 //! sweep: none (the same operations on the same inputs).
 
-mod common;
+use crate::common;
 
 use progmo::formulation::{Formulation, RankTolerances};
 use progmo::model::Model;

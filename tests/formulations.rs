@@ -347,7 +347,7 @@ fn baumgarte_terms_enter_as_written() {
     assert!((gdd - want).abs() < 1e-13, "{gdd} vs {want}");
 }
 
-mod common;
+use crate::common;
 
 /// max |x - y| / max(max |y|, 1).
 fn rel_diff(x: &[f64], y: &[f64]) -> f64 {

@@ -3,7 +3,7 @@
 //! bodies (`progmo::fuzzing`), which must not panic and assert their properties.
 //! A few thousand cases, a few seconds in release; the long coverage-guided runs are `fuzz/run.sh`.
 
-mod common;
+use crate::common;
 
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestRunner};

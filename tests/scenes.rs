@@ -1,7 +1,7 @@
 //! The bundled scene catalog (`references/scenes/`): every scene loads, solves and meets its own
 //! programme-residual tolerance; tree and Lagrangian descriptions agree with the Rust problems.
 
-mod common;
+use crate::common;
 
 use progmo::scene::Scene;
 use std::path::PathBuf;

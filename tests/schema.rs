@@ -1,7 +1,7 @@
 //! The scene format is kept once, in the serde types of `src/scene/file.rs`:
 //! - `src/scene/scene.schema.json` is generated from them (`progmo::scene::schema::json_schema`)
 //!   and must equal the committed file; regenerate it with
-//!   `PROGMO_BLESS=1 cargo test --release --test schema`;
+//!   `PROGMO_BLESS=1 cargo test --release --test integration schema::`;
 //! - every bundled scene (catalog, Test Set, test scenes) validates against it (a JSON Schema
 //!   validator, draft 2020-12), and the maximal example scenes, which load, use every key it has;
 //! - `FORMAT.md` documents exactly its keys: each key table of the page is marked with the
@@ -9,7 +9,7 @@
 //!   keys are the backticked names in the first column), and per table the page's keys equal
 //!   the schema's properties.
 
-mod common;
+use crate::common;
 
 use progmo::scene::schema::json_schema;
 use progmo::scene::Scene;
@@ -40,7 +40,7 @@ fn the_committed_schema_is_the_generated_one() {
     assert!(
         committed == generated,
         "{SCHEMA_FILE} differs from the schema generated from src/scene/file.rs; regenerate it \
-         with `PROGMO_BLESS=1 cargo test --release --test schema` and commit it"
+         with `PROGMO_BLESS=1 cargo test --release --test integration schema::` and commit it"
     );
 }
 
@@ -655,7 +655,7 @@ fn format_md_default_budgets_are_the_cores() {
     assert!(
         page == want,
         "FORMAT.md's \"Default budgets\" table differs from progmo::check::METRICS; regenerate it \
-         with `PROGMO_BLESS=1 cargo test --release --test schema` and commit it"
+         with `PROGMO_BLESS=1 cargo test --release --test integration schema::` and commit it"
     );
     // Every metric is in the table, and the table holds nothing else (a negative control of the
     // comparison: a table missing a row is not the generated one).
@@ -684,7 +684,7 @@ fn format_md_solver_keys_are_the_settings() {
     assert!(
         page == want,
         "FORMAT.md's [solver] table differs from progmo::solve::Overrides; regenerate it with \
-         `PROGMO_BLESS=1 cargo test --release --test schema` and commit it"
+         `PROGMO_BLESS=1 cargo test --release --test integration schema::` and commit it"
     );
 }
 

@@ -1,6 +1,6 @@
 //! The scene file's JSON Schema, generated from the types of [`super::file`] (their doc comments
 //! are the descriptions). The committed copy is `scene.schema.json` beside this file; regenerate
-//! it with `PROGMO_BLESS=1 cargo test --test schema` (the test fails while the copy differs).
+//! it with `PROGMO_BLESS=1 cargo test --test integration schema::` (the test fails while the copy differs).
 
 use super::file::{
     SceneFile, CLOSURE_KINDS, JOINTS_WITH_AXIS, JOINT_TYPES, LAGRANGIAN_ONLY, MODEL_KINDS,

@@ -306,7 +306,7 @@ pub fn setting(name: &str) -> Option<&'static SettingInfo> {
 }
 
 /// The Markdown table of the settings of a scene file's `table` (FORMAT.md's, generated: `PROGMO_BLESS=1
-/// cargo test --release --test schema`): key, type and range, default, meaning.
+/// cargo test --release --test integration schema::`): key, type and range, default, meaning.
 pub fn settings_table(table: &str) -> String {
     let mut out = String::from("| key | type | default | meaning |\n|---|---|---|---|\n");
     for s in settings().iter().filter(|s| s.table == table) {

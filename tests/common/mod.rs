@@ -1,4 +1,4 @@
-//! Helpers shared by the integration tests (`mod common;`).
+//! Helpers shared by the integration tests (`crate::common`, declared in tests/integration.rs).
 
 use std::path::PathBuf;
 

@@ -109,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
         "errors in forming A, F, B, gamma are not measured.",
         "rk4 (fixed step) is not part of the sweep.",
         "The hard-case suite (singular programmes, dead points, redundant rows, stiffness, chaos, "
-        "inconsistent starts) is a test suite, not a benchmark: `cargo test --release --test hard_cases "
+        "inconsistent starts) is a test suite, not a benchmark: `cargo test --release --test integration hard_cases:: "
         "-- --nocapture` prints its tables; expected behaviour and measured values are in "
         "references/hard/README.md.",
     ]
