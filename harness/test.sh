@@ -22,17 +22,39 @@ cargo fmt --all -- --check
 cargo clippy --release --workspace --all-targets -q -- -D warnings
 .venv/bin/python -m mypy
 .venv/bin/python -m mypy.stubtest progmo._core --allowlist harness/stubtest-allowlist.txt
-phase "cargo test (Rust core, pure Rust)"
+# Headless Chromium for the report test: network and dpkg bound, so it installs beside the checks
+# (after setup.sh, whose Eigen install holds the same dpkg lock).
+chromium_log="$(mktemp)"
+bash harness/install_chromium.sh >"$chromium_log" 2>&1 &
+chromium_pid=$!
+phase "cargo test (Rust core, pure Rust) beside pytest (harness): its output follows pytest's"
 # The robot scenes read example-robot-data's URDFs (installed by setup.sh): the same search path
 # the Python package uses (progmo.data.robot_path).
 PROGMO_ROBOT_PATH="$(.venv/bin/python -c 'import os; from progmo import data; print(os.pathsep.join(map(str, data.robot_path())))')"
 export PROGMO_ROBOT_PATH
-cargo test --release
+# Side by side (CI time): each phase leaves a core idle part of the time (rustc's serial front
+# end and links; pytest's last files on one worker); the two together keep both busy.
+# The binary first: pytest's test_stdout.py runs target/release/progmo (cargo test reuses it).
+cargo build --release -q --bin progmo
+cargo_log="$(mktemp)"
+cargo test --release >"$cargo_log" 2>&1 &
+cargo_pid=$!
 phase "waiting for the C++ anchor's background build"
 wait "$anchor_pid" || { echo "warning: the C++ anchor's background build failed (the bench tests build it again and report why):" >&2; tail -5 "$anchor_log" >&2; }
 rm -f "$anchor_log"
 phase "headless Chromium for the report test"
-bash harness/install_chromium.sh || echo "warning: no headless Chromium: the report browser test will be skipped (and say so)" >&2
+wait "$chromium_pid" || { cat "$chromium_log" >&2; echo "warning: no headless Chromium: the report browser test will be skipped (and say so)" >&2; }
+rm -f "$chromium_log"
 phase "pytest (harness; one worker per core, a test file per worker: pytest-xdist)"
-.venv/bin/python -m pytest -q -n "$(nproc)" --dist loadfile --durations=15 tests/python
+py_status=0
+.venv/bin/python -m pytest -q -n "$(nproc)" --dist loadfile --durations=15 tests/python || py_status=$?
+phase "cargo test's output"
+cargo_status=0
+wait "$cargo_pid" || cargo_status=$?
+cat "$cargo_log"
+rm -f "$cargo_log"
+if [ "$py_status" != 0 ] || [ "$cargo_status" != 0 ]; then
+  echo "test.sh: FAILED: pytest exit $py_status, cargo test exit $cargo_status" >&2
+  exit 1
+fi
 phase "done"

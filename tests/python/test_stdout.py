@@ -17,7 +17,7 @@ NON_UTF8 = os.fsdecode(b"out-\xff")  # a surrogate escape: the bytes reach the O
 
 
 def _progmo_bin() -> str | None:
-    """The Rust binary `cargo test --release` builds (harness/test.sh runs it before pytest)."""
+    """The Rust binary `cargo build --release` builds (harness/test.sh builds it before pytest)."""
     cands = [os.environ.get("PROGMO_BIN", "")]
     if os.environ.get("CARGO_TARGET_DIR"):
         cands.append(os.path.join(os.environ["CARGO_TARGET_DIR"], "release", "progmo"))
