@@ -242,25 +242,25 @@ where
     }
 }
 
-/// The harness's Python: $PROGMO_PYTHON, else the .venv of the checkout this binary was built in
-/// (next to target/), else of the source tree it was compiled from.
+/// The checkout this binary runs from, found at run time (`<root>/target/<profile>/progmo`; no
+/// path is baked in at build time): where a developer's `cargo build` leaves it beside the
+/// harness's `.venv` and the bundled references. None for a binary elsewhere (an installed one,
+/// or the Python package's in-process CLI, which sets `$PROGMO_REFERENCES` instead).
+fn checkout_root() -> Option<PathBuf> {
+    let exe = std::env::current_exe().ok()?;
+    let root = exe.parent()?.parent()?.parent()?;
+    (exe.parent()?.parent()?.file_name()? == "target" && root.join("Cargo.toml").is_file())
+        .then(|| root.to_path_buf())
+}
+
+/// The harness's Python: $PROGMO_PYTHON, else the `.venv` of the checkout this binary runs from.
 fn harness_python() -> Option<PathBuf> {
     if let Some(p) = std::env::var_os("PROGMO_PYTHON") {
         return Some(PathBuf::from(p));
     }
-    let mut candidates = vec![];
-    if let Ok(exe) = std::env::current_exe() {
-        // <root>/target/<profile>/progmo
-        if let Some(root) = exe
-            .parent()
-            .and_then(|p| p.parent())
-            .and_then(|p| p.parent())
-        {
-            candidates.push(root.join(".venv/bin/python"));
-        }
-    }
-    candidates.push(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python"));
-    candidates.into_iter().find(|p| p.exists())
+    checkout_root()
+        .map(|r| r.join(".venv/bin/python"))
+        .filter(|p| p.exists())
 }
 
 /// A command line clap refused, or `--help` / `--version`: help goes to standard output (exit 0,
@@ -308,15 +308,15 @@ fn harness(sub: &str, module: &[&str], args: &[String]) -> ExitCode {
     }
 }
 
-/// Where bundled scenes are looked for: `$PROGMO_REFERENCES/scenes` (the Python package sets it to
-/// the references it ships), else the checkout this binary was built from.
-fn bundled_scene_dirs() -> Vec<PathBuf> {
-    let mut dirs = vec![];
-    if let Some(r) = std::env::var_os("PROGMO_REFERENCES") {
-        dirs.push(PathBuf::from(r).join("scenes"));
+/// Where bundled scenes are looked for, by the rule `progmo.data.scene_file` follows in Python:
+/// `$PROGMO_REFERENCES/scenes` when it is set (the Python package sets it to the references it
+/// ships; a project points it at its own catalog), and then nowhere else; otherwise the
+/// references of the checkout this binary runs from.
+fn bundled_scene_dir() -> Option<PathBuf> {
+    match std::env::var_os("PROGMO_REFERENCES") {
+        Some(r) => Some(PathBuf::from(r).join("scenes")),
+        None => checkout_root().map(|r| r.join("references/scenes")),
     }
-    dirs.push(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("references/scenes"));
-    dirs
 }
 
 /// A scene argument: a file as given, else the name of a bundled scene (`double_pendulum`, with
@@ -332,16 +332,19 @@ fn scene_file(arg: &Path) -> Result<PathBuf, String> {
         return Err(format!("{}: no such scene file", arg.display()));
     }
     let stem = arg.file_stem().unwrap_or_default();
-    let dirs = bundled_scene_dirs();
-    for d in &dirs {
-        let f = d.join(stem).with_extension("toml");
-        if f.is_file() {
-            return Ok(f);
-        }
+    let Some(dir) = bundled_scene_dir() else {
+        return Err(format!(
+            "{}: no such scene file, and no bundled scenes to look in (set PROGMO_REFERENCES to a \
+             references folder, or run the Python package's `progmo`)",
+            arg.display()
+        ));
+    };
+    let f = dir.join(stem).with_extension("toml");
+    if f.is_file() {
+        return Ok(f);
     }
-    let mut names: Vec<String> = dirs
-        .iter()
-        .filter_map(|d| std::fs::read_dir(d).ok())
+    let mut names: Vec<String> = std::fs::read_dir(&dir)
+        .into_iter()
         .flatten()
         .flatten()
         .filter_map(|e| {
@@ -353,10 +356,10 @@ fn scene_file(arg: &Path) -> Result<PathBuf, String> {
         })
         .collect();
     names.sort();
-    names.dedup();
     Err(format!(
-        "{}: no such scene file or bundled scene (bundled: {})",
+        "{}: no such scene file or bundled scene (bundled in {}: {})",
         arg.display(),
+        dir.display(),
         if names.is_empty() {
             "none found".to_string()
         } else {

@@ -534,3 +534,43 @@ fn validate_reports_the_servo_realization_and_index() {
         "{out}"
     );
 }
+
+/// One name rule (`progmo.data.scene_file` in Python, `cli::scene_file` here): with
+/// `$PROGMO_REFERENCES` set, a bundled scene is looked for there and nowhere else (not in the
+/// checkout the binary was built from), and the error names the folder looked in.
+#[test]
+fn progmo_references_is_the_only_place_bundled_names_resolve() {
+    let refs = tmp("references");
+    std::fs::create_dir_all(refs.join("scenes")).unwrap();
+    let validate = |name: &str| {
+        progmo()
+            .args(["validate", name])
+            .env("PROGMO_REFERENCES", &refs)
+            .output()
+            .unwrap()
+    };
+    let o = validate("double_pendulum");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("no such scene file or bundled scene")
+            && err.contains(&refs.join("scenes").display().to_string())
+            && err.contains("none found"),
+        "{err}"
+    );
+    // the same name in that folder resolves there
+    std::fs::copy(
+        scene("double_pendulum"),
+        refs.join("scenes/double_pendulum.toml"),
+    )
+    .unwrap();
+    let o = validate("double_pendulum");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // without it, the checkout the binary runs from (found at run time, not baked in)
+    let o = progmo()
+        .args(["validate", "double_pendulum"])
+        .env_remove("PROGMO_REFERENCES")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}

@@ -47,6 +47,7 @@ class SolveSettings(TypedDict, total=False):
     max_drift: float | None
     max_samples: int | None
     max_step: float | None
+    max_steps: int | None
     output_dt: float | None
     projection_tol: float | None
     richardson: bool | None

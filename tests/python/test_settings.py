@@ -93,3 +93,27 @@ def test_bad_settings_are_refused_by_name(scene, kw, field, words):
         scene.solve(**kw)
     assert e.value.field == field and words in str(e.value), str(e.value)
     assert str(e.value).startswith(f"{field}: ")
+
+
+def test_progmo_references_is_the_one_name_rule_at_both_doors(tmp_path, monkeypatch):
+    """With $PROGMO_REFERENCES set, a bundled name resolves there only: the Python resolver and the
+    package's ``progmo`` command (the Rust CLI in-process) refuse the same name the same way."""
+    import subprocess
+    import sys
+
+    from progmo import data
+
+    (tmp_path / "scenes").mkdir()
+    monkeypatch.setenv("PROGMO_REFERENCES", str(tmp_path))
+    with pytest.raises(progmo.SceneError, match="no such scene file or bundled scene"):
+        data.scene_file("double_pendulum")
+    r = subprocess.run([sys.executable, "-m", "progmo.command", "validate", "double_pendulum"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2, r.stderr
+    assert "no such scene file or bundled scene" in r.stderr and str(tmp_path / "scenes") in r.stderr
+    shipped = Path(progmo.__file__).parent / "references" / "scenes" / "double_pendulum.toml"
+    (tmp_path / "scenes" / "double_pendulum.toml").write_text(shipped.read_text())
+    assert data.scene_file("double_pendulum") == tmp_path / "scenes" / "double_pendulum.toml"
+    r = subprocess.run([sys.executable, "-m", "progmo.command", "validate", "double_pendulum"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
