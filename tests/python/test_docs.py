@@ -70,3 +70,46 @@ def test_a_broken_link_and_a_missing_anchor_are_found(tmp_path):
                              "in-code.md: no such file"]
     finally:
         ROOT = saved
+
+
+# The Python API reference, generated from the package's docstrings and _core.pyi (pdoc):
+# `.venv/bin/python -m pdoc progmo -o out/api` (README.md, "Where to read more").
+def html_links(page: pathlib.Path) -> list[str]:
+    return re.findall(r'href="([^"]+)"', page.read_text())
+
+
+def html_broken(folder: pathlib.Path) -> list[str]:
+    """Relative links of the generated pages that name no file, or no id of the page they name."""
+    bad = []
+    for page in folder.rglob("*.html"):
+        for target in html_links(page):
+            if re.match(r"[a-z]+:", target):
+                continue
+            path, _, frag = target.partition("#")
+            dest = (page.parent / path).resolve() if path else page
+            if not dest.exists():
+                bad.append(f"{page.name}: {target}: no such file")
+            elif frag and f'id="{frag}"' not in dest.read_text():
+                bad.append(f"{page.name}: {target}: no id {frag}")
+    return bad
+
+
+def test_the_api_reference_builds_with_every_public_name_and_no_broken_link(tmp_path):
+    import subprocess
+    import sys
+
+    import progmo
+
+    out = tmp_path / "api"
+    r = subprocess.run([sys.executable, "-m", "pdoc", "progmo", "-o", str(out)],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    page = (out / "progmo.html").read_text()
+    missing = [n for n in progmo.__all__ if f'id="{n}"' not in page]
+    assert not missing, f"public names without an entry: {missing}"
+    # the settings reach the reference through Scene.solve's docstring
+    assert 'id="Scene.solve"' in page and "SETTINGS" in page
+    assert not html_broken(out), html_broken(out)
+    # negative control: a link to an id no page has is found
+    (out / "extra.html").write_text('<a href="progmo.html#NoSuchName">x</a>')
+    assert html_broken(out) == ["extra.html: progmo.html#NoSuchName: no id NoSuchName"]
