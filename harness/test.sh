@@ -14,12 +14,13 @@ bash harness/setup.sh
 anchor_log="$(mktemp)"
 .venv/bin/python -c 'from progmo.bench import anchor; anchor.build()' >"$anchor_log" 2>&1 &
 anchor_pid=$!
-phase "static checks: cargo fmt, clippy -D warnings, mypy, stubtest (the .pyi against the built extension)"
+phase "static checks: cargo fmt, clippy -D warnings (functions <= 100 lines), ruff (complexity <= 15), mypy, stubtest (the .pyi against the built extension)"
 for c in rustfmt clippy; do  # part of rustup's default profile; added if a toolchain lacks them
   cargo "${c/rustfmt/fmt}" --version >/dev/null 2>&1 || rustup component add "$c"
 done
 cargo fmt --all -- --check
 cargo clippy --release --workspace --all-targets -q -- -D warnings
+.venv/bin/ruff check -q harness/progmo tests/python fuzz/python
 .venv/bin/python -m mypy
 .venv/bin/python -m mypy.stubtest progmo._core --allowlist harness/stubtest-allowlist.txt
 # Headless Chromium for the report test: network and dpkg bound, so it installs beside the checks

@@ -744,7 +744,7 @@ def _joined(parts: list) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
     return joined, cat([p[2] for p in parts]), cat([p[3] for p in parts]), cat([p[4] for p in parts])
 
 
-def _replay(c: _Check) -> None:
+def _replay(c: _Check) -> None:  # noqa: C901 (over 15 before the lint: to split, not to grow)
     """Open-loop replay of u in the simulator over the whole span, in segments where the dynamics
     amplify errors (each restarted from the solver's state and judged), its metrics and the verdict;
     the continuous replay and the Lyapunov prediction of its growth as info."""

@@ -135,6 +135,7 @@ impl<C: Constraints, S: Scalar> Jet<C, S> {
 
     /// The generic passes over [`Constraints::eval`] (nv `Dual` passes per level and one `Dual2`
     /// pass); also the independent reference the specialised jets are tested against.
+    #[allow(clippy::too_many_lines)] // over 100 lines before the lint: to split, not to grow
     pub fn compute_generic(&mut self, c: &C, segments: &[Segment], t: S, q: &[S], v: &[S]) {
         let nv = self.nv;
         crate::model::qdot(segments, q, v, &mut self.qd);

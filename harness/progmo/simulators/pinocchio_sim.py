@@ -63,7 +63,7 @@ def _se3(point, quat_wxyz) -> "pin.SE3":
 class PinocchioBackend:
     name = NAME
 
-    def __init__(self, doc: str, report: dict, scene=None, withhold: tuple[str, ...] = (),
+    def __init__(self, doc: str, report: dict, scene=None, withhold: tuple[str, ...] = (),  # noqa: C901 (over 15 before the lint: to split, not to grow)
                  robot: RobotFile | None = None):
         """``robot``: build the model from the user's robot file (``robot_file``), not ``doc``."""
         if robot is not None:  # the file's own passive forces come from the simulator's reading
