@@ -35,12 +35,14 @@ PROGMO_ROBOT_PATH="$(.venv/bin/python -c 'import os; from progmo import data; pr
 export PROGMO_ROBOT_PATH
 # Side by side (CI time): each phase leaves a core idle part of the time (rustc's serial front
 # end and links; pytest's last files on one worker); the two together keep both busy.
-# The binary first: pytest's test_stdout.py runs target/release/progmo. Built as cargo test builds
-# it (an integration test's build, dev-dependencies' features included), so that neither build
-# redoes the other's core (`cargo build --bin` alone resolves other features: 3 min more in CI).
-cargo test --release -q --no-run --test no_alloc
+# pytest's test_stdout.py runs target/release/progmo: built here by cargo test's own build (one
+# feature resolution, so the core is not compiled twice), which writes "ok" or "failed" into
+# $PROGMO_BIN_READY when it ends; those tests wait for it there.
 cargo_log="$(mktemp)"
-cargo test --release >"$cargo_log" 2>&1 &
+PROGMO_BIN_READY="$(mktemp -u)"
+export PROGMO_BIN_READY
+( if cargo test --release --no-run; then echo ok >"$PROGMO_BIN_READY"; cargo test --release
+  else echo failed >"$PROGMO_BIN_READY"; exit 1; fi ) >"$cargo_log" 2>&1 &
 cargo_pid=$!
 phase "waiting for the C++ anchor's background build"
 wait "$anchor_pid" || { echo "warning: the C++ anchor's background build failed (the bench tests build it again and report why):" >&2; tail -5 "$anchor_log" >&2; }
@@ -55,7 +57,7 @@ phase "cargo test's output"
 cargo_status=0
 wait "$cargo_pid" || cargo_status=$?
 cat "$cargo_log"
-rm -f "$cargo_log"
+rm -f "$cargo_log" "$PROGMO_BIN_READY"
 if [ "$py_status" != 0 ] || [ "$cargo_status" != 0 ]; then
   echo "test.sh: FAILED: pytest exit $py_status, cargo test exit $cargo_status" >&2
   exit 1

@@ -17,7 +17,7 @@ NON_UTF8 = os.fsdecode(b"out-\xff")  # a surrogate escape: the bytes reach the O
 
 
 def _progmo_bin() -> str | None:
-    """The Rust binary `cargo build --release` builds (harness/test.sh builds it before pytest)."""
+    """The Rust binary `cargo build --release` builds."""
     cands = [os.environ.get("PROGMO_BIN", "")]
     if os.environ.get("CARGO_TARGET_DIR"):
         cands.append(os.path.join(os.environ["CARGO_TARGET_DIR"], "release", "progmo"))
@@ -25,13 +25,32 @@ def _progmo_bin() -> str | None:
     return next((c for c in cands if c and os.access(c, os.X_OK)), None)
 
 
-BIN = _progmo_bin()
-needs_bin = pytest.mark.skipif(BIN is None, reason="no target/release/progmo: run `cargo build --release`")
+#: harness/test.sh builds the binary beside pytest and writes "ok" (or "failed") into this file
+#: when the build has ended: the tests that run it wait for it there, never for a stale binary.
+READY = os.environ.get("PROGMO_BIN_READY")
+BIN = None if READY else _progmo_bin()
+needs_bin = pytest.mark.skipif(BIN is None and not READY,
+                               reason="no target/release/progmo: run `cargo build --release`")
+
+
+def _built() -> str:
+    global BIN
+    if BIN is None and READY:
+        import time
+        deadline = time.monotonic() + 1800
+        while not (os.path.exists(READY) and open(READY).read().strip()):
+            assert time.monotonic() < deadline, f"the binary's build did not end in 30 min ({READY})"
+            time.sleep(2)
+        state = open(READY).read().strip()
+        assert state == "ok", "the Rust binary did not build (cargo's output follows pytest's)"
+        BIN = _progmo_bin()
+        assert BIN is not None, "cargo's build ended without target/release/progmo"
+    assert BIN is not None
+    return BIN
 
 
 def rust(*args: str) -> list[str]:
-    assert BIN is not None
-    return [BIN, *args]
+    return [_built(), *args]
 
 
 def py(*args: str) -> list[str]:
