@@ -10,7 +10,8 @@ phase "set-up (harness/setup.sh)"
 bash harness/setup.sh
 # The C++ anchor of `progmo bench` (g++ against the pin wheel's headers: about 5 min of one core)
 # builds into its cache beside the Rust phases, which leave a core idle part of the time; the bench
-# tests then find it built. A failure here is only reported: those tests build it again and say why.
+# tests wait for it on the build's lock (anchor.build) and then find it built. A failure here is
+# only reported: those tests build it again and say why.
 anchor_log="$(mktemp)"
 .venv/bin/python -c 'from progmo.bench import anchor; anchor.build()' >"$anchor_log" 2>&1 &
 anchor_pid=$!
@@ -44,15 +45,15 @@ export PROGMO_BIN_READY
 ( if cargo test --release --no-run; then echo ok >"$PROGMO_BIN_READY"; cargo test --release
   else echo failed >"$PROGMO_BIN_READY"; exit 1; fi ) >"$cargo_log" 2>&1 &
 cargo_pid=$!
-phase "waiting for the C++ anchor's background build"
-wait "$anchor_pid" || { echo "warning: the C++ anchor's background build failed (the bench tests build it again and report why):" >&2; tail -5 "$anchor_log" >&2; }
-rm -f "$anchor_log"
 phase "headless Chromium for the report test"
 wait "$chromium_pid" || { cat "$chromium_log" >&2; echo "warning: no headless Chromium: the report browser test will be skipped (and say so)" >&2; }
 rm -f "$chromium_log"
 phase "pytest (harness; one worker per core, a test file per worker: pytest-xdist)"
 py_status=0
 .venv/bin/python -m pytest -q -n "$(nproc)" --dist loadfile --durations=15 tests/python || py_status=$?
+phase "the C++ anchor's background build (the bench tests waited for it on its lock)"
+wait "$anchor_pid" || { echo "warning: the C++ anchor's background build failed (the bench tests built it again and reported why):" >&2; tail -5 "$anchor_log" >&2; }
+rm -f "$anchor_log"
 phase "cargo test's output"
 cargo_status=0
 wait "$cargo_pid" || cargo_status=$?

@@ -383,3 +383,37 @@ def test_the_servo_part_judges_the_crane_against_its_flat_inverse(tmp_path):
     assert ideal.actuators == [] and s.actuators != []
     ri = ideal.solve(output_dt=0.25)
     assert np.max(np.abs(ri.q - q)) > 1e-3
+
+
+def test_concurrent_anchor_builds_of_one_key_build_once(tmp_path):
+    """harness/test.sh builds the C++ anchor beside the tests that use it: a second build() of the
+    same key waits on the build's lock and finds the first one's binary (no second 5-min build)."""
+    import dataclasses
+    import threading
+
+    from progmo.bench import anchor
+
+    runs = tmp_path / "runs"
+
+    @dataclasses.dataclass(frozen=True)
+    class Fake:
+        cxx_version: str = "fake"
+        pin_version: str = "0"
+        eigen_version: str = "0"
+
+        def key(self) -> str:
+            return "fake"
+
+        def command(self, out):  # a slow "compiler" that counts its runs
+            return ["sh", "-c", f'echo x >> "{runs}"; sleep 2; cp /bin/true "{out}"', "-o"]
+
+    results = []
+    threads = [threading.Thread(target=lambda: results.append(anchor.build(Fake(), tmp_path)))  # type: ignore[arg-type]
+               for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert runs.read_text().count("x") == 1
+    assert sorted(cached for _, cached in results) == [False, True]
+    assert all(exe == tmp_path / "anchor-fake" / "anchor" for exe, _ in results)

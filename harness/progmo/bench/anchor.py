@@ -32,6 +32,7 @@ minima: the figures least disturbed by the other processes).
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import json
 import os
@@ -164,6 +165,16 @@ def build(tc: Toolchain | None = None, cache: Path | None = None) -> tuple[Path,
     if exe.is_file() and os.access(exe, os.X_OK):
         return exe, True
     d.mkdir(parents=True, exist_ok=True)
+    # One build at a time per key: a second caller (harness/test.sh builds it beside the tests
+    # that use it) waits here for the first and then finds it cached.
+    with open(d / "build.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if exe.is_file() and os.access(exe, os.X_OK):
+            return exe, True
+        return _build_locked(tc, d, exe), False
+
+
+def _build_locked(tc: Toolchain, d: Path, exe: Path) -> Path:
     tmp = d / f"anchor.tmp{os.getpid()}"
     cmd = tc.command(tmp)
     log(f"[anchor] building (first use: about 5 min of CPU; cached afterwards): {' '.join(shlex.quote(c) for c in cmd)}")
@@ -175,10 +186,10 @@ def build(tc: Toolchain | None = None, cache: Path | None = None) -> tuple[Path,
         tmp.unlink(missing_ok=True)
         tail = "\n".join(r.stderr.splitlines()[-30:])
         raise AnchorFailed(f"building {SOURCE.name} failed (exit {r.returncode}):\n{tail}")
-    os.replace(tmp, exe)  # atomic: a concurrent build of the same key writes the same binary
+    os.replace(tmp, exe)  # atomic: a reader never sees half a binary
     (d / "build.json").write_text(json.dumps(dict(command=cmd[:-1] + [str(exe)], compiler=tc.cxx_version,
                                                    pin=tc.pin_version, eigen=tc.eigen_version), indent=1))
-    return exe, False
+    return exe
 
 
 # ---------------------------------------------------------------------------------------------
