@@ -641,22 +641,29 @@ fn with_table_after(page: &str, marker: &str, table: &str) -> Option<String> {
     Some(format!("{}{table}{}", &page[..at], &rest[len..]))
 }
 
-#[test]
-fn format_md_default_budgets_are_the_cores() {
+/// FORMAT.md with the table after `marker` as `generated` (written with PROGMO_BLESS, else
+/// compared); returns the page as read. `source` names what the table is generated from.
+fn format_md_table_is_generated(marker: &str, generated: &str, source: &str) -> String {
     let path = root().join("src/scene/FORMAT.md");
     let page = std::fs::read_to_string(&path).unwrap();
-    let generated = progmo::check::default_budget_table();
-    let want = with_budget_table(&page, &generated)
-        .unwrap_or_else(|| panic!("FORMAT.md lacks the marker {BUDGETS_MARKER}"));
+    let want = with_table_after(&page, marker, generated)
+        .unwrap_or_else(|| panic!("FORMAT.md lacks the marker {marker}"));
     if std::env::var_os("PROGMO_BLESS").is_some() {
         std::fs::write(&path, &want).unwrap();
-        return;
+        return want;
     }
     assert!(
         page == want,
-        "FORMAT.md's \"Default budgets\" table differs from progmo::check::METRICS; regenerate it \
-         with `PROGMO_BLESS=1 cargo test --release --test integration schema::` and commit it"
+        "FORMAT.md's table after {marker} differs from {source}; regenerate it with \
+         `PROGMO_BLESS=1 cargo test --release --test integration schema::` and commit it"
     );
+    page
+}
+
+#[test]
+fn format_md_default_budgets_are_the_cores() {
+    let generated = progmo::check::default_budget_table();
+    let page = format_md_table_is_generated(BUDGETS_MARKER, &generated, "progmo::check::METRICS");
     // Every metric is in the table, and the table holds nothing else (a negative control of the
     // comparison: a table missing a row is not the generated one).
     for m in &progmo::check::METRICS {
@@ -672,20 +679,8 @@ const SETTINGS_MARKER: &str = "<!-- generated: progmo::solve::settings_table(\"s
 /// (`progmo::solve::Overrides`' fields and doc comments).
 #[test]
 fn format_md_solver_keys_are_the_settings() {
-    let path = root().join("src/scene/FORMAT.md");
-    let page = std::fs::read_to_string(&path).unwrap();
     let generated = progmo::solve::settings_table("solver");
-    let want = with_table_after(&page, SETTINGS_MARKER, &generated)
-        .unwrap_or_else(|| panic!("FORMAT.md lacks the marker {SETTINGS_MARKER}"));
-    if std::env::var_os("PROGMO_BLESS").is_some() {
-        std::fs::write(&path, &want).unwrap();
-        return;
-    }
-    assert!(
-        page == want,
-        "FORMAT.md's [solver] table differs from progmo::solve::Overrides; regenerate it with \
-         `PROGMO_BLESS=1 cargo test --release --test integration schema::` and commit it"
-    );
+    format_md_table_is_generated(SETTINGS_MARKER, &generated, "progmo::solve::Overrides");
 }
 
 /// One name per setting at every door: the settings of the one definition
