@@ -60,6 +60,18 @@ pub fn raise(sig: i32) {
     imp::raise(sig);
 }
 
+/// Ignore SIGXFSZ for the rest of the process (the `progmo` binary calls it first): a write past
+/// the file size limit (`ulimit -f`) then fails with EFBIG, which the outputs report as a write
+/// error (exit 3, files left as `.partial`), instead of the signal killing the process mid-write.
+/// Python ignores it already.
+pub fn ignore_file_size_signal() {
+    #[cfg(unix)]
+    // SAFETY: sets a disposition to SIG_IGN; no handler runs.
+    unsafe {
+        libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+    }
+}
+
 #[cfg(unix)]
 mod imp {
     use super::{REQUESTED, SIGNAL};

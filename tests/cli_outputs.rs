@@ -121,15 +121,16 @@ fn sigterm_finishes_the_files_as_partial_and_exits_130() {
 
 #[test]
 fn a_file_that_cannot_be_written_is_the_last_line_and_never_has_its_real_name() {
-    // A 64 KiB file size limit (works as root, unlike permissions): the CSV and the MCAP fail
-    // mid-run with EFBIG; the summary (2 KB) is still written, named summary.json.partial beside
-    // them (a summary.json saying success would vouch for files that are not whole). One stream
-    // keeps the order.
+    // A 64 KiB file size limit (works as root, unlike permissions), SIGXFSZ at its default (the
+    // binary ignores it itself: killed by it, the run would leave no word): the CSV and the MCAP
+    // fail mid-run with EFBIG; the summary (2 KB) is still written, named summary.json.partial
+    // beside them (a summary.json saying success would vouch for files that are not whole). One
+    // stream keeps the order.
     let out = tmp("fsize");
     let o = Command::new("bash")
         .args([
             "-c",
-            "trap '' XFSZ; ulimit -f 64; exec \"$@\" 2>&1",
+            "trap - XFSZ; ulimit -f 64; exec \"$@\" 2>&1",
             "bash",
             PROGMO,
             "solve",

@@ -190,7 +190,7 @@ pub use scene3d::{
     scene_update_schema, Bodies, BodyPose, Geometry, Shape, Target, TracedSite, View, ViewTarget,
     SHAPE_COLOR, TARGET_COLOR,
 };
-pub use sinks::{Every, StopOn, Tee};
+pub use sinks::{Bounded, Every, StopOn, Tee};
 pub use staged::{
     remove_previous_run, with_suffix, writable_destination, RunFiles, Staged, PARTIAL_SUFFIX,
     RUN_FILES,

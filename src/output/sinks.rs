@@ -1,5 +1,6 @@
-//! Sink adapters: [`Tee`] (two sinks), [`Every`] (decimation by time) and [`StopOn`] (a stop
-//! request from a flag, e.g. set by a signal handler).
+//! Sink adapters: [`Tee`] (two sinks), [`Every`] (decimation by time), [`StopOn`] (a stop
+//! request from a flag, e.g. set by a signal handler) and [`Bounded`] (an in-memory trajectory
+//! with a size bound).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -176,6 +177,30 @@ mod tests {
         assert_eq!(a, b);
     }
 
+    /// A solve with a sample per step into a bound of 5 samples stops there, interrupted, with
+    /// the 5 samples kept; a bound above the solve's samples leaves it whole (negative control).
+    #[test]
+    fn bounded_stops_the_solve_at_its_bound() {
+        use crate::solve::{solve, solve_into, Output, ReturnCode, Settings};
+        let p = crate::problems::pendulum::double_pendulum();
+        let s = Settings {
+            output: Output::Steps,
+            ..Settings::default()
+        };
+        let mut b = Bounded::new(Trajectory::named_for(&p), 5);
+        let sol = solve_into(&p, &s, &mut b);
+        assert!(matches!(sol.code, ReturnCode::Interrupted { .. }), "{:?}", sol.code);
+        assert!(b.full());
+        let kept = b.into_inner();
+        assert_eq!(kept.len(), 5);
+        let whole = solve(&p, &s).trajectory;
+        assert_eq!(kept.t[..], whole.t[..5]);
+        let mut b = Bounded::new(Trajectory::named_for(&p), whole.len() + 1);
+        assert!(solve_into(&p, &s, &mut b).code.is_success());
+        assert!(!b.full());
+        assert_eq!(b.into_inner().t, whole.t);
+    }
+
     fn times(dt: f64, step: f64, n: usize) -> Vec<f64> {
         let l = layout();
         let mut e = Every::new(dt, l.trajectory());
@@ -222,5 +247,44 @@ mod tests {
         assert_eq!(got.q_at(1), all.q_at(9));
         assert_eq!(got.residual_at(1), all.residual_at(9));
         assert_eq!(got.reactions_at(1), all.reactions_at(9));
+    }
+}
+
+/// A trajectory kept in memory, bounded to `limit` samples: at the bound it asks the solve to stop
+/// ([`SampleSink::interrupted`]) and [`Bounded::full`] says so (the caller then reports the bound,
+/// keeping the samples taken). The in-memory doors size it with
+/// [`crate::solve::in_memory_samples`].
+pub struct Bounded {
+    inner: crate::solve::Trajectory,
+    limit: usize,
+}
+
+impl Bounded {
+    /// At most `limit` samples.
+    pub fn new(inner: crate::solve::Trajectory, limit: usize) -> Self {
+        Bounded { inner, limit }
+    }
+    /// The bound was reached.
+    pub fn full(&self) -> bool {
+        self.inner.len() >= self.limit
+    }
+    /// The bound.
+    pub fn limit(&self) -> usize {
+        self.limit
+    }
+    /// The samples taken.
+    pub fn into_inner(self) -> crate::solve::Trajectory {
+        self.inner
+    }
+}
+
+impl SampleSink for Bounded {
+    fn sample(&mut self, s: &Sample<'_>) {
+        if !self.full() {
+            SampleSink::sample(&mut self.inner, s);
+        }
+    }
+    fn interrupted(&self) -> bool {
+        self.full()
     }
 }

@@ -175,6 +175,18 @@ impl Source {
         };
         match e.span() {
             Some(span) => {
+                if let Some(open) = self.unclosed_inline_table(span.start, &msg) {
+                    let (field, _) = self.field_at(open);
+                    let (line, _) = self.line_col(span.start);
+                    return self.error(
+                        open..open + 1,
+                        &field,
+                        format!(
+                            "this inline table `{{` is not closed: TOML reads on to line {line} \
+                             and stops there ({msg}); end it with `}}`"
+                        ),
+                    );
+                }
                 let (field, on_header) = self.field_at(span.start);
                 if missing.is_some() && !on_header && field.is_empty() {
                     // A missing top-level key: the span is the whole document, shown at its start.
@@ -185,6 +197,58 @@ impl Source {
             }
             None => self.general(&join(String::new()), msg),
         }
+    }
+
+    /// The `{` of an inline table still open at an inline-table syntax error reported on a later
+    /// line (`{ a = 1, b = 2` then `[next]`: the parser only notices at the next header). Scans
+    /// the text before the error for brackets outside strings and comments.
+    fn unclosed_inline_table(&self, at: usize, msg: &str) -> Option<usize> {
+        if !msg.contains("inline table") && !msg.contains("between key-value pairs") {
+            return None;
+        }
+        let text = self.text.as_bytes();
+        let at = at.min(text.len());
+        let mut open: Vec<(u8, usize)> = Vec::new();
+        let mut i = 0;
+        while i < at {
+            let rest = &text[i..at];
+            match text[i] {
+                b'#' => {
+                    i += rest.iter().position(|&c| c == b'\n').unwrap_or(rest.len());
+                }
+                q @ (b'"' | b'\'') => {
+                    let triple = rest.len() >= 3 && rest[1] == q && rest[2] == q;
+                    let (skip, close): (usize, &[u8]) = if triple {
+                        (3, if q == b'"' { b"\"\"\"" } else { b"'''" })
+                    } else {
+                        (1, if q == b'"' { b"\"" } else { b"'" })
+                    };
+                    let mut j = i + skip;
+                    while j < at && !text[j..].starts_with(close) {
+                        if q == b'"' && text[j] == b'\\' {
+                            j += 1;
+                        }
+                        if !triple && text[j.min(at - 1)] == b'\n' {
+                            break;
+                        }
+                        j += 1;
+                    }
+                    i = j + close.len();
+                }
+                b'{' | b'[' => {
+                    open.push((text[i], i));
+                    i += 1;
+                }
+                b'}' | b']' => {
+                    open.pop();
+                    i += 1;
+                }
+                _ => i += 1,
+            }
+        }
+        let (_, brace) = open.iter().rev().find(|(c, _)| *c == b'{')?;
+        let (brace_line, _) = self.line_col(*brace);
+        (brace_line < self.line_col(at).0).then_some(*brace)
     }
 
     /// Dotted field path at a byte offset, from the table headers above it and the key of its line.

@@ -20,7 +20,8 @@ pub use overrides::{
 };
 pub use project::{ProjectionReport, Projector};
 pub use validate::{
-    validate, validate_replay_step, SettingsError, SettingsField, DEFAULT_MAX_SAMPLES,
+    in_memory_samples, validate, validate_in_memory, validate_replay_step, SettingsError,
+    SettingsField, DEFAULT_MAX_SAMPLES, IN_MEMORY_LIMIT_BYTES,
 };
 
 use crate::formulation::{Formulation, RankTolerances};
@@ -637,6 +638,12 @@ pub struct Trajectory {
 }
 
 impl Trajectory {
+    /// Doubles per sample: t, q, and v, dv/dt, u, reactions (nv each), lambda, residual, dg/dt
+    /// (s each).
+    pub fn values_per_sample(&self) -> usize {
+        1 + self.q_names.len() + 4 * self.v_names.len() + 3 * self.row_names.len()
+    }
+
     /// An empty trajectory with the names of `problem`'s q, v and rows.
     pub fn named_for<M: Model, C: Constraints>(problem: &Problem<M, C>) -> Self {
         Trajectory {

@@ -119,6 +119,47 @@ fn finite(field: SettingsField, x: f64) -> Result<(), SettingsError> {
     }
 }
 
+/// Bound of a trajectory kept in memory (the Python API's `Scene.solve`, the check's reference
+/// solves): 1 GiB of samples (`values_per_sample` doubles each; numpy's copy doubles it at the
+/// peak). `progmo solve` streams its samples to files and is bounded by `max_samples` alone.
+pub const IN_MEMORY_LIMIT_BYTES: usize = 1 << 30;
+
+/// Samples of `values_per_sample` doubles that fit in [`IN_MEMORY_LIMIT_BYTES`].
+pub fn in_memory_samples(values_per_sample: usize) -> usize {
+    IN_MEMORY_LIMIT_BYTES / (8 * values_per_sample.max(1))
+}
+
+/// Check that a solve kept in memory fits [`IN_MEMORY_LIMIT_BYTES`] before integrating: with
+/// `output_dt` the number of samples is known and is refused naming `output_dt`; without it
+/// (a sample per accepted step) the sink stops the solve at the bound
+/// ([`crate::output::Bounded`]).
+pub fn validate_in_memory(
+    span: (f64, f64),
+    s: &Settings,
+    values_per_sample: usize,
+) -> Result<(), SettingsError> {
+    if let Output::Every(dt) = s.output {
+        let n = intervals(span, dt) + 1.0;
+        let fit = in_memory_samples(values_per_sample);
+        if n > fit as f64 {
+            return Err(err(
+                SettingsField::OutputDt,
+                dt,
+                format!(
+                    "{dt:?} gives {n:.3e} samples of {values_per_sample} values over [{:?}, {:?}]: \
+                     {:.2} GiB in memory, over the limit of {} GiB ({fit} samples); raise output_dt, \
+                     shorten t1, or stream to files with `progmo solve`",
+                    span.0,
+                    span.1,
+                    n * 8.0 * values_per_sample as f64 / (1u64 << 30) as f64,
+                    IN_MEMORY_LIMIT_BYTES >> 30
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// A step `h` must move time at both ends of the span (`t + h > t` in floating point).
 fn advances(field: SettingsField, (t0, t1): (f64, f64), h: f64) -> Result<(), SettingsError> {
     for t in [t0, t1] {

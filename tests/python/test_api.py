@@ -274,3 +274,19 @@ def test_a_huge_output_request_is_refused_before_allocating():
             scene.solve(**kw)
     assert time.monotonic() - start < 1
     assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 50_000  # kB
+
+
+def test_a_trajectory_over_the_in_memory_limit_is_refused_before_allocating():
+    """Within max_samples but over 1 GiB of samples (progmo::solve::IN_MEMORY_LIMIT_BYTES): refused
+    naming output_dt before integrating; the same spacing under the limit is not."""
+    import resource
+
+    scene = progmo.load("double_pendulum")
+    span = scene.t1 - scene.t0
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    with pytest.raises(progmo.SettingsError, match=r"^output_dt: .* GiB in memory, over the limit of 1 GiB") as e:
+        scene.solve(output_dt=span / 5e7, max_samples=10**8)
+    assert e.value.field == "output_dt"
+    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 50_000  # kB
+    sol = scene.solve(output_dt=span / 1000)  # negative control: the same door under the limit
+    assert len(sol.t) == 1001

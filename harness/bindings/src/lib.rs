@@ -6,7 +6,7 @@ use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use progmo::formulation::Formulation;
 use progmo::model::Model;
-use progmo::output::StopOn;
+use progmo::output::{Bounded, StopOn};
 use progmo::programme::{Constraints, Level, Role};
 use progmo::scene::{Scene, SceneSystem};
 use progmo::solve::{Evaluator, Overrides, Solution, Trajectory};
@@ -333,23 +333,44 @@ impl PyScene {
         if let Some(t1) = t1 {
             with_problem!(&mut scene.system, p => p.t1 = t1);
         }
+        let traj = with_problem!(&scene.system, p => Trajectory::named_for(p));
+        let width = traj.values_per_sample();
         progmo::solve::validate(scene.span(), &s)
+            .and_then(|()| progmo::solve::validate_in_memory(scene.span(), &s, width))
             .map_err(|e| settings_error(e.field.name(), &e.message))?;
         let layout = with_problem!(&scene.system, p => SampleLayout::from_problem(p));
         let started = std::time::Instant::now();
         // Ctrl-C / SIGTERM stop the solve after the step in progress (as in `progmo solve`); the
         // signal then goes to Python's own handler (KeyboardInterrupt carrying `.solution`, the
         // samples up to the stop), once the solution is built.
-        let (sol, caught): (Solution, Option<i32>) = py.detach(|| {
+        // Without output_dt (a sample per step) the bound stops the solve (validate_in_memory).
+        let (sol, caught, full): (Solution, Option<i32>, Option<usize>) = py.detach(|| {
             let guard = progmo::interrupt::Guard::install();
-            let traj = with_problem!(&scene.system, p => Trajectory::named_for(p));
-            let mut sink = StopOn::new(traj, guard.flag());
+            let limit = progmo::solve::in_memory_samples(width);
+            let mut sink = StopOn::new(Bounded::new(traj, limit), guard.flag());
             let mut sol = scene.solve_into(&s, &mut sink);
-            sol.trajectory = sink.into_inner();
-            (sol, guard.release())
+            let kept = sink.into_inner();
+            let full = kept.full().then_some(limit);
+            sol.trajectory = kept.into_inner();
+            (sol, guard.release(), full)
         });
         let wall = started.elapsed().as_secs_f64();
+        let t_end = sol.t_end;
         let sol = PySolution::new(py, scene, sol, s, layout, wall)?;
+        if let (Some(limit), None) = (full, caught) {
+            let e = settings_error(
+                "output_dt",
+                &format!(
+                    "without output_dt every step is a sample: {limit} samples of {width} values \
+                     reached the in-memory limit of {} GiB at t = {t_end:?}; set output_dt, shorten \
+                     t1, or stream to files with `progmo solve` (the samples so far are in \
+                     .solution)",
+                    progmo::solve::IN_MEMORY_LIMIT_BYTES >> 30
+                ),
+            );
+            e.value(py).setattr("solution", Py::new(py, sol)?)?;
+            return Err(e);
+        }
         if let Some(sig) = caught {
             progmo::interrupt::raise(sig);
             if let Err(e) = py.check_signals() {
