@@ -20,6 +20,8 @@
 //! # }
 //! ```
 //!
+//! Failures of the entry points convert into one [`Error`] (typed variants, structured fields).
+//!
 //! See `ARCHITECTURE.md` for the map of modules.
 
 /// Git revision of this build (empty outside a checkout): provenance of summaries and reports.
@@ -27,6 +29,7 @@ pub const GIT_REVISION: &str = env!("PROGMO_GIT_REVISION");
 
 pub mod check;
 pub mod cli;
+pub mod error;
 pub mod export;
 pub mod expr;
 pub mod formulation;
@@ -46,3 +49,5 @@ pub mod scene;
 pub mod servo;
 pub mod solve;
 pub mod tree;
+
+pub use error::{Error, Result};

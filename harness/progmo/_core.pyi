@@ -12,18 +12,32 @@ import numpy.typing as npt
 F64 = npt.NDArray[np.float64]
 
 class SceneError(ValueError):
-    """A scene file is invalid; the message names file, line, column and field, and so do the
-    attributes (line and column None without a position, field None when not applicable)."""
+    """A scene file (or a file it names) is invalid; the message names file, line, column and
+    field, and so do the attributes (line and column None without a position, field None when not
+    applicable). Every error of the core carries these attributes (``progmo::Error``, converted in
+    one place): ``kind`` names its variant (``scene``, ``input``, ``settings``, ...)."""
 
+    kind: str
+    field: str | None
+    message: str
     file: str | None
     line: int | None
     column: int | None
-    field: str | None
-    message: str
     excerpt: str
+    rows: list[int] | None
 
 class SettingsError(ValueError):
-    """A solver setting or override is invalid; the message names it (`rtol: must be > 0`)."""
+    """A solver setting, override or time span is invalid; the message names it
+    (``rtol: must be > 0``), ``field`` is its name at every door, ``message`` what is wrong."""
+
+    kind: str
+    field: str | None
+    message: str
+    file: str | None
+    line: int | None
+    column: int | None
+    excerpt: str
+    rows: list[int] | None
 
 class SolveStopped(RuntimeError):
     """A solve stopped before t1 (raised by `Solution.raise_if_stopped`)."""
@@ -33,6 +47,15 @@ class SolveStopped(RuntimeError):
 
 class ExportUnsupported(ValueError):
     """The scene holds an element the simulator format cannot carry; the message names it."""
+
+    kind: str
+    field: str | None
+    message: str
+    file: str | None
+    line: int | None
+    column: int | None
+    excerpt: str
+    rows: list[int] | None
 
 # generated: SolveSettings from progmo::solve::settings (PROGMO_BLESS=1 pytest tests/python/test_settings.py)
 class SolveSettings(TypedDict, total=False):

@@ -66,6 +66,16 @@ fn header_suffix(h: &Option<String>) -> String {
 }
 
 impl OutputError {
+    /// The file (or label) concerned.
+    pub fn file(&self) -> &str {
+        match self {
+            OutputError::Io { file, .. }
+            | OutputError::Mcap { file, .. }
+            | OutputError::Json { file, .. }
+            | OutputError::Parse { file, .. }
+            | OutputError::Invalid { file, .. } => file,
+        }
+    }
     pub(crate) fn io(file: &str, what: impl Into<String>, source: std::io::Error) -> Self {
         OutputError::Io {
             file: file.to_string(),

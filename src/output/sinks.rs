@@ -160,6 +160,45 @@ impl<S: OutputSink> OutputSink for StopOn<'_, S> {
     }
 }
 
+/// A trajectory kept in memory, bounded to `limit` samples: at the bound it asks the solve to stop
+/// ([`SampleSink::interrupted`]) and [`Bounded::full`] says so (the caller then reports the bound,
+/// keeping the samples taken). The in-memory doors size it with
+/// [`crate::solve::in_memory_samples`].
+pub struct Bounded {
+    inner: crate::solve::Trajectory,
+    limit: usize,
+}
+
+impl Bounded {
+    /// At most `limit` samples.
+    pub fn new(inner: crate::solve::Trajectory, limit: usize) -> Self {
+        Bounded { inner, limit }
+    }
+    /// The bound was reached.
+    pub fn full(&self) -> bool {
+        self.inner.len() >= self.limit
+    }
+    /// The bound.
+    pub fn limit(&self) -> usize {
+        self.limit
+    }
+    /// The samples taken.
+    pub fn into_inner(self) -> crate::solve::Trajectory {
+        self.inner
+    }
+}
+
+impl SampleSink for Bounded {
+    fn sample(&mut self, s: &Sample<'_>) {
+        if !self.full() {
+            SampleSink::sample(&mut self.inner, s);
+        }
+    }
+    fn interrupted(&self) -> bool {
+        self.full()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -189,7 +228,11 @@ mod tests {
         };
         let mut b = Bounded::new(Trajectory::named_for(&p), 5);
         let sol = solve_into(&p, &s, &mut b);
-        assert!(matches!(sol.code, ReturnCode::Interrupted { .. }), "{:?}", sol.code);
+        assert!(
+            matches!(sol.code, ReturnCode::Interrupted { .. }),
+            "{:?}",
+            sol.code
+        );
         assert!(b.full());
         let kept = b.into_inner();
         assert_eq!(kept.len(), 5);
@@ -247,44 +290,5 @@ mod tests {
         assert_eq!(got.q_at(1), all.q_at(9));
         assert_eq!(got.residual_at(1), all.residual_at(9));
         assert_eq!(got.reactions_at(1), all.reactions_at(9));
-    }
-}
-
-/// A trajectory kept in memory, bounded to `limit` samples: at the bound it asks the solve to stop
-/// ([`SampleSink::interrupted`]) and [`Bounded::full`] says so (the caller then reports the bound,
-/// keeping the samples taken). The in-memory doors size it with
-/// [`crate::solve::in_memory_samples`].
-pub struct Bounded {
-    inner: crate::solve::Trajectory,
-    limit: usize,
-}
-
-impl Bounded {
-    /// At most `limit` samples.
-    pub fn new(inner: crate::solve::Trajectory, limit: usize) -> Self {
-        Bounded { inner, limit }
-    }
-    /// The bound was reached.
-    pub fn full(&self) -> bool {
-        self.inner.len() >= self.limit
-    }
-    /// The bound.
-    pub fn limit(&self) -> usize {
-        self.limit
-    }
-    /// The samples taken.
-    pub fn into_inner(self) -> crate::solve::Trajectory {
-        self.inner
-    }
-}
-
-impl SampleSink for Bounded {
-    fn sample(&mut self, s: &Sample<'_>) {
-        if !self.full() {
-            SampleSink::sample(&mut self.inner, s);
-        }
-    }
-    fn interrupted(&self) -> bool {
-        self.full()
     }
 }

@@ -617,6 +617,9 @@ pub struct Trajectory {
     pub v_names: Vec<String>,
     /// Names of the constraint rows.
     pub row_names: Vec<String>,
+    /// Names of the actuators (`[[actuators]]`; empty without): a servo solve's multipliers are
+    /// their forces tau, the first `actuator_names.len()` of each sample's lambda ([`Self::tau_at`]).
+    pub actuator_names: Vec<String>,
     /// Sample times.
     pub t: Vec<f64>,
     /// Configurations, nq per sample.
@@ -655,6 +658,11 @@ impl Trajectory {
                 .iter()
                 .map(|r| r.name.clone())
                 .collect(),
+            actuator_names: problem
+                .constraints
+                .actuation()
+                .map(|a| a.names.clone())
+                .unwrap_or_default(),
             ..Default::default()
         }
     }
@@ -699,6 +707,11 @@ impl Trajectory {
     /// Multipliers of sample k.
     pub fn lambda_at(&self, k: usize) -> &[f64] {
         &self.lambda[k * self.s()..(k + 1) * self.s()]
+    }
+    /// The actuators' forces tau of sample k (u = H(t, q) tau; empty without actuators): the
+    /// servo solve keeps them as the leading multipliers.
+    pub fn tau_at(&self, k: usize) -> &[f64] {
+        &self.lambda_at(k)[..self.actuator_names.len()]
     }
     /// Residuals of sample k.
     pub fn residual_at(&self, k: usize) -> &[f64] {

@@ -117,7 +117,7 @@ def test_a_state_dependent_map_is_evaluated_at_the_state():
     assert np.allclose(s.actuation_map_at(1.0, q), [[c], [c]], rtol=0, atol=1e-15)
     assert not Scene(str(scene_file("thruster_cars"))).actuation_varies
     assert Scene(str(scene_file("double_pendulum"))).actuation_map_at(0.0, np.zeros(2)) is None
-    with pytest.raises(ValueError, match="q needs 2 entries"):
+    with pytest.raises(ValueError, match="q: needs 2 entries"):
         s.actuation_map_at(0.0, np.zeros(3))
 
 

@@ -4,7 +4,6 @@
 
 use progmo::check::{self, METRICS};
 use progmo::solve::{DriftControl, DEFAULT_BAUMGARTE, DEFAULT_PROJECTION_ITER};
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
@@ -48,7 +47,7 @@ fn default_budgets<'py>(
         "projection" => DriftControl::Projection {
             tol: match drift.get_item("tol")? {
                 Some(x) => x.extract::<f64>()?,
-                None => return Err(PyValueError::new_err("drift: projection needs `tol`")),
+                None => return Err(crate::argument_error("drift", "projection needs `tol`")),
             },
             max_iter: match drift.get_item("max_iter")? {
                 Some(x) => x.extract::<usize>()?,
@@ -61,10 +60,13 @@ fn default_budgets<'py>(
         },
         "none" => DriftControl::None,
         other => {
-            return Err(PyValueError::new_err(format!(
-                "drift: unknown kind `{other}`{}",
-                check::did_you_mean(other, progmo::solve::DRIFT_NAMES.iter().copied())
-            )))
+            return Err(crate::argument_error(
+                "drift",
+                format!(
+                    "unknown kind `{other}`{}",
+                    check::did_you_mean(other, progmo::solve::DRIFT_NAMES.iter().copied())
+                ),
+            ))
         }
     };
     let out = PyDict::new(py);

@@ -1,6 +1,6 @@
 //! `progmo._core`: the Rust core seen from Python (private; the public API is the
-//! `progmo` package). Thin glue only: every conversion of errors lives in `scene_error`,
-//! every solve releases the GIL.
+//! `progmo` package). Thin glue only: every error of the core (`progmo::Error`) becomes a Python
+//! exception in one place, `py_err`; every solve releases the GIL.
 
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
@@ -53,16 +53,57 @@ create_exception!(
     "The scene holds an element the simulator format cannot carry; the message names it."
 );
 
-/// Python's `SettingsError` for the setting `field`: `args[0]` is "field: message", the attributes
-/// `field` and `message`.
-fn settings_error(field: &str, message: &str) -> PyErr {
-    let e = SettingsError::new_err(format!("{field}: {message}"));
+/// The one conversion of the core's errors (`progmo::Error`, typed variants) into Python's
+/// exceptions: `Scene` and `Input` -> `SceneError`, `Settings` -> `SettingsError`, an unsupported
+/// `Export` -> `ExportUnsupported` (other export errors ValueError), `Output` -> OSError,
+/// `Formulation` -> RuntimeError, `Argument` -> ValueError. `args[0]` is the one-line message;
+/// every exception carries `kind`, `field`, `message`, `file`, `line`, `column`, `excerpt` and
+/// `rows` as attributes (None where they do not apply).
+pub(crate) fn py_err(e: impl Into<progmo::Error>) -> PyErr {
+    use progmo::Error as E;
+    let e: E = e.into();
+    let text = e.to_string();
+    let err = match &e {
+        E::Scene(_) | E::Input { .. } => SceneError::new_err(text),
+        E::Settings { .. } => SettingsError::new_err(text),
+        E::Export(progmo::export::ExportError::Unsupported { .. }) => {
+            ExportUnsupported::new_err(text)
+        }
+        E::Export(_) | E::Argument { .. } => PyValueError::new_err(text),
+        E::Output(_) => pyo3::exceptions::PyOSError::new_err(text),
+        E::Formulation(_) => PyRuntimeError::new_err(text),
+    };
+    let at = e.location();
+    let excerpt = match &e {
+        E::Scene(s) => s.excerpt.clone(),
+        _ => String::new(),
+    };
     Python::attach(|py| {
-        let v = e.value(py);
-        let _ = v.setattr("field", field);
-        let _ = v.setattr("message", message);
+        let v = err.value(py);
+        // an exception instance takes attributes; a failure here would leave only the message
+        let _ = v.setattr("kind", e.kind());
+        let _ = v.setattr("field", e.field());
+        let _ = v.setattr("message", e.message());
+        let _ = v.setattr("file", e.file());
+        let _ = v.setattr("line", at.as_ref().map(|a| a.line));
+        let _ = v.setattr("column", at.as_ref().map(|a| a.column));
+        let _ = v.setattr("excerpt", excerpt);
+        let _ = v.setattr("rows", e.rows().map(<[usize]>::to_vec));
     });
-    e
+    err
+}
+
+/// A ValueError for the argument `field` (shapes, finiteness: checks of this glue's own).
+pub(crate) fn argument_error(field: &str, message: impl Into<String>) -> PyErr {
+    py_err(progmo::Error::argument(field, message))
+}
+
+/// A `SettingsError` for the setting `field` (a check of this glue's own, e.g. a keyword's type).
+fn settings_error(field: &str, message: &str) -> PyErr {
+    py_err(progmo::Error::Settings {
+        field: field.into(),
+        message: message.into(),
+    })
 }
 
 /// Keyword arguments as the core's overrides (`progmo::solve::Overrides::from_table`: names, types
@@ -93,56 +134,7 @@ fn overrides(kw: Option<&Bound<'_, PyDict>>) -> PyResult<Overrides> {
         };
         table.insert(name, value);
     }
-    Overrides::from_table(&table).map_err(|e| settings_error(&e.name, &e.message))
-}
-
-/// A located scene error as Python's `SceneError`: the one-line message as `args[0]` and the
-/// location as attributes, `file`, `line` and `column` (None without a position), `field` (None
-/// when not applicable), `message` (what is wrong, without the location) and `excerpt`.
-fn scene_error(e: progmo::scene::SceneError) -> PyErr {
-    let located = e.line > 0;
-    let attrs = (
-        Some(e.file.display().to_string()),
-        located.then_some(e.line),
-        located.then_some(e.column),
-        (!e.field.is_empty()).then(|| e.field.clone()),
-        e.message.clone(),
-        e.excerpt.clone(),
-    );
-    with_attributes(SceneError::new_err(e.to_string()), attrs)
-}
-
-/// `SceneError` of a message that has no scene position (a path rule): the same attributes, the
-/// location ones None.
-fn scene_error_unlocated(message: String) -> PyErr {
-    let attrs = (None, None, None, None, message.clone(), String::new());
-    with_attributes(SceneError::new_err(message), attrs)
-}
-
-type SceneErrorAttrs = (
-    Option<String>,
-    Option<usize>,
-    Option<usize>,
-    Option<String>,
-    String,
-    String,
-);
-
-fn with_attributes(
-    err: PyErr,
-    (file, line, column, field, message, excerpt): SceneErrorAttrs,
-) -> PyErr {
-    Python::attach(|py| {
-        let v = err.value(py);
-        // an exception instance takes attributes; a failure here would leave only the message
-        let _ = v.setattr("file", file);
-        let _ = v.setattr("line", line);
-        let _ = v.setattr("column", column);
-        let _ = v.setattr("field", field);
-        let _ = v.setattr("message", message);
-        let _ = v.setattr("excerpt", excerpt);
-    });
-    err
+    Overrides::from_table(&table).map_err(py_err)
 }
 
 pub(crate) fn json_to_py<'py>(
@@ -192,9 +184,7 @@ impl PyScene {
         finite("v", &v)?;
         let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
         if q.len() != nq || v.len() != nv {
-            return Err(PyValueError::new_err(format!(
-                "q needs {nq} entries, v {nv}"
-            )));
+            return Err(argument_error("q", format!("needs {nq} entries, v {nv}")));
         }
         Ok((q, v))
     }
@@ -207,7 +197,7 @@ impl PyScene {
     fn new(path: PathBuf) -> PyResult<Self> {
         Scene::load(&path)
             .map(|scene| PyScene { scene })
-            .map_err(scene_error)
+            .map_err(py_err)
     }
 
     #[getter]
@@ -306,7 +296,7 @@ impl PyScene {
     fn check_replay_step(&self, h: f64, t1: Option<f64>) -> PyResult<()> {
         let (t0, own) = self.scene.span();
         progmo::solve::validate_replay_step((t0, t1.unwrap_or(own)), h, &self.scene.settings)
-            .map_err(|e| SettingsError::new_err(format!("{}: {}", e.field.name(), e.message)))
+            .map_err(py_err)
     }
 
     /// Solve (the GIL is released meanwhile). Keyword arguments are the settings of the core's one
@@ -323,11 +313,7 @@ impl PyScene {
         settings: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<PySolution> {
         let o = overrides(settings)?;
-        let s = self
-            .scene
-            .settings
-            .apply(&o)
-            .map_err(|e| settings_error(e.field(), &e.to_string()))?;
+        let s = self.scene.settings.apply(&o).map_err(py_err)?;
         let t1 = o.t1;
         let mut scene = self.scene.clone();
         if let Some(t1) = t1 {
@@ -337,7 +323,7 @@ impl PyScene {
         let width = traj.values_per_sample();
         progmo::solve::validate(scene.span(), &s)
             .and_then(|()| progmo::solve::validate_in_memory(scene.span(), &s, width))
-            .map_err(|e| settings_error(e.field.name(), &e.message))?;
+            .map_err(py_err)?;
         let layout = with_problem!(&scene.system, p => SampleLayout::from_problem(p));
         let started = std::time::Instant::now();
         // Ctrl-C / SIGTERM stop the solve after the step in progress (as in `progmo solve`); the
@@ -411,9 +397,10 @@ impl PyScene {
             || v.shape() != [n, nv]
             || a.as_ref().is_some_and(|a| a.shape() != [n, nv])
         {
-            return Err(PyValueError::new_err(format!(
-                "shapes: t ({n},), q must be ({n}, {nq}), v and a ({n}, {nv})"
-            )));
+            return Err(argument_error(
+                "q",
+                format!("shapes: t ({n},), q must be ({n}, {nq}), v and a ({n}, {nv})"),
+            ));
         }
         let out = py.detach(|| {
             with_problem!(&self.scene.system, p => {
@@ -491,7 +478,7 @@ impl PyScene {
             // the solver's reference row norms: at the scene's initial state
             ev.set_row_scale_at(p.t0, &p.q0, &p.v0);
             ev.evaluate(f, &rank, None, t, &q, &v)
-                .map_err(|e| PyRuntimeError::new_err(format!("{formulation}: {e}")))?;
+                .map_err(py_err)?;
             let mut u = vec![0.0; nv];
             let mut r = vec![0.0; nv];
             ev.reaction(Role::Programme, &mut u);
@@ -532,12 +519,13 @@ impl PyScene {
         finite("v", &v)?;
         let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
         if q.len() != nq || v.len() != nv || iterations == 0 {
-            return Err(PyValueError::new_err(format!(
-                "q needs {nq} entries, v {nv}, iterations > 0"
-            )));
+            return Err(argument_error(
+                "q",
+                format!("needs {nq} entries, v {nv}, iterations > 0"),
+            ));
         }
         let rank = self.scene.settings.rank();
-        let out: Result<f64, String> = py.detach(|| {
+        let out: Result<f64, progmo::formulation::FormulationError> = py.detach(|| {
             with_problem!(&self.scene.system, p => {
                 let mut ev = Evaluator::<_, _, f64>::new(&p.model, &p.constraints);
                 // the solver's reference row norms: at the scene's initial state
@@ -548,14 +536,14 @@ impl PyScene {
                 let states = [&q, &qb];
                 let start = std::time::Instant::now();
                 for i in 0..iterations {
-                    ev.evaluate(f, &rank, None, t, states[i % 2], &v).map_err(|e| e.to_string())?;
+                    ev.evaluate(f, &rank, None, t, states[i % 2], &v)?;
                     ev.reaction(Role::Programme, &mut u);
                     std::hint::black_box(&u);
                 }
                 Ok(start.elapsed().as_secs_f64() / iterations as f64)
             })
         });
-        out.map_err(|e| PyRuntimeError::new_err(format!("{formulation}: {e}")))
+        out.map_err(py_err)
     }
 
     /// The located error the solver's refusal of the initial state gives (the same message and
@@ -564,7 +552,7 @@ impl PyScene {
         self.scene
             .check_initial(&self.scene.settings)
             .map(|_| ())
-            .map_err(scene_error)
+            .map_err(py_err)
     }
 
     /// `[[actuators]]` of the scene: (name, index into v) of each actuator, the index None for an
@@ -610,7 +598,7 @@ impl PyScene {
         finite("q", &q)?;
         let nq = self.scene.q_names().len();
         if q.len() != nq {
-            return Err(PyValueError::new_err(format!("q needs {nq} entries")));
+            return Err(argument_error("q", format!("needs {nq} entries")));
         }
         Ok(self.actuation().map(|a| {
             let n = self.scene.v_names().len();
@@ -644,9 +632,10 @@ impl PyScene {
         let k = t.len();
         let (nq, nv) = (self.scene.q_names().len(), self.scene.v_names().len());
         if q.shape() != [k, nq] || u.shape() != [k, nv] {
-            return Err(PyValueError::new_err(format!(
-                "shapes: t ({k},), q must be ({k}, {nq}), u ({k}, {nv})"
-            )));
+            return Err(argument_error(
+                "q",
+                format!("shapes: t ({k},), q must be ({k}, {nq}), u ({k}, {nv})"),
+            ));
         }
         let out = py.detach(|| {
             let mut out = Array2::<f64>::zeros((k, nv));
@@ -789,9 +778,10 @@ impl PyScene {
             "mjcf" => progmo::export::Format::Mjcf,
             "urdf" => progmo::export::Format::Urdf,
             other => {
-                return Err(PyValueError::new_err(format!(
-                    "unknown export format {other:?} (mjcf, urdf)"
-                )))
+                return Err(argument_error(
+                    "format",
+                    format!("unknown export format {other:?} (mjcf, urdf)"),
+                ))
             }
         };
         let exported = if supply_reactions {
@@ -799,12 +789,7 @@ impl PyScene {
         } else {
             self.scene.export(format, &options)
         };
-        let (doc, report) = exported.map_err(|e| match e {
-            progmo::export::ExportError::Unsupported { .. } => {
-                ExportUnsupported::new_err(format!("cannot export {}: {e}", self.scene.name))
-            }
-            e => PyValueError::new_err(format!("cannot export {}: {e}", self.scene.name)),
-        })?;
+        let (doc, report) = exported.map_err(py_err)?;
         Ok((doc, json_to_py(py, &report)?))
     }
 
@@ -814,10 +799,10 @@ impl PyScene {
         let q = q.as_slice()?.to_vec();
         finite("q", &q)?;
         if q.len() != self.scene.q_names().len() {
-            return Err(PyValueError::new_err(format!(
-                "q needs {} entries",
-                self.scene.q_names().len()
-            )));
+            return Err(argument_error(
+                "q",
+                format!("needs {} entries", self.scene.q_names().len()),
+            ));
         }
         Ok(match self.scene.bodies() {
             Some(mut b) => b
@@ -847,7 +832,7 @@ impl PyScene {
                 py,
                 &b.scene_update(&q, prefix, alpha, targets),
             )?)),
-            Some(_) => Err(PyValueError::new_err("q has the wrong length")),
+            Some(_) => Err(argument_error("q", "has the wrong length")),
             None => Ok(None),
         }
     }
@@ -863,7 +848,7 @@ impl PyScene {
     ) -> PyResult<Option<Bound<'py, PyAny>>> {
         let q = q.as_array();
         if q.ncols() != self.scene.q_names().len() {
-            return Err(PyValueError::new_err("q has the wrong number of columns"));
+            return Err(argument_error("q", "has the wrong number of columns"));
         }
         let Some(mut b) = self.scene.bodies() else {
             return Ok(None);
@@ -902,17 +887,17 @@ impl PyScene {
 }
 
 fn parse_formulation(f: &str) -> PyResult<Formulation> {
-    f.parse()
-        .map_err(|e: progmo::solve::UnknownName| PyValueError::new_err(e.to_string()))
+    f.parse().map_err(|e: progmo::solve::UnknownName| py_err(e))
 }
 
 /// Arrays from Python must be finite: a NaN state would only come back as NaN results.
 fn finite<'a>(name: &str, x: impl IntoIterator<Item = &'a f64>) -> PyResult<()> {
     match x.into_iter().enumerate().find(|(_, v)| !v.is_finite()) {
         None => Ok(()),
-        Some((i, v)) => Err(PyValueError::new_err(format!(
-            "{name}: entry {i} is {v:?}; inputs must be finite"
-        ))),
+        Some((i, v)) => Err(argument_error(
+            name,
+            format!("entry {i} is {v:?}; inputs must be finite"),
+        )),
     }
 }
 
@@ -937,7 +922,7 @@ fn chain_toml(
         t1,
     };
     spec.check()
-        .map_err(|e| PyValueError::new_err(format!("chain_toml: {e}")))?;
+        .map_err(|e| py_err(progmo::Error::argument("chain_toml", e)))?;
     Ok(spec.toml())
 }
 
@@ -972,7 +957,7 @@ fn cli(py: Python<'_>, argv: Vec<std::ffi::OsString>) -> u8 {
 fn resolve_file(name: &str, folder: PathBuf) -> PyResult<String> {
     progmo::input::resolve(name, &folder)
         .map(|p| p.display().to_string())
-        .map_err(scene_error_unlocated)
+        .map_err(|m| py_err(progmo::Error::input(m)))
 }
 
 /// Version of the core.

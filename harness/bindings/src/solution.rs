@@ -4,12 +4,10 @@
 use crate::{json_to_py, matrix};
 use numpy::PyArray1;
 use progmo::output::{
-    replay, write_summary_to_path, Bodies, CsvSink, McapSink, OutputError, SampleLayout, Staged,
-    SummaryInput,
+    replay, write_summary_to_path, Bodies, CsvSink, McapSink, SampleLayout, Staged, SummaryInput,
 };
 use progmo::scene::Scene;
 use progmo::solve::{Settings, Solution};
-use pyo3::exceptions::PyOSError;
 use pyo3::prelude::*;
 use pyo3::types::PyList;
 use std::path::PathBuf;
@@ -128,10 +126,6 @@ impl PySolution {
     }
 }
 
-fn os_error(e: OutputError) -> PyErr {
-    PyOSError::new_err(e.to_string())
-}
-
 #[pymethods]
 impl PySolution {
     /// Name of the scene solved.
@@ -236,21 +230,13 @@ impl PySolution {
     /// or None without actuators.
     #[getter]
     fn tau<'py>(&self, py: Python<'py>) -> PyResult<Option<Py<PyAny>>> {
-        use progmo::programme::Constraints;
-        let m = match self.servo_scene.as_ref().map(|s| &s.system) {
-            Some(progmo::scene::SceneSystem::Tree(p)) => p.constraints.actuation().map(|a| a.len()),
-            _ => None,
-        };
-        let Some(m) = m else {
-            return Ok(None);
-        };
-        // the servo solve's multipliers are tau (evaluator: lambda holds tau, one per actuator)
         let tr = &self.sol.trajectory;
-        let s = tr.row_names.len();
-        let flat: Vec<f64> = tr
-            .lambda
-            .chunks(s.max(1))
-            .flat_map(|row| row[..m].to_vec())
+        let m = tr.actuator_names.len();
+        if m == 0 {
+            return Ok(None);
+        }
+        let flat: Vec<f64> = (0..tr.t.len())
+            .flat_map(|k| tr.tau_at(k).to_vec())
             .collect();
         Ok(Some(frozen(matrix(py, &flat, m)?.into_any())?))
     }
@@ -283,7 +269,7 @@ impl PySolution {
             let mut sink = Staged::create(&path, |p| CsvSink::create(p, &self.layout))?;
             replay(&self.sol.trajectory, &self.sol.warnings, &mut sink)
         })
-        .map_err(os_error)
+        .map_err(crate::py_err)
     }
     /// Write the samples as `progmo solve`'s recording.mcap (Foxglove; src/output/mcap_sink.rs),
     /// whole or under `<path>.partial`, as `write_csv`.
@@ -298,7 +284,7 @@ impl PySolution {
             })?;
             replay(&self.sol.trajectory, &self.sol.warnings, &mut sink)
         })
-        .map_err(os_error)
+        .map_err(crate::py_err)
     }
     /// Write `progmo solve`'s summary.json (return code, statistics, settings, max residuals),
     /// whole or not at all (through `<path>.tmp`; a device at `path` is refused, never replaced).
@@ -321,7 +307,7 @@ impl PySolution {
             servo: servo.as_ref(),
             robot_file: self.robot_file.as_ref(),
         };
-        write_summary_to_path(path, &input).map_err(os_error)
+        write_summary_to_path(path, &input).map_err(crate::py_err)
     }
 
     /// Raise `SolveStopped` (the return code as one sentence; `.code` its name) unless the solve
