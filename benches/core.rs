@@ -9,9 +9,10 @@ use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use progmo::formulation::{Formulation, RankTolerances};
 use progmo::integrate::Method;
 use progmo::model::Model;
-use progmo::problems::{chain, hard, particle, pendulum, rigid_body};
+use progmo::problems::{hard, particle, pendulum, rigid_body};
 use progmo::programme::Constraints;
 use progmo::scalar::{Dual, Scalar};
+use progmo::scene::chain;
 use progmo::solve::{
     solve, solve_into, DriftControl, Evaluator, Output, Problem, Sample, SampleSink, Settings,
 };

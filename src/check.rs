@@ -335,18 +335,7 @@ pub fn tolerance_keys() -> Vec<String> {
     keys
 }
 
-/// The nearest of `candidates` to a misspelt `name` (edit distance within a third of its
-/// length), for "did you mean" (the expression parser's rule).
-pub fn nearest<'a>(name: &str, candidates: impl Iterator<Item = &'a str>) -> Option<String> {
-    crate::expr::closest(name, candidates)
-}
-
-/// ` (did you mean `x`?)` or nothing.
-pub fn did_you_mean<'a>(name: &str, candidates: impl Iterator<Item = &'a str>) -> String {
-    nearest(name, candidates)
-        .map(|s| format!(" (did you mean `{s}`?)"))
-        .unwrap_or_default()
-}
+pub use crate::located::{did_you_mean, nearest};
 
 /// A number as Python's `{:g}` would print the catalog's values (1e-10, 0.5).
 fn fmt_g(x: f64) -> String {

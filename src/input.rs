@@ -2,7 +2,7 @@
 //! file a scene names). The rules (src/scene/FORMAT.md, "Files"):
 //!
 //! - where ([`resolve`]): a file a scene names must resolve, symlinks and `..` followed, inside the
-//!   scene's folder, a folder of the robot path ([`crate::import::ROBOT_PATH_VAR`], then
+//!   scene's folder, a folder of the robot path ([`ROBOT_PATH_VAR`], then
 //!   `$ROS_PACKAGE_PATH`; `package://PKG/...` inside its package `DIR/PKG`) or a folder of
 //!   [`ALLOW_ROOTS_VAR`]; anything else is refused naming this rule;
 //! - what ([`read`]): only regular files; a directory, FIFO, device or socket is refused by name
@@ -14,6 +14,11 @@
 
 use std::io::Read;
 use std::path::{Component, Path, PathBuf};
+
+/// Environment variable: search path (`:`-separated directories) for `package://PKG/rest`: the
+/// first `DIR/PKG/rest` that exists. The Python package fills it (when unset) with the
+/// `share` directory of an installed `example-robot-data`.
+pub const ROBOT_PATH_VAR: &str = "PROGMO_ROBOT_PATH";
 
 /// Environment variable: extra folders (`:`-separated) a scene may read files from, besides its
 /// own folder and the robot path.
@@ -125,7 +130,7 @@ fn var_dirs(var: &str) -> Vec<PathBuf> {
 
 /// The robot path: `$PROGMO_ROBOT_PATH`, then `$ROS_PACKAGE_PATH`.
 pub fn robot_path() -> Vec<PathBuf> {
-    let mut dirs = var_dirs(crate::import::ROBOT_PATH_VAR);
+    let mut dirs = var_dirs(ROBOT_PATH_VAR);
     dirs.extend(var_dirs("ROS_PACKAGE_PATH"));
     dirs
 }
@@ -223,13 +228,13 @@ pub fn resolve(file: &str, scene_dir: &Path) -> Result<PathBuf, String> {
                 "`{file}` not found: package `{pkg}` is looked up in ${} and \
                  $ROS_PACKAGE_PATH ({}); for example-robot-data, `pip install example-robot-data` \
                  (the Python `progmo` then finds it) or set {} to its `share` directory",
-                crate::import::ROBOT_PATH_VAR,
+                ROBOT_PATH_VAR,
                 if roots.is_empty() {
                     "both unset".to_string()
                 } else {
                     format!("searched {}", roots.len())
                 },
-                crate::import::ROBOT_PATH_VAR,
+                ROBOT_PATH_VAR,
             ));
         };
         let canon = std::fs::canonicalize(&found)

@@ -30,10 +30,10 @@ use crate::common;
 
 use progmo::formulation::{Formulation, RankTolerances};
 use progmo::model::Model;
-use progmo::problems::chain::ChainSpec;
 use progmo::programme::jet::Jet;
 use progmo::programme::Constraints;
 use progmo::scalar::{BitEq, Dual, Scalar};
+use progmo::scene::chain::ChainSpec;
 use progmo::scene::{Scene, SceneSystem};
 use progmo::solve::{Evaluator, Problem};
 use progmo::with_problem;

@@ -453,7 +453,7 @@ fn articulated_body_agrees_on_every_tree_scene() {
 /// Random chains (masses 0.05 ... 1, lengths 0.1 ... 0.5, bends, velocities) of 2 ... 64 links.
 #[test]
 fn articulated_body_agrees_on_random_chains() {
-    use progmo::problems::chain::ChainSpec;
+    use progmo::scene::chain::ChainSpec;
     let mut rng = Lcg(1515);
     for n in [2, 3, 5, 9, 17, 33, 64] {
         let spec = ChainSpec {
@@ -476,7 +476,7 @@ fn articulated_body_agrees_on_random_chains() {
 #[test]
 fn auto_resolves_by_size_and_model() {
     use progmo::formulation::AUTO_ARTICULATED_NV;
-    use progmo::problems::chain::ChainSpec;
+    use progmo::scene::chain::ChainSpec;
     for n in [AUTO_ARTICULATED_NV - 1, AUTO_ARTICULATED_NV] {
         let scene = ChainSpec::uniform(n).scene().unwrap();
         progmo::with_problem!(&scene.system, p => {
@@ -518,7 +518,7 @@ fn auto_resolves_by_size_and_model() {
 /// in (q, v) agrees between articulated-body and null-space on a chain.
 #[test]
 fn articulated_body_derivatives_agree_over_duals() {
-    use progmo::problems::chain::ChainSpec;
+    use progmo::scene::chain::ChainSpec;
     type Dual64 = progmo::scalar::Dual<f64>;
     let n = 12;
     let scene = ChainSpec::uniform(n).scene().unwrap();

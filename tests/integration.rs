@@ -19,6 +19,7 @@ mod formulations;
 mod fuzz_props;
 mod hard_cases;
 mod input_files;
+mod layering;
 mod mjcf_import;
 mod paper_examples;
 mod rolling;

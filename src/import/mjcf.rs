@@ -17,7 +17,7 @@
 
 use super::unmodelled::{JointRange, Recorder, Unmodelled};
 use super::urdf::Robot;
-use crate::scene::{SceneError, Source};
+use crate::located::{SceneError, Source};
 use crate::tree::{BodySpec, JointSpec, WORLD};
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 use roxmltree::Node;

@@ -11,7 +11,7 @@
 //! - [`resolve`]: where `package://PKG/...` paths are found (`$PROGMO_ROBOT_PATH`, then
 //!   `$ROS_PACKAGE_PATH`) and the folders a scene may read ([`crate::input`]).
 //!
-//! Errors are [`SceneError`](crate::scene::SceneError)s located in the description file (file,
+//! Errors are [`SceneError`](crate::located::SceneError)s located in the description file (file,
 //! line, column, element).
 
 pub mod mjcf;
@@ -21,10 +21,7 @@ pub mod urdf;
 use nalgebra::Matrix3;
 use std::path::{Path, PathBuf};
 
-/// Environment variable: search path (`:`-separated directories) for `package://PKG/rest`: the
-/// first `DIR/PKG/rest` that exists. The Python package fills it (when unset) with the
-/// `share` directory of an installed `example-robot-data`.
-pub const ROBOT_PATH_VAR: &str = "PROGMO_ROBOT_PATH";
+pub use crate::input::ROBOT_PATH_VAR;
 
 /// The file a model's `file` names: `package://PKG/rest` through [`ROBOT_PATH_VAR`] (then
 /// `ROS_PACKAGE_PATH`), otherwise a path relative to the scene file's directory; refused outside
@@ -77,11 +74,11 @@ fn options_limit() -> usize {
 /// Parse a robot description file as XML; a malformed document is a located error (the parser's
 /// row and column turned into a byte offset of `src`).
 pub(crate) fn parse_xml(
-    src: &crate::scene::Source,
-) -> Result<roxmltree::Document<'_>, crate::scene::SceneError> {
+    src: &crate::located::Source,
+) -> Result<roxmltree::Document<'_>, crate::located::SceneError> {
     // a file that does not begin as XML is not one: located, never quoted (it may be anything)
     if let Some((line, column)) = crate::input::xml_start(&src.text) {
-        return Err(crate::scene::SceneError {
+        return Err(crate::located::SceneError {
             file: src.file.clone(),
             line,
             column,
@@ -95,7 +92,7 @@ pub(crate) fn parse_xml(
     // bounded before the parser allocates: located, never quoted (the file did not parse)
     let unquoted = |offset: usize, message: String| {
         let (line, column) = src.line_col(offset);
-        crate::scene::SceneError {
+        crate::located::SceneError {
             file: src.file.clone(),
             line,
             column,

@@ -113,13 +113,13 @@ pub struct JointRange {
 
 /// Collects records while a file is read.
 pub(crate) struct Recorder<'s> {
-    pub src: &'s crate::scene::Source,
+    pub src: &'s crate::located::Source,
     pub file: PathBuf,
     pub out: Vec<Unmodelled>,
 }
 
 impl<'s> Recorder<'s> {
-    pub fn new(src: &'s crate::scene::Source) -> Self {
+    pub fn new(src: &'s crate::located::Source) -> Self {
         let file = std::path::absolute(&src.file).unwrap_or_else(|_| src.file.clone());
         Recorder {
             src,

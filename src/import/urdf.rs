@@ -12,7 +12,7 @@
 
 use super::unmodelled::{JointRange, Recorder, Unmodelled};
 use crate::input::MAX_BODIES;
-use crate::scene::{SceneError, Source};
+use crate::located::{SceneError, Source};
 use crate::tree::{BodySpec, JointSpec, WORLD};
 use roxmltree::Node;
 use std::collections::{HashMap, HashSet, VecDeque};

@@ -13,7 +13,7 @@
 //! `../shared/seed/NOTES.md`). Implementors are immutable; scratch space lives in a
 //! [`Model::Workspace`] so evaluation allocates nothing.
 
-pub mod lie;
+pub use crate::lie;
 
 use crate::scalar::Scalar;
 use nalgebra::DMatrix;

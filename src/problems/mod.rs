@@ -2,14 +2,12 @@
 //!
 //! Each problem is a model, its constraints, a consistent initial state and, where one exists, an
 //! independent reference (closed form or invariant) with its provenance in the doc comment.
-//! - [`chain`]: generated n-link planar chains (scaling, conditioning; also the bench's).
 //! - [`hard`]: hard cases for numerical stability (singular programmes, stiff springs, ...).
 //! - [`particle`]: Example 2.1 of the paper (particle in a Newtonian field at constant speed).
 //! - [`rigid_body`]: Example 3.1 (generalized precession of a rigid body), free and heavy top.
 //! - [`pendulum`]: a double pendulum with a time-dependent holonomic programme, and a Cartesian
 //!   pendulum whose rod is a system constraint and whose motion is a complete programme.
 
-pub mod chain;
 pub mod hard;
 pub mod particle;
 pub mod pendulum;

@@ -14,6 +14,7 @@
 //! ([`jet`]): B = dg/dv (2.6) for velocity rows, B = g_q N(q) for position rows, B = dh/d(dv/dt)
 //! for acceleration rows.
 
+pub mod actuation;
 pub mod jet;
 
 use crate::model::Segment;
@@ -107,9 +108,9 @@ pub trait Constraints: Send + Sync {
         false
     }
 
-    /// The actuators that must realize the programme (servo-constraints, [`crate::servo`]), or
+    /// The actuators that must realize the programme (servo-constraints, [`actuation`]), or
     /// `None` (the default) for the ideal realization of (2.7).
-    fn actuation(&self) -> Option<&crate::servo::Actuation> {
+    fn actuation(&self) -> Option<&actuation::Actuation> {
         None
     }
 }

@@ -1,99 +1,12 @@
 //! Errors of scene files: every message names the file, line, column and field, and shows the line.
 
 use crate::expr::ExprError;
-use std::fmt;
 use std::ops::Range;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-/// A problem with a scene file, located in it.
-#[derive(Clone, Debug, PartialEq)]
-pub struct SceneError {
-    /// The scene file.
-    pub file: PathBuf,
-    /// 1-based line (0 when the error has no position, e.g. the file cannot be read).
-    pub line: usize,
-    /// 1-based column.
-    pub column: usize,
-    /// The field concerned (`model.bodies[1].mass`), empty when not applicable.
-    pub field: String,
-    /// What is wrong.
-    pub message: String,
-    /// The offending source line and a caret, if known.
-    pub excerpt: String,
-}
-
-impl fmt::Display for SceneError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}", self.file.display())?;
-        if self.line > 0 {
-            write!(f, ":{}:{}", self.line, self.column)?;
-        }
-        write!(f, ": error: ")?;
-        if !self.field.is_empty() {
-            write!(f, "{}: ", self.field)?;
-        }
-        write!(f, "{}", self.message)?;
-        if !self.excerpt.is_empty() {
-            write!(f, "\n{}", self.excerpt)?;
-        }
-        Ok(())
-    }
-}
-
-impl std::error::Error for SceneError {}
-
-/// The text of a scene file with its name, for locating errors.
-#[derive(Clone, Debug)]
-pub struct Source {
-    pub file: PathBuf,
-    pub text: String,
-}
+pub use crate::located::{escape_invisible, SceneError, Source};
 
 impl Source {
-    /// 1-based (line, column) of a byte offset.
-    pub fn line_col(&self, offset: usize) -> (usize, usize) {
-        let offset = offset.min(self.text.len());
-        let before = &self.text[..offset];
-        let line = before.matches('\n').count() + 1;
-        let start = before.rfind('\n').map(|i| i + 1).unwrap_or(0);
-        (line, self.text[start..offset].chars().count() + 1)
-    }
-
-    /// The line at an error with a caret, under the quoting rule of [`crate::input`]: nothing
-    /// for text that is not quotable, else one line of at most `QUOTE_WIDTH` characters.
-    fn excerpt(&self, line: usize, column: usize, width: usize) -> String {
-        if !crate::input::quotable(&self.text) {
-            return String::new();
-        }
-        let text = self.text.lines().nth(line - 1).unwrap_or("");
-        let (text, column) = crate::input::excerpt_line(text, column);
-        let room = text.chars().count().saturating_sub(column - 1).max(1);
-        format!(
-            "    {text}\n    {}{}",
-            " ".repeat(column.saturating_sub(1)),
-            "^".repeat(width.clamp(1, room))
-        )
-    }
-
-    /// An error at a byte span.
-    pub fn error(&self, span: Range<usize>, field: &str, message: impl Into<String>) -> SceneError {
-        let (line, column) = self.line_col(span.start);
-        let first_line_len = self.text
-            [span.start.min(self.text.len())..span.end.min(self.text.len())]
-            .lines()
-            .next()
-            .map(|l| l.chars().count())
-            .unwrap_or(1);
-        SceneError {
-            file: self.file.clone(),
-            line,
-            column,
-            field: escape_invisible(field),
-            message: escape_invisible(&message.into()),
-            excerpt: self.excerpt(line, column, first_line_len),
-        }
-    }
-
     /// Span of the value of `key = value` written on a line of its own in the table whose header
     /// starts at byte `header` (0: the top level), up to the next table header; None when the key
     /// is written otherwise (inline, dotted) or not at all.
@@ -115,18 +28,6 @@ impl Source {
             start += line.len();
         }
         None
-    }
-
-    /// An error without a position.
-    pub fn general(&self, field: &str, message: impl Into<String>) -> SceneError {
-        SceneError {
-            file: self.file.clone(),
-            line: 0,
-            column: 0,
-            field: escape_invisible(field),
-            message: escape_invisible(&message.into()),
-            excerpt: String::new(),
-        }
     }
 
     /// An expression error, located inside the TOML string at `span` (the span includes quotes).
@@ -385,31 +286,6 @@ impl Source {
         };
         (field, false)
     }
-}
-
-/// Characters a terminal does not show (controls, zero-width and format characters, non-ASCII
-/// spaces) written as `\u{200b}`, so a message about a name shows what is in it.
-pub fn escape_invisible(s: &str) -> String {
-    let invisible = |c: char| {
-        (c.is_control() && c != '\n')
-            || (c.is_whitespace() && c != ' ' && c != '\n')
-            || matches!(c as u32,
-                0xAD | 0x34F | 0x61C | 0x115F | 0x1160 | 0x17B4 | 0x17B5 | 0x180B..=0x180F
-                | 0x200B..=0x200F | 0x202A..=0x202E | 0x2060..=0x206F | 0x3164 | 0xFE00..=0xFE0F
-                | 0xFEFF | 0xFFA0 | 0xFFF0..=0xFFFB | 0xE0000..=0xE0FFF)
-    };
-    if !s.chars().any(invisible) {
-        return s.to_string();
-    }
-    s.chars()
-        .map(|c| {
-            if invisible(c) {
-                format!("\\u{{{:x}}}", c as u32)
-            } else {
-                c.to_string()
-            }
-        })
-        .collect()
 }
 
 fn parse_position(head: &str) -> Option<(usize, usize)> {

@@ -165,7 +165,7 @@ impl ExprConstraints {
 impl Constraints for ExprConstraints {
     type Workspace<S: Scalar> = RowsWork<S>;
 
-    fn actuation(&self) -> Option<&crate::servo::Actuation> {
+    fn actuation(&self) -> Option<&crate::programme::actuation::Actuation> {
         self.actuation.as_ref()
     }
 

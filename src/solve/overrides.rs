@@ -356,7 +356,7 @@ impl Overrides {
                     name: name.clone(),
                     message: format!(
                         "unknown setting `{name}`{}: expected one of {}",
-                        crate::check::did_you_mean(name, names.clone()),
+                        crate::located::did_you_mean(name, names.clone()),
                         names.collect::<Vec<_>>().join(", ")
                     ),
                 });

@@ -4,8 +4,8 @@
 
 use super::kinematics::ensure_vec;
 use super::model::{JointKind, Model};
-use crate::model::lie::quat_mul;
-pub use crate::model::lie::{quat_exp, quat_log};
+use crate::lie::quat_mul;
+pub use crate::lie::{quat_exp, quat_log};
 use crate::scalar::Scalar;
 use nalgebra::DVector;
 

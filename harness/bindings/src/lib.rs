@@ -901,7 +901,7 @@ fn finite<'a>(name: &str, x: impl IntoIterator<Item = &'a f64>) -> PyResult<()> 
     }
 }
 
-/// Scene text of a generated n-link planar chain (`progmo::problems::chain`): the one generator
+/// Scene text of a generated n-link planar chain (`progmo::scene::chain`): the one generator
 /// shared by the Rust benchmarks, the tests and `progmo bench`.
 #[pyfunction]
 #[pyo3(signature = (n, *, masses=None, length=0.25, q0=None, name=None, t1=2.0))]
@@ -913,7 +913,7 @@ fn chain_toml(
     name: Option<String>,
     t1: f64,
 ) -> PyResult<String> {
-    let spec = progmo::problems::chain::ChainSpec {
+    let spec = progmo::scene::chain::ChainSpec {
         n,
         masses,
         length,

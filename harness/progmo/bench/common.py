@@ -206,7 +206,7 @@ def chain_toml(n: int, *, masses: Sequence[float] | None = None, length: float =
                q0: float | None = None, name: str | None = None, t1: float = 2.0) -> str:
     """An n-link planar chain (hinges about y) in the layout of references/scenes/chain_8.toml:
     programme rows tip_height and, for n >= 3, shoulder. The generator lives in the core
-    (progmo::problems::chain, shared with the Rust benchmarks and tests); see its docs."""
+    (progmo::scene::chain, shared with the Rust benchmarks and tests); see its docs."""
     from .._core import chain_toml as core_chain_toml
 
     return core_chain_toml(n, masses=None if masses is None else [float(m) for m in masses],
