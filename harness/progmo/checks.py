@@ -744,12 +744,11 @@ def _joined(parts: list) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray]:
     return joined, cat([p[2] for p in parts]), cat([p[3] for p in parts]), cat([p[4] for p in parts])
 
 
-def _replay(c: _Check) -> None:  # noqa: C901 (over 15 before the lint: to split, not to grow)
+def _replay(c: _Check) -> None:
     """Open-loop replay of u in the simulator over the whole span, in segments where the dynamics
     amplify errors (each restarted from the solver's state and judged), its metrics and the verdict;
     the continuous replay and the Lyapunov prediction of its growth as info."""
     from .simulators import BlowUp
-    from .simulators.replay import downsample, quat_aware_diff
 
     scene, ref, be, res = c.scene, _replay_ref(c, c.ref), c.backend, c.res
     t0r = _time.perf_counter()
@@ -770,32 +769,7 @@ def _replay(c: _Check) -> None:  # noqa: C901 (over 15 before the lint: to split
     span = c.horizon
     lam = float(probe.growth[-1]) / span if span > 0 else math.nan
     res.info["lyapunov_exponent"] = lam
-    # parts: (start step, replay, R, rabs, dev, blow-up)
-    parts: list = []
-    if len(segs) == 1:
-        if cont is None or len(cont.t) < 2:
-            first = cont_blowup
-            assert first is not None
-            res.breaches = [Breach("replay_blowup", first.value, first.limit, first.time)]
-            raise _Stop("fail", f"{c.simulator} replay: {first}") from None
-        assert cont_m is not None
-        parts.append((0, cont, *cont_m, cont_blowup))
-    else:
-        for a, b in segs:
-            try:
-                rp, blow = be.replay(ref, fe, a, b), None
-            except BlowUp as e:
-                rp, blow = e.partial, e
-            if rp is None or len(rp.t) < 2:
-                if not parts:
-                    assert blow is not None
-                    res.breaches = [Breach("replay_blowup", blow.value, blow.limit, blow.time)]
-                    raise _Stop("fail", f"{c.simulator} replay (segment 1 of {len(segs)}): {blow}") from None
-                parts[-1] = (*parts[-1][:5], blow)
-                break
-            parts.append((a, rp, *_measure(c, rp, a), blow))
-            if blow is not None:
-                break
+    parts = _replay_parts(c, ref, fe, segs, cont, cont_m, cont_blowup)
     blowup = parts[-1][5]
     rp, R, rabs, dev = _joined(parts)
     if blowup is not None:
@@ -805,6 +779,65 @@ def _replay(c: _Check) -> None:  # noqa: C901 (over 15 before the lint: to split
     res.notes.append(f"replay of {len(rp.t) - 1} of {ref.steps} steps"
                      + (f" in {len(segs)} segments" if len(segs) > 1 else "")
                      + f" took {_time.perf_counter() - t0r:.2f} s (with the Lyapunov probe)")
+    _replay_metrics(c, ref, parts, rp, R, rabs)
+    _open_loop_info(c, cont, cont_m[2] if cont_m is not None else None, cont_blowup, probe, segs, most)
+    if len(segs) > 1:
+        res.notes.append("per segment (max replay_residual, replay_deviation): " + "; ".join(
+            f"{ref.t[2 * p[0]]:g} .. {p[1].t[-1]:g} s: {p[3].max():.2g}, {p[4].max():.2g}" for p in parts))
+    c.first.update({"replay_residual": (rp.t, rabs), "replay_deviation": (rp.t, dev)})
+    _replay_series(c, ref, rp, rabs, dev)
+    if c.record is not None:
+        rec = c.record
+        rec.scene, rec.ref, rec.replay = scene, ref, rp
+        rec.residual, rec.deviation = R, dev
+        rec.sample_times = c.first["parity_mass"][0].tolist()
+        rec.q_names, rec.v_names = list(scene.q_names), list(scene.v_names)
+        rec.row_names = [r["name"] for r in scene.rows]
+    _replay_verdict(c, ref, segs, blowup)
+
+
+def _replay_parts(c: _Check, ref: Any, fe: int, segs: list[tuple[int, int]], cont: Any, cont_m: Any,
+                  cont_blowup: Any) -> list:
+    """The replay's parts, (start step, replay, R, rabs, dev, blow-up) each: the continuous replay when
+    the span is one segment, else one replay per segment up to the first that blows up (a first
+    segment that leaves no two samples fails the check)."""
+    from .simulators import BlowUp
+
+    res = c.res
+    parts: list = []
+    if len(segs) == 1:
+        if cont is None or len(cont.t) < 2:
+            first = cont_blowup
+            assert first is not None
+            res.breaches = [Breach("replay_blowup", first.value, first.limit, first.time)]
+            raise _Stop("fail", f"{c.simulator} replay: {first}") from None
+        assert cont_m is not None
+        parts.append((0, cont, *cont_m, cont_blowup))
+        return parts
+    for a, b in segs:
+        try:
+            rp, blow = c.backend.replay(ref, fe, a, b), None
+        except BlowUp as e:
+            rp, blow = e.partial, e
+        if rp is None or len(rp.t) < 2:
+            if not parts:
+                assert blow is not None
+                res.breaches = [Breach("replay_blowup", blow.value, blow.limit, blow.time)]
+                raise _Stop("fail", f"{c.simulator} replay (segment 1 of {len(segs)}): {blow}") from None
+            parts[-1] = (*parts[-1][:5], blow)
+            break
+        parts.append((a, rp, *_measure(c, rp, a), blow))
+        if blow is not None:
+            break
+    return parts
+
+
+def _replay_metrics(c: _Check, ref: Any, parts: list, rp: Any, R: np.ndarray, rabs: np.ndarray) -> None:
+    """The replay's metrics (residual, deviation, the unactuated force of servo-constraints), where
+    they are worst, and the closure and supplied rows' residuals as info; a non-finite residual is an error."""
+    from .simulators.replay import quat_aware_diff
+
+    scene, be, res = c.scene, c.backend, c.res
     all_rabs = np.concatenate([p[3] for p in parts])
     if not np.all(np.isfinite(all_rabs)):
         raise _Stop("error", f"{c.simulator} replay: non-finite programme residual at "
@@ -828,11 +861,13 @@ def _replay(c: _Check) -> None:  # noqa: C901 (over 15 before the lint: to split
         off = np.asarray(scene.unactuated_part(ref.t, ref.q, ref.u))  # the core's range(H(t, q))
         res.metrics["replay_unactuated"] = unactuated_force(ref.u, off)
         c.where["replay_unactuated"] = attribution.unactuated(scene.v_names, off)
-    _open_loop_info(c, cont, cont_m[2] if cont_m is not None else None, cont_blowup, probe, segs, most)
-    if len(segs) > 1:
-        res.notes.append("per segment (max replay_residual, replay_deviation): " + "; ".join(
-            f"{ref.t[2 * p[0]]:g} .. {p[1].t[-1]:g} s: {p[3].max():.2g}, {p[4].max():.2g}" for p in parts))
-    c.first.update({"replay_residual": (rp.t, rabs), "replay_deviation": (rp.t, dev)})
+
+
+def _replay_series(c: _Check, ref: Any, rp: Any, rabs: np.ndarray, dev: np.ndarray) -> None:
+    """The report's series: the replay's residual and deviation, u, and q of the solver and the replay."""
+    from .simulators.replay import downsample
+
+    scene, res = c.scene, c.res
     sel = downsample(len(rp.t))
     res.series.append(Series("replay_residual", rp.t[sel].tolist(), rabs[sel].tolist(),
                              "row units (m, rad, m/s ...)"))
@@ -844,13 +879,12 @@ def _replay(c: _Check) -> None:  # noqa: C901 (over 15 before the lint: to split
     for j, name in enumerate(scene.q_names[:Q_OVERLAY]):
         res.series.append(Series(f"q.{name}", ref.t[selu].tolist(), ref.q[selu, j].tolist(), "m or rad"))
         res.series.append(Series(f"q.{name} replay", rp.t[sel].tolist(), rp.q[sel, j].tolist(), "m or rad"))
-    if c.record is not None:
-        rec = c.record
-        rec.scene, rec.ref, rec.replay = scene, ref, rp
-        rec.residual, rec.deviation = R, dev
-        rec.sample_times = c.first["parity_mass"][0].tolist()
-        rec.q_names, rec.v_names = list(scene.q_names), list(scene.v_names)
-        rec.row_names = [r["name"] for r in scene.rows]
+
+
+def _replay_verdict(c: _Check, ref: Any, segs: list[tuple[int, int]], blowup: Any) -> None:
+    """The verdict: each metric judged against its budget, a blow-up fails; the reason of a failure
+    names the segment where each breach happened."""
+    res = c.res
     res.status = "pass"
     bval = {b.metric: b.value for b in res.budgets}
     _judge(c, _first_times(c.first, bval))

@@ -27,7 +27,9 @@ import shlex
 import signal
 import sys
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from . import baselines as bl
 from . import cliutil, data, executors
@@ -35,6 +37,9 @@ from . import history as hist
 from . import report as rp
 from .parallel import Task, default_jobs, error_result, last_line
 from .results import CheckResult, save
+
+if TYPE_CHECKING:
+    from .checks import CheckOptions
 
 EXIT_OK, EXIT_FAIL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 
@@ -171,8 +176,28 @@ def _say(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
-def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:  # noqa: C901 (over 15 before the lint: to split, not to grow)
-    from . import Scene, SceneError
+@dataclass
+class _CheckRun:
+    """What the steps of one `progmo check` share: the options, where results go, and what they
+    collect (the results, the report's notes, the plan of (scene, simulator) checks)."""
+
+    ns: argparse.Namespace
+    root: Path
+    out: Path
+    base_dir: Path
+    sims: list[str]
+    notes: list[str] = field(default_factory=list)
+    results: list[CheckResult] = field(default_factory=list)
+    usage_problem: bool = False  # exit 2 (wins over 1)
+    tasks: list[Task] = field(default_factory=list)
+    planned: list[tuple[str, str]] = field(default_factory=list)
+    scenes: dict[str, dict[str, str]] = field(default_factory=dict)
+    done: int = 0
+    interrupted: bool = False
+    other_versions: dict[str, list[str]] = field(default_factory=dict)
+
+
+def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
     from .checks import SIMULATORS, CheckOptions
     from .results import SOLVER_ONLY
 
@@ -194,135 +219,166 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:  # noqa: C901 (ov
         return EXIT_USAGE
     base_dir = Path(ns.baselines) if ns.baselines else data.baselines_dir()
 
-    usage_problem = False
-    notes: list[str] = []
-    results: list[CheckResult] = []
-    files, problems = _scene_files(ns.scenes)
-    for pr in problems:
-        _say(f"progmo check: error: {pr}")
-        notes.append(pr)
-        usage_problem = True
-    tasks: list[Task] = []
-    planned: list[tuple[str, str]] = []
-    scenes: dict[str, dict[str, str]] = {}
-    for f in files:
-        try:
-            sc = Scene(str(f))
-            name = sc.name
-            if name in scenes:
-                raise ValueError(f"scene name {name!r} already used by {scenes[name]['path']}")
-            scenes[name] = {"path": _rel(f, root), "description": sc.description, "purpose": sc.purpose}
-            # A model no simulator document describes is checked solver-only, never skipped.
-            targets = sims
-            if sc.kind == "lagrangian":
-                targets = [SOLVER_ONLY]
-                scenes[name]["solver_only"] = "a lagrangian model: no MJCF/URDF element describes it"
-            planned += [(name, m) for m in targets]
-            try:
-                sc.check_initial()
-            except SceneError as e:
-                # the solver refuses the scene: the located message of `progmo solve`, exit 2
-                _say(str(e))
-                notes.append(f"{_rel(f, root)}: the solver refuses the scene: {last_line(e)}")
-                usage_problem = True
-                results += [error_result(Task(str(f), name, m), f"the solver refuses the scene: {e}")
-                            for m in targets]
-                continue
-            tasks += [Task(str(f), name, m) for m in targets]
-        except Exception as e:  # noqa: BLE001 - SceneError or worse: report it, run the rest
-            msg = f"scene does not load: {last_line(e)}"
-            _say(f"progmo check: error: {f}: {msg}")
-            notes.append(f"{_rel(f, root)}: {msg}")
-            usage_problem = True
-            name = f.stem if f.stem not in scenes else f"{f.stem} ({f})"
-            scenes[name] = {"path": _rel(f, root)}
-            results += [error_result(Task(str(f), name, m), msg) for m in sims]
-            planned += [(name, m) for m in sims]
-    columns = sims + [SOLVER_ONLY] if SOLVER_ONLY not in sims and any(m == SOLVER_ONLY for _, m in planned) else sims
+    c = _CheckRun(ns, root, out, base_dir, sims)
+    _plan_checks(c)
+    columns = sims + [SOLVER_ONLY] if SOLVER_ONLY not in sims and any(m == SOLVER_ONLY for _, m in c.planned) else sims
 
     options = CheckOptions(step=ns.step, horizon=ns.horizon, samples=ns.samples)
     prov = rp.provenance(root, rerun_command(argv, Path.cwd(), root))
     prov["jobs"] = jobs if ns.executor == "local" else f"ray ({ns.address or os.environ.get('RAY_ADDRESS') or 'local instance'})"
     prov["baselines"] = _rel(base_dir, root)
-    run = rp.Run(results=results, simulators=columns, provenance=prov, scenes=scenes, notes=notes,
-                 plots=not ns.no_plots, planned=planned)
+    run = rp.Run(results=c.results, simulators=columns, provenance=prov, scenes=c.scenes, notes=c.notes,
+                 plots=not ns.no_plots, planned=c.planned)
+    paths = _run_checks(c, run, options, jobs, columns, t_start)
+    return _check_outcome(c, run, paths)
 
-    order = {(t.scene, t.simulator): i for i, t in enumerate(tasks)}
-    interrupted = False
-    n_total = len(tasks)
+
+def _plan_checks(c: _CheckRun) -> None:
+    """The (scene, simulator) checks to run, from the scene arguments; a scene that does not load
+    or that the solver refuses is an error result (exit 2) and the rest still runs."""
+    files, problems = _scene_files(c.ns.scenes)
+    for pr in problems:
+        _say(f"progmo check: error: {pr}")
+        c.notes.append(pr)
+        c.usage_problem = True
+    for f in files:
+        try:
+            _plan_scene(c, f)
+        except Exception as e:  # noqa: BLE001 - SceneError or worse: report it, run the rest
+            msg = f"scene does not load: {last_line(e)}"
+            _say(f"progmo check: error: {f}: {msg}")
+            c.notes.append(f"{_rel(f, c.root)}: {msg}")
+            c.usage_problem = True
+            name = f.stem if f.stem not in c.scenes else f"{f.stem} ({f})"
+            c.scenes[name] = {"path": _rel(f, c.root)}
+            c.results += [error_result(Task(str(f), name, m), msg) for m in c.sims]
+            c.planned += [(name, m) for m in c.sims]
+
+
+def _plan_scene(c: _CheckRun, f: Path) -> None:
+    """One scene file's checks (raises when the scene does not load)."""
+    from . import Scene, SceneError
+    from .results import SOLVER_ONLY
+
+    sc = Scene(str(f))
+    name = sc.name
+    if name in c.scenes:
+        raise ValueError(f"scene name {name!r} already used by {c.scenes[name]['path']}")
+    c.scenes[name] = {"path": _rel(f, c.root), "description": sc.description, "purpose": sc.purpose}
+    # A model no simulator document describes is checked solver-only, never skipped.
+    targets = c.sims
+    if sc.kind == "lagrangian":
+        targets = [SOLVER_ONLY]
+        c.scenes[name]["solver_only"] = "a lagrangian model: no MJCF/URDF element describes it"
+    c.planned += [(name, m) for m in targets]
+    try:
+        sc.check_initial()
+    except SceneError as e:
+        # the solver refuses the scene: the located message of `progmo solve`, exit 2
+        _say(str(e))
+        c.notes.append(f"{_rel(f, c.root)}: the solver refuses the scene: {last_line(e)}")
+        c.usage_problem = True
+        c.results += [error_result(Task(str(f), name, m), f"the solver refuses the scene: {e}")
+                      for m in targets]
+        return
+    c.tasks += [Task(str(f), name, m) for m in targets]
+
+
+def _run_checks(c: _CheckRun, run: rp.Run, options: CheckOptions, jobs: int, columns: list[str],
+                t_start: float) -> dict[str, Path] | None:
+    """Run the planned checks (each result compared with its baseline and saved as it comes), then
+    write what was done, even when interrupted; the report's paths (None when writing it failed)."""
+    order = {(t.scene, t.simulator): i for i, t in enumerate(c.tasks)}
+    n_total = len(c.tasks)
     old_term = signal.getsignal(signal.SIGTERM)
     if _main_thread():
         signal.signal(signal.SIGTERM, _raise_interrupt)
-    _say(f"progmo check: {len(scenes)} scene(s), {n_total} check(s) ({', '.join(columns)}), {jobs} job(s)")
-    done = 0
-    other_versions: dict[str, list[str]] = {}
+    _say(f"progmo check: {len(c.scenes)} scene(s), {n_total} check(s) ({', '.join(columns)}), {jobs} job(s)")
     try:
-        for task, r in executors.run(tasks, options, executor=ns.executor, jobs=jobs, address=ns.address):
-            done += 1
-            if (r.scene, r.simulator) != (task.scene, task.simulator):
-                r.notes.append(f"run_check named this result {r.scene} / {r.simulator}")
-                r.scene, r.simulator = task.scene, task.simulator
-            results.append(r)
-            try:
-                baseline = bl.load(base_dir, r.scene, r.simulator)
-                run.comparisons[(r.scene, r.simulator)] = rp.comparisons_as_dicts(bl.compare(r, baseline))
-                for d in bl.version_differences(baseline, prov):
-                    other_versions.setdefault(d, []).append(f"{r.scene}/{r.simulator}")
-            except ValueError as e:
-                notes.append(str(e))
-                usage_problem = True
-            _save_atomic(results, out / "results.json")
-            _say(_progress(done, n_total, r, run))
+        for task, r in executors.run(c.tasks, options, executor=c.ns.executor, jobs=jobs, address=c.ns.address):
+            _take_result(c, run, task, r, n_total)
     except executors.ExecutorError as e:
-        usage_problem = True
-        notes.insert(0, f"executor {ns.executor}: {e}; {n_total - done} check(s) did not run")
+        c.usage_problem = True
+        c.notes.insert(0, f"executor {c.ns.executor}: {e}; {n_total - c.done} check(s) did not run")
         _say(f"progmo check: error: {e}")
     except KeyboardInterrupt:
-        interrupted = True
-        notes.insert(0, f"INTERRUPTED after {done} of {n_total} checks; the others did not run")
-        _say(f"progmo check: interrupted after {done} of {n_total} checks; writing what was done")
+        c.interrupted = True
+        c.notes.insert(0, f"INTERRUPTED after {c.done} of {n_total} checks; the others did not run")
+        _say(f"progmo check: interrupted after {c.done} of {n_total} checks; writing what was done")
     finally:
         if _main_thread():
             signal.signal(signal.SIGTERM, old_term)
-        for d, pairs in other_versions.items():
-            notes.append(f"baselines accepted with other versions: {d} for {len(pairs)} check(s) "
-                         f"({', '.join(pairs[:6])}{' ...' if len(pairs) > 6 else ''}); "
-                         "their comparison may reflect the version change")
-        results.sort(key=lambda r: order.get((r.scene, r.simulator), -1))
-        _save_atomic(results, out / "results.json")
-        if ns.accept:
-            _accept(run, base_dir, prov)
-        prov["wall_seconds"] = round(time.perf_counter() - t_start, 1)
-        if ns.history:
-            try:
-                _say(f"progmo check: history record {hist.save(run, ns.history)}")
-                run.history, problems = hist.load(ns.history)
-                notes.extend(problems)
-            except OSError as e:
-                notes.append(f"history: cannot write or read {ns.history}: {e}")
-                _say(f"progmo check: error: history: {e}")
-        report_ok = True
+        paths = _write_run(c, run, order, t_start)
+    return paths
+
+
+def _take_result(c: _CheckRun, run: rp.Run, task: Task, r: CheckResult, n_total: int) -> None:
+    """One finished check: named by its task, compared with its baseline, saved, its progress line."""
+    c.done += 1
+    if (r.scene, r.simulator) != (task.scene, task.simulator):
+        r.notes.append(f"run_check named this result {r.scene} / {r.simulator}")
+        r.scene, r.simulator = task.scene, task.simulator
+    c.results.append(r)
+    try:
+        baseline = bl.load(c.base_dir, r.scene, r.simulator)
+        run.comparisons[(r.scene, r.simulator)] = rp.comparisons_as_dicts(bl.compare(r, baseline))
+        for d in bl.version_differences(baseline, run.provenance):
+            c.other_versions.setdefault(d, []).append(f"{r.scene}/{r.simulator}")
+    except ValueError as e:
+        c.notes.append(str(e))
+        c.usage_problem = True
+    _save_atomic(c.results, c.out / "results.json")
+    _say(_progress(c.done, n_total, r, run))
+
+
+def _write_run(c: _CheckRun, run: rp.Run, order: dict[tuple[str, str], int], t_start: float) -> dict[str, Path] | None:
+    """What was done, written: results.json in the planned order, the accepted baselines (--accept),
+    the history record (--history) and the report; the report's paths (None when writing it failed)."""
+    ns, prov = c.ns, run.provenance
+    for d, pairs in c.other_versions.items():
+        c.notes.append(f"baselines accepted with other versions: {d} for {len(pairs)} check(s) "
+                       f"({', '.join(pairs[:6])}{' ...' if len(pairs) > 6 else ''}); "
+                       "their comparison may reflect the version change")
+    c.results.sort(key=lambda r: order.get((r.scene, r.simulator), -1))
+    _save_atomic(c.results, c.out / "results.json")
+    if ns.accept:
+        _accept(run, c.base_dir, prov)
+    prov["wall_seconds"] = round(time.perf_counter() - t_start, 1)
+    if ns.history:
         try:
-            paths = rp.write(run, out)
-        except Exception as e:  # noqa: BLE001 - keep results.json; say what broke
-            report_ok = False
-            _say(f"progmo check: error: writing the report failed: {last_line(e)}")
+            _say(f"progmo check: history record {hist.save(run, ns.history)}")
+            run.history, problems = hist.load(ns.history)
+            c.notes.extend(problems)
+        except OSError as e:
+            c.notes.append(f"history: cannot write or read {ns.history}: {e}")
+            _say(f"progmo check: error: history: {e}")
+    try:
+        return rp.write(run, c.out)
+    except Exception as e:  # noqa: BLE001 - keep results.json; say what broke
+        _say(f"progmo check: error: writing the report failed: {last_line(e)}")
+        return None
+
+
+def _check_outcome(c: _CheckRun, run: rp.Run, paths: dict[str, Path] | None) -> int:
+    """The closing lines (coverage, the report's paths, --json) and the exit code."""
+    ns, out, results = c.ns, c.out, c.results
+    report_ok = paths is not None
     human = sys.stderr if ns.json else sys.stdout
     print(f"progmo check: {run.coverage()}", file=human)
-    if report_ok:
+    if paths is not None:
         print(f"report: {paths['html']}  (summary: {paths['md']}, {paths['csv']}; results: {out / 'results.json'})",
               file=human)
     if ns.json:
         print(json.dumps({
-            "coverage": run.coverage(), "ok": run.ok(), "interrupted": interrupted,
-            "report": str(paths["html"]) if report_ok else None, "results_file": str(out / "results.json"),
-            "notes": notes,
+            "coverage": run.coverage(), "ok": run.ok(), "interrupted": c.interrupted,
+            "report": str(paths["html"]) if paths is not None else None, "results_file": str(out / "results.json"),
+            "notes": c.notes,
             "results": [{**{k: v for k, v in r.to_json().items() if k != "series"},
                          "verdict": run.verdict(r)} for r in results],
         }, indent=1))
-    if interrupted:
+    if c.interrupted:
         return EXIT_INTERRUPTED
-    if usage_problem:
+    if c.usage_problem:
         return EXIT_USAGE
     return EXIT_OK if run.ok() and report_ok else EXIT_FAIL
 

@@ -37,6 +37,7 @@ import os
 import sys
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -207,7 +208,8 @@ def _value_at(rec: Recording, result, metric: str, t: float | None):
     return None
 
 
-def main(argv: list[str] | None = None) -> int:  # noqa: C901 (over 15 before the lint: to split, not to grow)
+def _parser() -> argparse.ArgumentParser:
+    """The command line of `progmo debug`."""
     p = cliutil.parser("progmo debug", description=__doc__ or "")
     p.add_argument("scene", help="scene file (.toml) or name of a bundled scene")
     p.add_argument("--simulator", choices=[*SIMULATORS, "both"], default="both")
@@ -216,10 +218,42 @@ def main(argv: list[str] | None = None) -> int:  # noqa: C901 (over 15 before th
     p.add_argument("--horizon", type=float, default=None, help="replay horizon in s")
     p.add_argument("--corrupt-u-scale", type=float, default=None,
                    help="negative control: multiply the replayed u by this factor")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
     try:
-        a = p.parse_args(argv)
+        a = _parser().parse_args(argv)
     except SystemExit as e:
         return 2 if e.code else 0
+    refused = _refusal(a)
+    if refused is not None:
+        return refused
+    sims = list(SIMULATORS) if a.simulator == "both" else [a.simulator]
+    try:
+        os.makedirs(a.out, exist_ok=True)
+    except OSError as e:
+        raise WriteFailed(a.out, e) from None
+    corrupt = None
+    if a.corrupt_u_scale is not None:
+        factor = a.corrupt_u_scale
+        corrupt = lambda t, u: u * factor  # noqa: E731
+    opts = CheckOptions(step=a.step, horizon=a.horizon)
+    stem = os.path.splitext(os.path.basename(a.scene))[0]
+    mcap_path = os.path.join(a.out, stem + ".mcap")
+    # Nothing of an earlier run (the other simulator's CSV, an old recording) may pass for this one's.
+    _files.remove([Path(a.out) / f"{stem}{x}" for x in
+                   (".mcap", ".mcap" + _files.PARTIAL,
+                    *(f"_{s}.csv{p}" for s in SIMULATORS for p in ("", _files.PARTIAL)))])
+    results = _record(a, sims, opts, corrupt, stem, mcap_path)
+    print(f"wrote {mcap_path}" + "".join(f", {os.path.join(a.out, f'{stem}_{s}.csv')}"
+                                         for s, _, rec in results if rec.replay is not None))
+    return _verdict(results)
+
+
+def _refusal(a: argparse.Namespace) -> int | None:
+    """The exit status of bad input (2) or a missing mcap package (1), the message printed; None
+    when the run may go on (`a.scene` then names the scene file)."""
     from . import data
     try:
         a.scene = str(data.scene_file(a.scene))
@@ -242,23 +276,14 @@ def main(argv: list[str] | None = None) -> int:  # noqa: C901 (over 15 before th
     except ImportError as e:
         print(f"progmo debug: error: the mcap package is not importable: {e}", file=sys.stderr)
         return 1
-    sims = list(SIMULATORS) if a.simulator == "both" else [a.simulator]
-    try:
-        os.makedirs(a.out, exist_ok=True)
-    except OSError as e:
-        raise WriteFailed(a.out, e) from None
-    corrupt = None
-    if a.corrupt_u_scale is not None:
-        factor = a.corrupt_u_scale
-        corrupt = lambda t, u: u * factor  # noqa: E731
-    opts = CheckOptions(step=a.step, horizon=a.horizon)
-    stem = os.path.splitext(os.path.basename(a.scene))[0]
-    mcap_path = os.path.join(a.out, stem + ".mcap")
-    # Nothing of an earlier run (the other simulator's CSV, an old recording) may pass for this one's.
-    _files.remove([Path(a.out) / f"{stem}{x}" for x in
-                   (".mcap", ".mcap" + _files.PARTIAL,
-                    *(f"_{s}.csv{p}" for s in SIMULATORS for p in ("", _files.PARTIAL)))])
-    results = []
+    return None
+
+
+def _record(a: argparse.Namespace, sims: list[str], opts: CheckOptions, corrupt: Any, stem: str,
+            mcap_path: str) -> list[tuple[str, Any, Recording]]:
+    """Run the check of each simulator with full recording into the MCAP (under its `.partial`
+    name until whole) and the CSVs; (simulator, result, recording) of each."""
+    results: list[tuple[str, Any, Recording]] = []
     part = _files.partial(mcap_path)
     _files.check_destination(mcap_path)
     try:
@@ -269,21 +294,7 @@ def main(argv: list[str] | None = None) -> int:  # noqa: C901 (over 15 before th
     written: list[str] = []
     try:
         mc = _Mcap(f)
-        solver_written = False
-        for sim in sims:
-            rec = Recording()
-            # frames: at most MAX_FRAMES samples (the step is only known inside the check)
-            r, _ = _run(a.scene, sim, opts, corrupt_u=corrupt, frame_every=-1, record=rec)
-            results.append((sim, r, rec))
-            if rec.replay is not None:
-                with _files.deferred_interrupt():  # a simulator's records whole, or not at all
-                    if not solver_written:
-                        _write_solver(mc, rec)
-                        solver_written = True
-                    _write_sim(mc, sim, rec, r)
-                    csv_path = os.path.join(a.out, f"{stem}_{sim}.csv")
-                    _write_csv(csv_path, sim, rec)
-                    written.append(csv_path)
+        _record_sims(mc, a, sims, opts, corrupt, stem, results, written)
         mc.finish()
         f.close()
     except KeyboardInterrupt:
@@ -308,8 +319,33 @@ def main(argv: list[str] | None = None) -> int:  # noqa: C901 (over 15 before th
         os.replace(part, mcap_path)
     except OSError as e:
         raise WriteFailed(part, e) from None
-    print(f"wrote {mcap_path}" + "".join(f", {os.path.join(a.out, f'{stem}_{s}.csv')}"
-                                         for s, _, rec in results if rec.replay is not None))
+    return results
+
+
+def _record_sims(mc: _Mcap, a: argparse.Namespace, sims: list[str], opts: CheckOptions, corrupt: Any, stem: str,
+                 results: list[tuple[str, Any, Recording]], written: list[str]) -> None:
+    """Each simulator's check, recorded (the solver's motion once, with the first replay); appends to
+    `results` and to `written` (the CSVs)."""
+    solver_written = False
+    for sim in sims:
+        rec = Recording()
+        # frames: at most MAX_FRAMES samples (the step is only known inside the check)
+        r, _ = _run(a.scene, sim, opts, corrupt_u=corrupt, frame_every=-1, record=rec)
+        results.append((sim, r, rec))
+        if rec.replay is not None:
+            with _files.deferred_interrupt():  # a simulator's records whole, or not at all
+                if not solver_written:
+                    _write_solver(mc, rec)
+                    solver_written = True
+                _write_sim(mc, sim, rec, r)
+                csv_path = os.path.join(a.out, f"{stem}_{sim}.csv")
+                _write_csv(csv_path, sim, rec)
+                written.append(csv_path)
+
+
+def _verdict(results: list[tuple[str, Any, Recording]]) -> int:
+    """Print each simulator's line and the first tolerance breach (or that none happened); the exit
+    status: 1 on a breach or an error of the check, else 0."""
     breaches = []
     bad = False
     for sim, r, rec in results:
@@ -327,19 +363,24 @@ def main(argv: list[str] | None = None) -> int:  # noqa: C901 (over 15 before th
         for b in r.breaches:
             breaches.append((sim, b, _value_at(rec, r, b.metric, b.first_time)))
     if breaches:
-        timed = [x for x in breaches if x[1].first_time is not None]
-        sim, b, at = min(timed, key=lambda x: float(x[1].first_time or 0.0)) if timed else breaches[0]
-        when = f"t = {b.first_time:.6g} s" if b.first_time is not None else "(no time)"
-        there = f"value there {at:.3g}, " if at is not None else ""
-        print(f"first tolerance breach: {sim} {b.metric} at {when}: {there}worst {b.value:.3g} "
-              f"vs budget {b.budget:.3g}" + (f" ({b.where})" if b.where else ""))
-        for sim2, b2, _ in breaches:
-            if b2 is not b:
-                ft = f"t = {b2.first_time:.6g} s" if b2.first_time is not None else "(no time)"
-                print(f"  also: {sim2} {b2.metric} from {ft}: worst {b2.value:.3g} vs budget {b2.budget:.3g}")
+        _print_breaches(breaches)
         return 1
     print("no tolerance breach")
     return 1 if bad else 0
+
+
+def _print_breaches(breaches: list[tuple[str, Any, float | None]]) -> None:
+    """The first tolerance breach in time (where and when, the value there against the budget), then the others."""
+    timed = [x for x in breaches if x[1].first_time is not None]
+    sim, b, at = min(timed, key=lambda x: float(x[1].first_time or 0.0)) if timed else breaches[0]
+    when = f"t = {b.first_time:.6g} s" if b.first_time is not None else "(no time)"
+    there = f"value there {at:.3g}, " if at is not None else ""
+    print(f"first tolerance breach: {sim} {b.metric} at {when}: {there}worst {b.value:.3g} "
+          f"vs budget {b.budget:.3g}" + (f" ({b.where})" if b.where else ""))
+    for sim2, b2, _ in breaches:
+        if b2 is not b:
+            ft = f"t = {b2.first_time:.6g} s" if b2.first_time is not None else "(no time)"
+            print(f"  also: {sim2} {b2.metric} from {ft}: worst {b2.value:.3g} vs budget {b2.budget:.3g}")
 
 
 if __name__ == "__main__":

@@ -298,9 +298,8 @@ def _attention(run: Run) -> list[tuple[str, str, str, str]]:
     return out
 
 
-def render_html(run: Run) -> str:  # noqa: C901 (over 15 before the lint: to split, not to grow)
+def render_html(run: Run) -> str:
     p = run.provenance
-    tot = run.totals()
     ok = run.ok()
     h: list[str] = []
     a = h.append
@@ -314,46 +313,23 @@ def render_html(run: Run) -> str:  # noqa: C901 (over 15 before the lint: to spl
     a(f"<div class='banner {'b-ok' if ok else 'b-bad'}' id='overall'>{_e(run.coverage())}</div>")
     if run.notes:
         a("<ul class='notes'>" + "".join(f"<li>{_e(n)}</li>" for n in run.notes) + "</ul>")
+    _html_verdicts(run, h)
+    _html_attention(run, h)
+    _html_scenes(run, h)
+    _html_provenance(run, h)
+    return "\n".join(h)
 
-    # Summary matrix.
+
+def _html_verdicts(run: Run, h: list[str]) -> None:
+    """The summary matrix: a row per scene, a column per simulator, the totals and the statuses' legend."""
+    a = h.append
     a("<h2>Verdicts</h2>")
     a("<table id='verdicts'><thead><tr><th>scene</th>")
     for m in run.simulators:
         a(f"<th>{_e(m)}</th>")
     a("<th>checked span</th><th>max residual</th><th>worst budget use</th><th>warnings</th></tr></thead><tbody>")
     for s in run.scene_names():
-        sup = run.supplied().get(s)
-        a(f"<tr><td><a href='#{_anchor(s)}'>{_e(s)}</a>"
-          + (f" <span class='small'>reactions of {_e(', '.join(sup))} supplied by progmo</span>" if sup else "")
-          + "</td>")
-        res: list[float] = []
-        use: list[float] = []
-        spans: list[str] = []
-        warns: set[str] = set()
-        for m in run.simulators:
-            if m not in run.cells(s):
-                a(f"<td class='c-na' title='{_e(_na_reason(run, s, m))}'>&mdash;</td>")
-                continue
-            r = run.result(s, m)
-            v = run.verdict(r)
-            bu_cell = budget_use(r) if r is not None else None
-            cell = "warn" if v == "pass" and bu_cell is not None and bu_cell > WARN_USE else v.replace(" ", "-")
-            tip = f" title='worst budget use {_use_text(bu_cell)}'" if bu_cell is not None else ""
-            a(f"<td class='c-{cell}'{tip}>{_badge(v)}</td>")
-            if r is not None:
-                mr, bu = max_residual(r), budget_use(r)
-                if mr is not None:
-                    res.append(mr)
-                if bu is not None:
-                    use.append(bu)
-                if r.span_text():
-                    spans.append(r.span_text())
-                warns.update(r.warnings)
-        a(f"<td class='num'>{_e(' / '.join(dict.fromkeys(spans)))}</td>")
-        a(f"<td class='num'>{fmt(max(res)) if res else ''}</td>")
-        u = max(use) if use else None
-        a(f"<td class='num'>{_bar(u)}{_use_text(u)}</td>")
-        a(f"<td class='num{' warn' if warns else ''}'>{len(warns) or ''}</td></tr>")
+        _html_verdict_row(run, s, h)
     a("</tbody><tfoot><tr><th>total</th>")
     for m in run.simulators:
         c: dict[str, int] = {}
@@ -373,6 +349,47 @@ def render_html(run: Run) -> str:  # noqa: C901 (over 15 before the lint: to spl
       "Budgets marked <i>default</i> are the documented defaults for a scene that gives none "
       "(src/scene/FORMAT.md).</p>")
 
+
+def _html_verdict_row(run: Run, s: str, h: list[str]) -> None:
+    """One scene's row of the summary matrix: its verdict per simulator, span, residual, budget use, warnings."""
+    a = h.append
+    sup = run.supplied().get(s)
+    a(f"<tr><td><a href='#{_anchor(s)}'>{_e(s)}</a>"
+      + (f" <span class='small'>reactions of {_e(', '.join(sup))} supplied by progmo</span>" if sup else "")
+      + "</td>")
+    res: list[float] = []
+    use: list[float] = []
+    spans: list[str] = []
+    warns: set[str] = set()
+    for m in run.simulators:
+        if m not in run.cells(s):
+            a(f"<td class='c-na' title='{_e(_na_reason(run, s, m))}'>&mdash;</td>")
+            continue
+        r = run.result(s, m)
+        v = run.verdict(r)
+        bu_cell = budget_use(r) if r is not None else None
+        cell = "warn" if v == "pass" and bu_cell is not None and bu_cell > WARN_USE else v.replace(" ", "-")
+        tip = f" title='worst budget use {_use_text(bu_cell)}'" if bu_cell is not None else ""
+        a(f"<td class='c-{cell}'{tip}>{_badge(v)}</td>")
+        if r is not None:
+            mr, bu = max_residual(r), budget_use(r)
+            if mr is not None:
+                res.append(mr)
+            if bu is not None:
+                use.append(bu)
+            if r.span_text():
+                spans.append(r.span_text())
+            warns.update(r.warnings)
+    a(f"<td class='num'>{_e(' / '.join(dict.fromkeys(spans)))}</td>")
+    a(f"<td class='num'>{fmt(max(res)) if res else ''}</td>")
+    u = max(use) if use else None
+    a(f"<td class='num'>{_bar(u)}{_use_text(u)}</td>")
+    a(f"<td class='num{' warn' if warns else ''}'>{len(warns) or ''}</td></tr>")
+
+
+def _html_attention(run: Run, h: list[str]) -> None:
+    """The history's span (with --history) and the table of the checks that need attention."""
+    a = h.append
     if run.history:
         first, last = run.history[0], run.history[-1]
         a(f"<p class='small' id='history'>History: {len(run.history)} run(s) from {_e(first.get('date'))} to "
@@ -385,7 +402,10 @@ def render_html(run: Run) -> str:  # noqa: C901 (over 15 before the lint: to spl
             a(f"<tr><td><a href='#{_anchor(s)}'>{_e(s)}</a></td><td>{_e(m)}</td><td>{_badge(v)}</td><td class='small'>{_e(why)}</td></tr>")
         a("</table>")
 
-    # Per scene.
+
+def _html_scenes(run: Run, h: list[str]) -> None:
+    """Per scene: a folding block (open when it needs attention) with each simulator's block and the trend plot."""
+    a = h.append
     a("<h2>Scenes</h2>")
     for s in run.scene_names():
         worst = RANK[run.worst(s)]
@@ -408,7 +428,11 @@ def render_html(run: Run) -> str:  # noqa: C901 (over 15 before the lint: to spl
                 a(f"<img class='plot' alt='{_e(s)} history' src='{img}'>")
         a("</details>")
 
-    # Provenance.
+
+def _html_provenance(run: Run, h: list[str]) -> None:
+    """The footer: the rerun command, the versions and machine, where budgets and regressions come from."""
+    p = run.provenance
+    a = h.append
     a("<footer id='provenance'><h2>Provenance and how to rerun</h2>")
     a("<p>Rerun this check (from the repository root):</p>")
     a(f"<pre id='rerun'><code>{_e(p.get('command', ''))}</code></pre>")
@@ -426,7 +450,6 @@ def render_html(run: Run) -> str:  # noqa: C901 (over 15 before the lint: to spl
       + ", ".join(f"{_e(n)} {f:g}" for n, _, f in bl.CLASSES if f is not None)
       + " (references/baselines/README.md).</p>")
     a("</footer></main></body></html>")
-    return "\n".join(h)
 
 
 def _sim_block(run: Run, s: str, m: str) -> str:

@@ -58,7 +58,7 @@ import time
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -176,11 +176,9 @@ def _located(path: str | os.PathLike[str], text: str, key: str, msg: str, needle
     return SweepError(f"{path}:{line}:{col}: {key}: {msg}" if line else f"{path}: {key}: {msg}")
 
 
-def load_spec(path: str | os.PathLike[str]) -> Spec:  # noqa: C901 (over 15 before the lint: to split, not to grow)
-    """Read and validate a sweep file; errors name the file, the line and the key."""
-    from .checks import SIMULATORS
-
-    p = Path(path)
+def _read_spec_text(p: Path) -> str:
+    """The sweep file's text: a regular file of at most MAX_SPEC_BYTES, in UTF-8 (else a SweepError
+    naming the file, an invalid byte located)."""
     try:
         # a regular file of at most MAX_SPEC_BYTES: never a FIFO (blocks) or /dev/zero (endless)
         st = p.stat()
@@ -194,7 +192,7 @@ def load_spec(path: str | os.PathLike[str]) -> Spec:  # noqa: C901 (over 15 befo
     except OSError as e:
         raise SweepError(f"{p}: cannot read the sweep file: {e.strerror or e}") from None
     try:
-        text = raw.decode("utf-8")
+        return raw.decode("utf-8")
     except UnicodeDecodeError as e:
         # located, never quoted (the core's rule for files that are not text, src/input.rs)
         before = raw[:e.start]
@@ -202,6 +200,12 @@ def load_spec(path: str | os.PathLike[str]) -> Spec:  # noqa: C901 (over 15 befo
         col = len(before[before.rfind(b"\n") + 1:].decode("utf-8")) + 1
         raise SweepError(f"{p}:{line}:{col}: the sweep file is not valid UTF-8 (an invalid byte at line {line}, "
                          f"column {col}): save it as UTF-8") from None
+
+
+def load_spec(path: str | os.PathLike[str]) -> Spec:
+    """Read and validate a sweep file; errors name the file, the line and the key."""
+    p = Path(path)
+    text = _read_spec_text(p)
     try:
         d = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
@@ -209,6 +213,32 @@ def load_spec(path: str | os.PathLike[str]) -> Spec:  # noqa: C901 (over 15 befo
 
     def err(key: str, msg: str, needle: str | None = None) -> SweepError:
         return _located(p, text, key, msg, needle or key.split(".")[-1])
+
+    samples, seed, sims, init, opt = _spec_options(d, err)
+    vary = d.get("vary", {})
+    if not isinstance(vary, dict) or not vary:
+        raise err("vary", "a sweep needs a [vary] table with at least one variable", "vary")
+    variables = [_spec_variable(key, dist, err) for key, dist in vary.items()]
+    scene = d.get("scene")
+    if scene is not None and not isinstance(scene, str):
+        raise err("scene", f"must be a scene name or path, got {scene!r}")
+    grid = [v for v in variables if v.dist == "grid"]
+    points = math.prod(len(v.args) for v in grid)
+    if samples * points > MAX_SAMPLES:
+        # refused before any sample is drawn: a file per sample, a check per sample and simulator
+        where = "samples" if "samples" in d or not grid else f"vary.{grid[0].key}"
+        raise err(where, f"{samples} draw(s) x {points} grid point(s) = {samples * points:.4g} samples, more "
+                  f"than the {MAX_SAMPLES} a sweep runs (progmo.sweep.MAX_SAMPLES)",
+                  "samples" if where == "samples" else grid[0].key)
+    return Spec(str(p), scene, samples, seed, list(dict.fromkeys(sims)), init, opt["horizon"], opt["step"],
+                variables)
+
+
+def _spec_options(d: dict[str, Any], err: Callable[..., SweepError]
+                  ) -> tuple[int, int, list[str], str, dict[str, float | None]]:
+    """The sweep file's keys besides `scene` and `[vary]`, validated: samples, seed, simulators,
+    initial_state and {horizon, step}; an unknown key is refused (with the nearest known one)."""
+    from .checks import SIMULATORS
 
     for k in d:
         if k not in KEYS:
@@ -231,54 +261,41 @@ def load_spec(path: str | os.PathLike[str]) -> Spec:  # noqa: C901 (over 15 befo
         if x is not None and not (f is not None and f > 0):
             raise err(k, f"must be a finite number > 0, got {x!r}")
         opt[k] = f
-    vary = d.get("vary", {})
-    if not isinstance(vary, dict) or not vary:
-        raise err("vary", "a sweep needs a [vary] table with at least one variable", "vary")
-    variables = []
-    for key, dist in vary.items():
-        where, _, name = key.rpartition(".")
-        if where not in WHERE or not name:
-            near = _core.nearest(where, list(WHERE)) if name else None
-            raise err(f"vary.{key}", f"must be WHERE.NAME with WHERE one of {', '.join(WHERE)}"
-                      + (f" (did you mean `{near}.{name}`?)" if near else ""), key)
-        if where == "solver" and name not in _core.SOLVER_NUMBERS:
-            raise err(f"vary.{key}", f"unknown solver setting `{name}`{_did_you_mean(name, _core.SOLVER_NUMBERS)}: "
-                      f"a sweep varies the numeric ones ({', '.join(_core.SOLVER_NUMBERS)})", key)
-        if not (isinstance(dist, dict) and len(dist) == 1):
-            raise err(f"vary.{key}", "must be one distribution: { uniform = [a, b] }, { normal = [mean, sd] }, "
-                      "{ loguniform = [a, b] } or { grid = [x1, x2, ...] }", key)
-        (kind, args), = dist.items()
-        if kind not in DISTRIBUTIONS:
-            raise err(f"vary.{key}", f"unknown distribution {kind!r}{_did_you_mean(kind, list(DISTRIBUTIONS))} "
-                      f"(one of {', '.join(DISTRIBUTIONS)})", key)
-        if not isinstance(args, list) or not args or any(_number(a) is None for a in args):
-            raise err(f"vary.{key}", f"{kind} needs a list of finite numbers, got {args!r}", key)
-        args = [float(a) for a in args]
-        n = DISTRIBUTIONS[kind]
-        if n is not None and len(args) != n:
-            raise err(f"vary.{key}", f"{kind} takes {n} numbers, got {len(args)}", key)
-        if kind in ("uniform", "loguniform") and not args[0] < args[1]:
-            raise err(f"vary.{key}", f"{kind} needs a < b, got {args}", key)
-        if kind == "uniform" and not math.isfinite(args[1] - args[0]):
-            raise err(f"vary.{key}", f"uniform needs b - a finite, got {args}", key)
-        if kind == "loguniform" and args[0] <= 0:
-            raise err(f"vary.{key}", "loguniform needs a > 0", key)
-        if kind == "normal" and not args[1] > 0:
-            raise err(f"vary.{key}", "normal needs a standard deviation > 0", key)
-        variables.append(Variable(key, where, name, kind, args))
-    scene = d.get("scene")
-    if scene is not None and not isinstance(scene, str):
-        raise err("scene", f"must be a scene name or path, got {scene!r}")
-    grid = [v for v in variables if v.dist == "grid"]
-    points = math.prod(len(v.args) for v in grid)
-    if samples * points > MAX_SAMPLES:
-        # refused before any sample is drawn: a file per sample, a check per sample and simulator
-        where = "samples" if "samples" in d or not grid else f"vary.{grid[0].key}"
-        raise err(where, f"{samples} draw(s) x {points} grid point(s) = {samples * points:.4g} samples, more "
-                  f"than the {MAX_SAMPLES} a sweep runs (progmo.sweep.MAX_SAMPLES)",
-                  "samples" if where == "samples" else grid[0].key)
-    return Spec(str(p), scene, samples, seed, list(dict.fromkeys(sims)), init, opt["horizon"], opt["step"],
-                variables)
+    return samples, seed, sims, init, opt
+
+
+def _spec_variable(key: str, dist: Any, err: Callable[..., SweepError]) -> Variable:
+    """One `[vary]` entry, WHERE.NAME = { distribution = [numbers] }, validated."""
+    where, _, name = key.rpartition(".")
+    if where not in WHERE or not name:
+        near = _core.nearest(where, list(WHERE)) if name else None
+        raise err(f"vary.{key}", f"must be WHERE.NAME with WHERE one of {', '.join(WHERE)}"
+                  + (f" (did you mean `{near}.{name}`?)" if near else ""), key)
+    if where == "solver" and name not in _core.SOLVER_NUMBERS:
+        raise err(f"vary.{key}", f"unknown solver setting `{name}`{_did_you_mean(name, _core.SOLVER_NUMBERS)}: "
+                  f"a sweep varies the numeric ones ({', '.join(_core.SOLVER_NUMBERS)})", key)
+    if not (isinstance(dist, dict) and len(dist) == 1):
+        raise err(f"vary.{key}", "must be one distribution: { uniform = [a, b] }, { normal = [mean, sd] }, "
+                  "{ loguniform = [a, b] } or { grid = [x1, x2, ...] }", key)
+    (kind, args), = dist.items()
+    if kind not in DISTRIBUTIONS:
+        raise err(f"vary.{key}", f"unknown distribution {kind!r}{_did_you_mean(kind, list(DISTRIBUTIONS))} "
+                  f"(one of {', '.join(DISTRIBUTIONS)})", key)
+    if not isinstance(args, list) or not args or any(_number(a) is None for a in args):
+        raise err(f"vary.{key}", f"{kind} needs a list of finite numbers, got {args!r}", key)
+    args = [float(a) for a in args]
+    n = DISTRIBUTIONS[kind]
+    if n is not None and len(args) != n:
+        raise err(f"vary.{key}", f"{kind} takes {n} numbers, got {len(args)}", key)
+    if kind in ("uniform", "loguniform") and not args[0] < args[1]:
+        raise err(f"vary.{key}", f"{kind} needs a < b, got {args}", key)
+    if kind == "uniform" and not math.isfinite(args[1] - args[0]):
+        raise err(f"vary.{key}", f"uniform needs b - a finite, got {args}", key)
+    if kind == "loguniform" and args[0] <= 0:
+        raise err(f"vary.{key}", "loguniform needs a > 0", key)
+    if kind == "normal" and not args[1] > 0:
+        raise err(f"vary.{key}", "normal needs a standard deviation > 0", key)
+    return Variable(key, where, name, kind, args)
 
 
 def check_names(spec: Spec, scene: Any) -> None:
@@ -735,9 +752,8 @@ def _say(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
-def main(argv: list[str] | None = None) -> int:  # noqa: C901 (over 15 before the lint: to split, not to grow)
+def main(argv: list[str] | None = None) -> int:
     from .checks import CheckOptions
-    from .report import provenance
 
     argv = list(sys.argv[1:] if argv is None else argv)
     ns = parser().parse_args(argv)
@@ -746,51 +762,13 @@ def main(argv: list[str] | None = None) -> int:  # noqa: C901 (over 15 before th
         return EXIT_OK
     out = Path(ns.out)
     try:
-        scene_args = list(ns.scenes)
-        spec_path = Path(ns.spec) if ns.spec else None
-        if spec_path is None:
-            if not scene_args:
-                raise SweepError("give a SCENE (with a bundled sweep) or --spec FILE")
-            found = bundled_spec(Path(scene_args[0]).stem)
-            if found is None:
-                raise SweepError(f"no bundled sweep for {scene_args[0]!r} (references/sweeps/): give --spec FILE")
-            spec_path = found
-        spec = load_spec(spec_path)
-        if ns.samples is not None:
-            if ns.samples < 1:
-                raise SweepError("--samples must be >= 1")
-            if ns.samples * spec.grid_points() > MAX_SAMPLES:
-                raise SweepError(f"--samples {ns.samples} x {spec.grid_points()} grid point(s) = "
-                                 f"{ns.samples * spec.grid_points():.4g} samples, more than the {MAX_SAMPLES} "
-                                 "a sweep runs (progmo.sweep.MAX_SAMPLES)")
-            spec.samples = ns.samples
-        scene_files = []
-        if not scene_args:
-            if spec.scene is None:
-                raise SweepError(f"{spec_path}: no SCENE given and the sweep file names no `scene`")
-            scene_files.append(spec_scene(spec))
-        for s in scene_args:
-            scene_files.append(data.scene_file(s))
-        out.mkdir(parents=True, exist_ok=True)
-        samples: list[Sample] = []
-        texts: dict[str, str] = {}
-        for f in scene_files:
-            samples += make_samples(Path(f), spec, out)  # loads the scene through the core's door
-            texts[str(f)] = f.read_text()
+        spec, samples, texts = _prepare(ns, out)
     except (SweepError, ValueError, OSError) as e:
         _say(f"progmo sweep: error: {last_line(e) if not isinstance(e, SweepError) else e}")
         return EXIT_USAGE
 
     results_path = out / "results.jsonl"
-    digest = spec_digest(spec, texts)
-    stamp = out / "sweep.digest"
-    if ns.fresh or (stamp.is_file() and stamp.read_text().strip() != digest):
-        if results_path.is_file() and not ns.fresh:
-            _say("progmo sweep: the sweep file or a scene changed since the results in OUT: starting afresh")
-        _files.remove([results_path])
-    _files.write_text(stamp, digest + "\n")
-    drop_torn_tail(results_path)
-    records = read_results(results_path)
+    records = _resume(ns, out, spec, texts, results_path)
     by_path = {s.path: s for s in samples}
     tasks = [Task(s.path, s.scene, m) for s in samples if not s.refused for m in spec.simulators
              if (s.scene, s.index, m) not in records]
@@ -800,8 +778,85 @@ def main(argv: list[str] | None = None) -> int:  # noqa: C901 (over 15 before th
          f"{len(tasks)} to run on the {ns.executor} executor")
     options = CheckOptions()  # the replay step is in each sample's [tolerances], the horizon its [time] t1
     jobs = ns.jobs if ns.jobs is not None else default_jobs()
-    interrupted = usage = False
     t0 = time.perf_counter()
+    done, interrupted, usage = _run_samples(ns, tasks, options, jobs, by_path, records, results_path, total)
+    wall = time.perf_counter() - t0
+    agg = aggregate(samples, spec, records)
+    import shlex
+
+    from .report import provenance
+
+    meta = provenance(Path.cwd(), "progmo sweep " + shlex.join(argv))
+    meta.update(executor=ns.executor, address=ns.address or os.environ.get("RAY_ADDRESS") or "",
+                wall_seconds=round(wall, 2), checks_this_run=done,
+                checks_per_second=round(done / wall, 3) if wall > 0 and done else None,
+                plots=not ns.no_plots)
+    paths = write_report(agg, meta, out)
+    print(f"progmo sweep: {summary_line(agg)}")
+    print(f"report: {paths['html']}  (summary: {paths['md']}; data: {paths['json']}; results: {results_path})")
+    if interrupted:
+        return EXIT_INTERRUPTED
+    if usage:
+        return EXIT_USAGE
+    return EXIT_OK if ok(agg) else EXIT_FAIL
+
+
+def _prepare(ns: argparse.Namespace, out: Path) -> tuple[Spec, list[Sample], dict[str, str]]:
+    """The sweep file (given, or the scene's bundled one; --samples applied), its samples written
+    into OUT, and the scenes' texts; bad usage raises (SweepError, ValueError, OSError)."""
+    scene_args = list(ns.scenes)
+    spec_path = Path(ns.spec) if ns.spec else None
+    if spec_path is None:
+        if not scene_args:
+            raise SweepError("give a SCENE (with a bundled sweep) or --spec FILE")
+        found = bundled_spec(Path(scene_args[0]).stem)
+        if found is None:
+            raise SweepError(f"no bundled sweep for {scene_args[0]!r} (references/sweeps/): give --spec FILE")
+        spec_path = found
+    spec = load_spec(spec_path)
+    if ns.samples is not None:
+        if ns.samples < 1:
+            raise SweepError("--samples must be >= 1")
+        if ns.samples * spec.grid_points() > MAX_SAMPLES:
+            raise SweepError(f"--samples {ns.samples} x {spec.grid_points()} grid point(s) = "
+                             f"{ns.samples * spec.grid_points():.4g} samples, more than the {MAX_SAMPLES} "
+                             "a sweep runs (progmo.sweep.MAX_SAMPLES)")
+        spec.samples = ns.samples
+    scene_files = []
+    if not scene_args:
+        if spec.scene is None:
+            raise SweepError(f"{spec_path}: no SCENE given and the sweep file names no `scene`")
+        scene_files.append(spec_scene(spec))
+    for s in scene_args:
+        scene_files.append(data.scene_file(s))
+    out.mkdir(parents=True, exist_ok=True)
+    samples: list[Sample] = []
+    texts: dict[str, str] = {}
+    for f in scene_files:
+        samples += make_samples(Path(f), spec, out)  # loads the scene through the core's door
+        texts[str(f)] = f.read_text()
+    return spec, samples, texts
+
+
+def _resume(ns: argparse.Namespace, out: Path, spec: Spec, texts: dict[str, str], results_path: Path) -> dict[tuple[str, int, str], dict[str, Any]]:
+    """The results already in OUT (none with --fresh, or when the sweep file or a scene changed:
+    the digest in OUT/sweep.digest), keyed by (scene, sample, simulator)."""
+    digest = spec_digest(spec, texts)
+    stamp = out / "sweep.digest"
+    if ns.fresh or (stamp.is_file() and stamp.read_text().strip() != digest):
+        if results_path.is_file() and not ns.fresh:
+            _say("progmo sweep: the sweep file or a scene changed since the results in OUT: starting afresh")
+        _files.remove([results_path])
+    _files.write_text(stamp, digest + "\n")
+    drop_torn_tail(results_path)
+    return read_results(results_path)
+
+
+def _run_samples(ns: argparse.Namespace, tasks: list[Task], options: Any, jobs: int, by_path: dict[str, Sample],
+                 records: dict[tuple[str, int, str], dict[str, Any]], results_path: Path, total: int) -> tuple[int, bool, bool]:
+    """Run the checks, each result appended to results.jsonl as it comes (and into `records`);
+    (checks done, interrupted, an executor error)."""
+    interrupted = usage = False
     done = 0
     try:
         sink = open(results_path, "a")
@@ -827,23 +882,7 @@ def main(argv: list[str] | None = None) -> int:  # noqa: C901 (over 15 before th
         _say(f"progmo sweep: interrupted after {done} of {len(tasks)} checks; rerun the same command to resume")
     except OSError as e:  # appending a result (a torn last line is dropped when resuming)
         raise _files.WriteFailed(results_path, e) from None
-    wall = time.perf_counter() - t0
-    agg = aggregate(samples, spec, records)
-    import shlex
-
-    meta = provenance(Path.cwd(), "progmo sweep " + shlex.join(argv))
-    meta.update(executor=ns.executor, address=ns.address or os.environ.get("RAY_ADDRESS") or "",
-                wall_seconds=round(wall, 2), checks_this_run=done,
-                checks_per_second=round(done / wall, 3) if wall > 0 and done else None,
-                plots=not ns.no_plots)
-    paths = write_report(agg, meta, out)
-    print(f"progmo sweep: {summary_line(agg)}")
-    print(f"report: {paths['html']}  (summary: {paths['md']}; data: {paths['json']}; results: {results_path})")
-    if interrupted:
-        return EXIT_INTERRUPTED
-    if usage:
-        return EXIT_USAGE
-    return EXIT_OK if ok(agg) else EXIT_FAIL
+    return done, interrupted, usage
 
 
 if __name__ == "__main__":

@@ -63,42 +63,15 @@ def _se3(point, quat_wxyz) -> "pin.SE3":
 class PinocchioBackend:
     name = NAME
 
-    def __init__(self, doc: str, report: dict, scene=None, withhold: tuple[str, ...] = (),  # noqa: C901 (over 15 before the lint: to split, not to grow)
+    def __init__(self, doc: str, report: dict, scene=None, withhold: tuple[str, ...] = (),
                  robot: RobotFile | None = None):
         """``robot``: build the model from the user's robot file (``robot_file``), not ``doc``."""
         if robot is not None:  # the file's own passive forces come from the simulator's reading
             report = {**report, "harness_forces": [hf for hf in report.get("harness_forces", [])
                                                   if hf["kind"] not in FILE_FORCES]}
         require_forces(report, SUPPORTED, "Pinocchio")
-        rj = report.get("root_joint")
         self.file: PinFile | None = None
-        if robot is not None:
-            if report.get("closures"):
-                raise Unsupported("loop closures over a robot file: Pinocchio's reading of the file has "
-                                  "no frames for their sites")
-            if rj and rj["python"] != "pin.JointModelFreeFlyer()":
-                raise Unsupported(f"root joint {rj['python']} over a robot file")
-            self.file = pinocchio_model(robot, report["gravity"], rj)
-            self.model = self.file.model
-            report = name_report(report, self.file.addr)
-            report["sim_q_offset"] = self.file.q_offset
-        else:
-            fd, path = tempfile.mkstemp(suffix=".urdf")
-            try:
-                with os.fdopen(fd, "w") as f:
-                    f.write(doc)
-                if rj:
-                    if rj["python"] not in ROOT_JOINTS:
-                        raise ValueError(f"unknown root joint {rj['python']!r}")
-                    self.model = pin.buildModelFromUrdf(path, ROOT_JOINTS[rj["python"]](), rj["name"])
-                else:
-                    self.model = pin.buildModelFromUrdf(path)
-            finally:
-                os.unlink(path)
-            # URDF has no armature: the export report lists it for model.armature (crba, rnea and
-            # aba add it to the mass matrix diagonal)
-            for a in report.get("armature", []):
-                self.model.armature[a["sim_v"]:a["sim_v"] + a["nv"]] = a["armature"]
+        report = self._load_model(doc, report, robot)
         self.route = "user's file" if robot is not None else "progmo export"
         self.report = report
         self.cm = CoordMap(report)
@@ -109,7 +82,53 @@ class PinocchioBackend:
         if model.nq != self.cm.nq or model.nv != self.cm.nv:
             raise ValueError(f"URDF has nq={model.nq}, nv={model.nv}; report {self.cm.nq}, {self.cm.nv}")
         self.lie = model.nq != model.nv
-        # harness forces
+        self._harness_forces(doc, report, robot, withhold)
+        self.data = model.createData()
+        self._closures(report.get("closures", []))
+        sites = {c[k] for c in report.get("closures", []) for k in ("site_a", "site_b")}
+        self.body_frames = [(f.name, i) for i, f in enumerate(model.frames)
+                            if f.type == pin.FrameType.BODY and f.name != "universe" and f.name not in sites]
+        #: our body name -> the Pinocchio joint that carries its link
+        self.body_joint = {name: model.frames[i].parentJoint for name, i in self.body_frames}
+
+    def _load_model(self, doc: str, report: dict, robot: RobotFile | None) -> dict:
+        """``self.model`` from the user's robot file (``self.file``; the report then names its
+        coordinates) or from the exported URDF ``doc`` (with the report's root joint and armature);
+        the report the rest reads."""
+        rj = report.get("root_joint")
+        if robot is not None:
+            if report.get("closures"):
+                raise Unsupported("loop closures over a robot file: Pinocchio's reading of the file has "
+                                  "no frames for their sites")
+            if rj and rj["python"] != "pin.JointModelFreeFlyer()":
+                raise Unsupported(f"root joint {rj['python']} over a robot file")
+            self.file = pinocchio_model(robot, report["gravity"], rj)
+            self.model = self.file.model
+            report = name_report(report, self.file.addr)
+            report["sim_q_offset"] = self.file.q_offset
+            return report
+        fd, path = tempfile.mkstemp(suffix=".urdf")
+        try:
+            with os.fdopen(fd, "w") as f:
+                f.write(doc)
+            if rj:
+                if rj["python"] not in ROOT_JOINTS:
+                    raise ValueError(f"unknown root joint {rj['python']!r}")
+                self.model = pin.buildModelFromUrdf(path, ROOT_JOINTS[rj["python"]](), rj["name"])
+            else:
+                self.model = pin.buildModelFromUrdf(path)
+        finally:
+            os.unlink(path)
+        # URDF has no armature: the export report lists it for model.armature (crba, rnea and
+        # aba add it to the mass matrix diagonal)
+        for a in report.get("armature", []):
+            self.model.armature[a["sim_v"]:a["sim_v"] + a["nv"]] = a["armature"]
+        return report
+
+    def _harness_forces(self, doc: str, report: dict, robot: RobotFile | None, withhold: tuple[str, ...]) -> None:
+        """The export report's harness forces: attractors and gravity compensation at operational
+        frames on the bodies' CoMs (added to the model), springs and dampers."""
+        model = self.model
         if robot is not None and robot.fmt == "mjcf" and any(
                 hf["kind"] == "attractor" for hf in report.get("harness_forces", [])):
             raise Unsupported("attractors over an MJCF robot file in Pinocchio (no CoM frames)")
@@ -147,13 +166,7 @@ class PinocchioBackend:
                 self.dampers.append((hf["sim_v"], hf["nv"], hf["damping"]))
         if "attractor" in withhold:
             self.attractors = []
-        self.data = model.createData()
-        self._closures(report.get("closures", []))
-        sites = {c[k] for c in report.get("closures", []) for k in ("site_a", "site_b")}
-        self.body_frames = [(f.name, i) for i, f in enumerate(model.frames)
-                            if f.type == pin.FrameType.BODY and f.name != "universe" and f.name not in sites]
-        #: our body name -> the Pinocchio joint that carries its link
-        self.body_joint = {name: model.frames[i].parentJoint for name, i in self.body_frames}
+
 
     def _closures(self, closures: list[dict]) -> None:
         """Constraint models of the loop closures (module doc)."""

@@ -215,10 +215,10 @@ class PinFile:
     q_offset: list[tuple[int, float]] = field(default_factory=list)
 
 
-def pinocchio_model(rf: RobotFile, gravity: list[float], root: dict | None) -> PinFile:  # noqa: C901 (over 15 before the lint: to split, not to grow)
+def pinocchio_model(rf: RobotFile, gravity: list[float], root: dict | None) -> PinFile:
     import pinocchio as pin
 
-    notes = []
+    notes: list[str] = []
     if rf.fmt == "urdf":
         if root:
             model = pin.buildModelFromUrdf(str(rf.path), pin.JointModelFreeFlyer(), root["name"])
@@ -230,15 +230,7 @@ def pinocchio_model(rf: RobotFile, gravity: list[float], root: dict | None) -> P
         notes.append(f"Pinocchio reads {rf.path.name} (buildModelFromMJCF; its gravity option is not read)")
     mj = _mujoco_of_file(rf) if rf.fmt == "mjcf" else None
     if rf.locked:
-        ids = []
-        for lj in rf.locked:
-            if not model.existJointName(lj):
-                raise Unsupported(f"locked joint {lj!r} is not a one-joint body of Pinocchio's reading of "
-                                  f"{rf.path.name} (buildReducedModel locks whole joints)")
-            ids.append(model.getJointId(lj))
-        # q = 0 is the file's pose in Pinocchio's reading (URDF q = 0, MJCF q = ref: see q_offset)
-        model = pin.buildReducedModel(model, ids, pin.neutral(model))
-        notes.append("locked joints removed by buildReducedModel in the file's pose: " + ", ".join(rf.locked))
+        model = _pin_locked(model, rf, notes)
     addr = _pin_addresses(model, mj, rf)
     for jid in range(1, model.njoints):
         if model.joints[jid].nq != model.joints[jid].nv and model.joints[jid].shortname() not in (
@@ -252,33 +244,8 @@ def pinocchio_model(rf: RobotFile, gravity: list[float], root: dict | None) -> P
     grav: list[tuple[int, np.ndarray, float]] = []
     q_offset: list[tuple[int, float]] = []
     if mj is not None:
-        import mujoco
-
-        offset: dict[int, float] = {}
-        for j in range(mj.njnt):
-            name = mujoco.mj_id2name(mj, mujoco.mjtObj.mjOBJ_JOINT, j)
-            ref = float(mj.qpos0[mj.jnt_qposadr[j]]) if int(mj.jnt_type[j]) in (2, 3) else 0.0
-            if ref != 0.0 and name in addr:
-                offset[addr[name][0]] = ref
-            k = float(mj.jnt_stiffness[j])
-            if k != 0.0 and name in addr:
-                if int(mj.jnt_type[j]) not in (2, 3):
-                    raise Unsupported(f"a spring on the ball/free joint {name!r}: not applied for Pinocchio")
-                iq, iv = addr[name]
-                # in Pinocchio's q (q - ref): -k (q_pin + ref - springref)
-                springs.append((iq, iv, k, float(mj.qpos_spring[mj.jnt_qposadr[j]]) - ref))
-        q_offset = sorted(offset.items())
-        if q_offset:
-            notes.append("Pinocchio's MJCF reader ignores joint ref (the file's pose at q = 0): q_pin = q - ref on "
-                         + ", ".join(f"{n}" for n, (iq, _) in addr.items() if iq in offset))
-        for b in range(1, mj.nbody):
-            gc = float(mj.body_gravcomp[b])
-            if gc != 0.0:
-                name = mujoco.mj_id2name(mj, mujoco.mjtObj.mjOBJ_BODY, b)
-                if not model.existFrame(name, pin.FrameType.BODY):
-                    raise Unsupported(f"gravcomp on body {name!r}: not a body frame of Pinocchio's reading")
-                fid = model.getFrameId(name, pin.FrameType.BODY)
-                grav.append((fid, np.array(mj.body_ipos[b], float), gc * float(mj.body_mass[b])))
+        springs, q_offset = _mjcf_springs(mj, addr, notes)
+        grav = _mjcf_gravcomp(mj, model)
         if springs or grav:
             notes.append("not read by Pinocchio's MJCF reader, applied by the harness from MuJoCo's "
                          "compilation of the same file: "
@@ -295,6 +262,67 @@ def pinocchio_model(rf: RobotFile, gravity: list[float], root: dict | None) -> P
         skipped += [{"kind": "equality", "element": f"equality {mujoco.mj_id2name(mj, mujoco.mjtObj.mjOBJ_EQUALITY, i) or i}",
                      "location": rf.path.name} for i in range(mj.neq)]
     return PinFile(model, addr, damping, springs, grav, notes, skipped, q_offset)
+
+
+def _pin_locked(model: Any, rf: RobotFile, notes: list[str]) -> Any:
+    """Pinocchio's reading of the file with its locked joints removed (buildReducedModel)."""
+    import pinocchio as pin
+
+    ids = []
+    for lj in rf.locked:
+        if not model.existJointName(lj):
+            raise Unsupported(f"locked joint {lj!r} is not a one-joint body of Pinocchio's reading of "
+                              f"{rf.path.name} (buildReducedModel locks whole joints)")
+        ids.append(model.getJointId(lj))
+    # q = 0 is the file's pose in Pinocchio's reading (URDF q = 0, MJCF q = ref: see q_offset)
+    model = pin.buildReducedModel(model, ids, pin.neutral(model))
+    notes.append("locked joints removed by buildReducedModel in the file's pose: " + ", ".join(rf.locked))
+    return model
+
+
+def _mjcf_springs(mj: Any, addr: dict[str, tuple[int, int]], notes: list[str]
+                  ) -> tuple[list[tuple[int, int, float, float]], list[tuple[int, float]]]:
+    """From MuJoCo's compilation of an MJCF file: the joint springs (in Pinocchio's q) and the
+    joints' ref, which Pinocchio's MJCF reader ignores (q_pin = q - ref): (springs, q_offset)."""
+    import mujoco
+
+    springs: list[tuple[int, int, float, float]] = []
+    offset: dict[int, float] = {}
+    for j in range(mj.njnt):
+        name = mujoco.mj_id2name(mj, mujoco.mjtObj.mjOBJ_JOINT, j)
+        ref = float(mj.qpos0[mj.jnt_qposadr[j]]) if int(mj.jnt_type[j]) in (2, 3) else 0.0
+        if ref != 0.0 and name in addr:
+            offset[addr[name][0]] = ref
+        k = float(mj.jnt_stiffness[j])
+        if k != 0.0 and name in addr:
+            if int(mj.jnt_type[j]) not in (2, 3):
+                raise Unsupported(f"a spring on the ball/free joint {name!r}: not applied for Pinocchio")
+            iq, iv = addr[name]
+            # in Pinocchio's q (q - ref): -k (q_pin + ref - springref)
+            springs.append((iq, iv, k, float(mj.qpos_spring[mj.jnt_qposadr[j]]) - ref))
+    q_offset = sorted(offset.items())
+    if q_offset:
+        notes.append("Pinocchio's MJCF reader ignores joint ref (the file's pose at q = 0): q_pin = q - ref on "
+                     + ", ".join(f"{n}" for n, (iq, _) in addr.items() if iq in offset))
+    return springs, q_offset
+
+
+def _mjcf_gravcomp(mj: Any, model: Any) -> list[tuple[int, np.ndarray, float]]:
+    """From MuJoCo's compilation of an MJCF file: each body's gravity compensation as (Pinocchio's
+    body frame, CoM in the body frame, gravcomp x mass)."""
+    import mujoco
+    import pinocchio as pin
+
+    grav: list[tuple[int, np.ndarray, float]] = []
+    for b in range(1, mj.nbody):
+        gc = float(mj.body_gravcomp[b])
+        if gc != 0.0:
+            name = mujoco.mj_id2name(mj, mujoco.mjtObj.mjOBJ_BODY, b)
+            if not model.existFrame(name, pin.FrameType.BODY):
+                raise Unsupported(f"gravcomp on body {name!r}: not a body frame of Pinocchio's reading")
+            fid = model.getFrameId(name, pin.FrameType.BODY)
+            grav.append((fid, np.array(mj.body_ipos[b], float), gc * float(mj.body_mass[b])))
+    return grav
 
 
 def _pin_addresses(model: Any, mj: Any, rf: RobotFile) -> dict[str, tuple[int, int]]:
