@@ -420,7 +420,6 @@ fn clear_earlier_run(out: Option<&Path>) {
     }
 }
 
-#[allow(clippy::too_many_lines)] // over 100 lines before the lint: to split, not to grow
 fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
     let mut scene = match load(&a.scene) {
         Ok(s) => s,
@@ -433,40 +432,12 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("out").join(&scene.name));
-    let refused = |msg: std::fmt::Arguments<'_>| {
-        errln!("progmo solve: error: {msg}");
-        clear_earlier_run(Some(&out));
-        ExitCode::from(2)
-    };
-    let settings = match settings_from(&a, &scene.settings) {
+    let settings = match solve_settings(&a, &mut scene, &out) {
         Ok(s) => s,
-        Err(msg) => return refused(format_args!("{msg}")),
+        Err(code) => return code,
     };
-    if let Some(t1) = a.settings.t1 {
-        let (t0, _) = scene.span();
-        if !(t1 > t0) {
-            return refused(format_args!("--t1 {t1} must be after t0 = {t0}"));
-        }
-        crate::with_problem!(&mut scene.system, p => p.t1 = t1);
-    }
-    if let Err(e) = crate::solve::validate(scene.span(), &settings) {
-        return refused(format_args!("{}", flagged(&a, &e)));
-    }
-    for n in &scene.import_notes {
-        errln!("progmo solve: note: {n}");
-    }
-    for line in unmodelled_lines(&scene) {
-        errln!("progmo solve: {line}");
-    }
-    if let Err(e) = std::fs::create_dir_all(&out) {
-        errln!("progmo solve: error: cannot create {}: {e}", out.display());
-        return ExitCode::from(3);
-    }
-    // A run into the folder of an earlier one first removes that run's outputs, so nothing of it
-    // (an old summary saying success, an MCAP of another scene) can pass for this run's.
-    if let Err(e) = crate::output::remove_previous_run(&out) {
-        errln!("progmo solve: error: {e}");
-        return ExitCode::from(3);
+    if let Err(code) = prepare_output(&scene, &out) {
+        return code;
     }
     let layout = crate::with_problem!(&scene.system, p => SampleLayout::from_problem(p));
     let (t0, t1) = scene.span();
@@ -489,109 +460,17 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
     let mut write_errors = sink.into_inner().into_inner().errors();
     let wall = started.elapsed().as_secs_f64();
     let rows = layout.row_names.clone();
-    // Servo scenes: the analysis with the internal dynamics along the motion (two more solves).
-    let servo = scene
-        .servo_report(&settings, true)
-        .and_then(|r| serde_json::to_value(r).ok());
-    let robot_file = scene
-        .robot
-        .as_ref()
-        .and_then(|r| serde_json::to_value(r).ok());
-    let summary = SummaryInput {
-        scene: &scene.name,
+    let run = FinishedRun {
+        scene: &scene,
         solution: &solution,
-        row_names: &rows,
         settings: &settings,
-        wall_seconds: wall,
-        git_revision: (!GIT_REVISION.is_empty()).then_some(GIT_REVISION),
-        command_line,
-        servo: servo.as_ref(),
-        robot_file: robot_file.as_ref(),
+        out: &out,
+        t0,
+        wall,
     };
-    // Beside a data file that could not be written whole (a `.partial`), the summary is partial
-    // too: a summary.json saying success must mean the run's files are whole.
-    let summary_name = if write_errors.is_empty() {
-        "summary.json"
-    } else {
-        "summary.json.partial"
-    };
-    write_errors.extend(write_summary_to_path(out.join(summary_name), &summary).err());
-    // --json: the summary's content (and where the files are) on stdout, the line on stderr.
-    let json = a.json.then(|| {
-        let mut v = crate::output::summary_json(&summary).unwrap_or(serde_json::Value::Null);
-        if let Some(m) = v.as_object_mut() {
-            m.insert("output".into(), out.display().to_string().into());
-        }
-        v
-    });
-    let report = |line: std::fmt::Arguments<'_>| -> Result<(), ExitCode> {
-        match &json {
-            Some(v) => {
-                errln!("{line}");
-                say_json(v)
-            }
-            None => write_stdout(line, true),
-        }
-    };
-    let worst = solution.max_residual.iter().cloned().fold(0.0, f64::max);
-    let st = &solution.stats.integrator;
-    for w in &solution.warnings {
-        errln!("{}: warning: {w}", scene.name);
-    }
-    let warned = match solution.warnings.len() {
-        0 => String::new(),
-        1 => format!(
-            ", 1 conditioning WARNING ({} at t = {:.6})",
-            solution.warnings[0].kind.name(),
-            solution.warnings[0].t
-        ),
-        k => format!(
-            ", {k} conditioning WARNINGS (first: {} at t = {:.6})",
-            solution.warnings[0].kind.name(),
-            solution.warnings[0].t
-        ),
-    };
-    match &solution.code {
-        ReturnCode::Success => {
-            if let Err(code) = report(format_args!(
-                "{}: success, t = {:.6} .. {:.6}, max programme residual {:.2e}, {} steps ({} rejected), {} RHS evaluations, {:.3} s{warned} -> {}",
-                scene.name, t0, solution.t_end, worst, st.steps, st.rejected, st.rhs_evals, wall, out.display()
-            )) {
-                return code;
-            }
-        }
-        code if solution.stats.integrator.steps == 0
-            && solution.t_end == t0
-            && matches!(
-                code,
-                ReturnCode::InconsistentInitialState { .. }
-                    | ReturnCode::SingularProgramme { .. }
-                    | ReturnCode::UnrealizableProgramme { .. }
-            ) =>
-        {
-            errln!("{}", scene.initial_error(code, &settings));
-            return ExitCode::from(2);
-        }
-        code => {
-            errln!(
-                "{}: stopped at t = {:.6} ({}): {code}; results up to there are in {}",
-                scene.name,
-                solution.t_end,
-                code.name(),
-                out.display()
-            );
-            if let Err(code) = report(format_args!(
-                "{}: {}, t = {:.6} .. {:.6}, max programme residual {:.2e}{warned} -> {}",
-                scene.name,
-                code.name(),
-                t0,
-                solution.t_end,
-                worst,
-                out.display()
-            )) {
-                return code;
-            }
-        }
+    let json = run.write_summary(&a, &rows, command_line, &mut write_errors);
+    if let Err(code) = run.report(json.as_ref()) {
+        return code;
     }
     // A file that could not be written is the last word (exit 3), whatever the solve did.
     for e in &write_errors {
@@ -602,6 +481,180 @@ fn solve(a: SolveArgs, command_line: &[String]) -> ExitCode {
         ReturnCode::Success => ExitCode::SUCCESS,
         ReturnCode::Interrupted { .. } => ExitCode::from(130),
         _ => ExitCode::from(1),
+    }
+}
+
+/// The settings of a solve (the scene's, overridden by the flags) and the span set by `--t1`,
+/// checked; a refusal clears the earlier run's outputs in `out`.
+fn solve_settings(a: &SolveArgs, scene: &mut Scene, out: &Path) -> Result<Settings, ExitCode> {
+    let refused = |msg: std::fmt::Arguments<'_>| {
+        errln!("progmo solve: error: {msg}");
+        clear_earlier_run(Some(out));
+        ExitCode::from(2)
+    };
+    let settings = match settings_from(a, &scene.settings) {
+        Ok(s) => s,
+        Err(msg) => return Err(refused(format_args!("{msg}"))),
+    };
+    if let Some(t1) = a.settings.t1 {
+        let (t0, _) = scene.span();
+        if !(t1 > t0) {
+            return Err(refused(format_args!("--t1 {t1} must be after t0 = {t0}")));
+        }
+        crate::with_problem!(&mut scene.system, p => p.t1 = t1);
+    }
+    if let Err(e) = crate::solve::validate(scene.span(), &settings) {
+        return Err(refused(format_args!("{}", flagged(a, &e))));
+    }
+    Ok(settings)
+}
+
+/// The notes on the scene's import, then the output folder, emptied of an earlier run.
+fn prepare_output(scene: &Scene, out: &Path) -> Result<(), ExitCode> {
+    for n in &scene.import_notes {
+        errln!("progmo solve: note: {n}");
+    }
+    for line in unmodelled_lines(scene) {
+        errln!("progmo solve: {line}");
+    }
+    if let Err(e) = std::fs::create_dir_all(out) {
+        errln!("progmo solve: error: cannot create {}: {e}", out.display());
+        return Err(ExitCode::from(3));
+    }
+    // A run into the folder of an earlier one first removes that run's outputs, so nothing of it
+    // (an old summary saying success, an MCAP of another scene) can pass for this run's.
+    if let Err(e) = crate::output::remove_previous_run(out) {
+        errln!("progmo solve: error: {e}");
+        return Err(ExitCode::from(3));
+    }
+    Ok(())
+}
+
+/// A solve that has run: what its summary and its report line are made of.
+struct FinishedRun<'a> {
+    scene: &'a Scene,
+    solution: &'a crate::solve::Solution,
+    settings: &'a Settings,
+    out: &'a Path,
+    t0: f64,
+    wall: f64,
+}
+
+impl FinishedRun<'_> {
+    /// Write summary.json (partial beside a partial data file; its error joins `write_errors`);
+    /// with `--json`, the summary's content and the output folder for stdout.
+    fn write_summary(
+        &self,
+        a: &SolveArgs,
+        rows: &[String],
+        command_line: &[String],
+        write_errors: &mut Vec<crate::output::OutputError>,
+    ) -> Option<serde_json::Value> {
+        let (scene, settings) = (self.scene, self.settings);
+        // Servo scenes: the analysis with the internal dynamics along the motion (two more solves).
+        let servo = scene
+            .servo_report(settings, true)
+            .and_then(|r| serde_json::to_value(r).ok());
+        let robot_file = scene
+            .robot
+            .as_ref()
+            .and_then(|r| serde_json::to_value(r).ok());
+        let summary = SummaryInput {
+            scene: &scene.name,
+            solution: self.solution,
+            row_names: rows,
+            settings,
+            wall_seconds: self.wall,
+            git_revision: (!GIT_REVISION.is_empty()).then_some(GIT_REVISION),
+            command_line,
+            servo: servo.as_ref(),
+            robot_file: robot_file.as_ref(),
+        };
+        // Beside a data file that could not be written whole (a `.partial`), the summary is partial
+        // too: a summary.json saying success must mean the run's files are whole.
+        let summary_name = if write_errors.is_empty() {
+            "summary.json"
+        } else {
+            "summary.json.partial"
+        };
+        write_errors.extend(write_summary_to_path(self.out.join(summary_name), &summary).err());
+        // --json: the summary's content (and where the files are) on stdout, the line on stderr.
+        a.json.then(|| {
+            let mut v = crate::output::summary_json(&summary).unwrap_or(serde_json::Value::Null);
+            if let Some(m) = v.as_object_mut() {
+                m.insert("output".into(), self.out.display().to_string().into());
+            }
+            v
+        })
+    }
+
+    /// The warnings and the line that says how the solve ended (on stdout, or on stderr with the
+    /// JSON document on stdout); an inconsistent or singular initial state is a located error.
+    fn report(&self, json: Option<&serde_json::Value>) -> Result<(), ExitCode> {
+        let (scene, solution, out, t0) = (self.scene, self.solution, self.out, self.t0);
+        let report = |line: std::fmt::Arguments<'_>| -> Result<(), ExitCode> {
+            match json {
+                Some(v) => {
+                    errln!("{line}");
+                    say_json(v)
+                }
+                None => write_stdout(line, true),
+            }
+        };
+        let worst = solution.max_residual.iter().cloned().fold(0.0, f64::max);
+        let st = &solution.stats.integrator;
+        for w in &solution.warnings {
+            errln!("{}: warning: {w}", scene.name);
+        }
+        let warned = match solution.warnings.len() {
+            0 => String::new(),
+            1 => format!(
+                ", 1 conditioning WARNING ({} at t = {:.6})",
+                solution.warnings[0].kind.name(),
+                solution.warnings[0].t
+            ),
+            k => format!(
+                ", {k} conditioning WARNINGS (first: {} at t = {:.6})",
+                solution.warnings[0].kind.name(),
+                solution.warnings[0].t
+            ),
+        };
+        match &solution.code {
+            ReturnCode::Success => report(format_args!(
+                "{}: success, t = {:.6} .. {:.6}, max programme residual {:.2e}, {} steps ({} rejected), {} RHS evaluations, {:.3} s{warned} -> {}",
+                scene.name, t0, solution.t_end, worst, st.steps, st.rejected, st.rhs_evals, self.wall, out.display()
+            )),
+            code if solution.stats.integrator.steps == 0
+                && solution.t_end == t0
+                && matches!(
+                    code,
+                    ReturnCode::InconsistentInitialState { .. }
+                        | ReturnCode::SingularProgramme { .. }
+                        | ReturnCode::UnrealizableProgramme { .. }
+                ) =>
+            {
+                errln!("{}", scene.initial_error(code, self.settings));
+                Err(ExitCode::from(2))
+            }
+            code => {
+                errln!(
+                    "{}: stopped at t = {:.6} ({}): {code}; results up to there are in {}",
+                    scene.name,
+                    solution.t_end,
+                    code.name(),
+                    out.display()
+                );
+                report(format_args!(
+                    "{}: {}, t = {:.6} .. {:.6}, max programme residual {:.2e}{warned} -> {}",
+                    scene.name,
+                    code.name(),
+                    t0,
+                    solution.t_end,
+                    worst,
+                    out.display()
+                ))
+            }
+        }
     }
 }
 

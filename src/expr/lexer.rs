@@ -34,17 +34,16 @@ fn is_cont(c: char) -> bool {
     c.is_ascii_alphanumeric() || c == '_'
 }
 
-#[allow(clippy::too_many_lines)] // over 100 lines before the lint: to split, not to grow
 pub(crate) fn lex(src: &str) -> Result<Vec<Token>, ExprError> {
-    let cs: Vec<char> = src.chars().collect();
-    let err = |kind, col: usize, text: &[char]| -> ExprError {
-        ExprError::new(kind, col + 1, &text.iter().collect::<String>(), src)
+    let lx = Lexer {
+        src,
+        cs: src.chars().collect(),
     };
+    let cs = &lx.cs;
     let mut out = Vec::new();
     let mut i = 0;
     while i < cs.len() {
         let c = cs[i];
-        let start = i;
         let simple = match c {
             '+' => Some(Tok::Plus),
             '-' => Some(Tok::Minus),
@@ -58,7 +57,7 @@ pub(crate) fn lex(src: &str) -> Result<Vec<Token>, ExprError> {
         };
         if let Some(tok) = simple {
             if c == '*' && cs.get(i + 1) == Some(&'*') {
-                return Err(err(K::DoubleStar, i, &cs[i..i + 2]));
+                return Err(lx.err(K::DoubleStar, i, &cs[i..i + 2]));
             }
             out.push(Token {
                 tok,
@@ -71,125 +70,15 @@ pub(crate) fn lex(src: &str) -> Result<Vec<Token>, ExprError> {
         } else if c.is_ascii_digit()
             || (c == '.' && cs.get(i + 1).is_some_and(|d| d.is_ascii_digit()))
         {
-            // digits [. digits] [(e|E) [+-] digits]
-            while i < cs.len() && cs[i].is_ascii_digit() {
-                i += 1;
-            }
-            if i < cs.len() && cs[i] == '.' {
-                i += 1;
-                while i < cs.len() && cs[i].is_ascii_digit() {
-                    i += 1;
-                }
-            }
-            let mut bad_exponent = false;
-            if i < cs.len() && (cs[i] == 'e' || cs[i] == 'E') {
-                let mut j = i + 1;
-                if j < cs.len() && (cs[j] == '+' || cs[j] == '-') {
-                    j += 1;
-                }
-                let digits = j;
-                while j < cs.len() && cs[j].is_ascii_digit() {
-                    j += 1;
-                }
-                if j > digits {
-                    i = j;
-                } else {
-                    bad_exponent = true;
-                    i = digits;
-                }
-            }
-            if bad_exponent {
-                return Err(err(
-                    K::BadNumber {
-                        text: cs[start..i].iter().collect(),
-                        reason: "the exponent needs digits",
-                    },
-                    start,
-                    &cs[start..i],
-                ));
-            }
-            if i < cs.len() && (cs[i] == '.' || cs[i].is_ascii_digit()) {
-                let mut j = i;
-                while j < cs.len() && (cs[j] == '.' || is_cont(cs[j])) {
-                    j += 1;
-                }
-                return Err(err(
-                    K::BadNumber {
-                        text: cs[start..j].iter().collect(),
-                        reason: "too many `.`",
-                    },
-                    start,
-                    &cs[start..j],
-                ));
-            }
-            let text: String = cs[start..i].iter().collect();
-            if i < cs.len() && is_start(cs[i]) {
-                let mut j = i;
-                while j < cs.len() && is_cont(cs[j]) {
-                    j += 1;
-                }
-                let name: String = cs[i..j].iter().collect();
-                return Err(err(K::ImplicitMul { number: text, name }, i, &cs[i..j]));
-            }
-            // The scanned text always has Rust float syntax.
-            let v: f64 = text.parse().unwrap_or(f64::NAN);
-            if !v.is_finite() {
-                return Err(err(
-                    K::BadNumber {
-                        text: text.clone(),
-                        reason: "out of range",
-                    },
-                    start,
-                    &cs[start..i],
-                ));
-            }
-            out.push(Token {
-                tok: Tok::Num(v),
-                col: start + 1,
-                text,
-            });
+            let (token, end) = lx.number(i)?;
+            out.push(token);
+            i = end;
         } else if is_start(c) {
-            // part ("." part)* "'"{0,2}
-            loop {
-                while i < cs.len() && is_cont(cs[i]) {
-                    i += 1;
-                }
-                if i < cs.len() && cs[i] == '.' {
-                    if cs.get(i + 1).is_some_and(|&d| is_start(d)) {
-                        i += 1;
-                        continue;
-                    }
-                    return Err(err(
-                        K::BadName {
-                            text: cs[start..=i].iter().collect(),
-                            reason: "expected a name part after `.`",
-                        },
-                        start,
-                        &cs[start..=i],
-                    ));
-                }
-                break;
-            }
-            let primes = cs[i..].iter().take_while(|&&p| p == '\'').count();
-            i += primes;
-            if primes > 2 {
-                return Err(err(
-                    K::BadName {
-                        text: cs[start..i].iter().collect(),
-                        reason: "at most two `'` (velocity `'`, acceleration `''`)",
-                    },
-                    start,
-                    &cs[start..i],
-                ));
-            }
-            let text: String = cs[start..i].iter().collect();
-            out.push(Token {
-                tok: Tok::Name(text.clone()),
-                col: start + 1,
-                text,
-            });
+            let (token, end) = lx.name(i)?;
+            out.push(token);
+            i = end;
         } else {
-            return Err(err(K::UnexpectedChar(c), i, &cs[i..=i]));
+            return Err(lx.err(K::UnexpectedChar(c), i, &cs[i..=i]));
         }
     }
     out.push(Token {
@@ -198,4 +87,147 @@ pub(crate) fn lex(src: &str) -> Result<Vec<Token>, ExprError> {
         text: String::new(),
     });
     Ok(out)
+}
+
+/// The source being tokenized, as chars.
+struct Lexer<'a> {
+    src: &'a str,
+    cs: Vec<char>,
+}
+
+impl Lexer<'_> {
+    /// An error of `kind` at the 0-based char index `col`, on the chars `text`.
+    fn err(&self, kind: K, col: usize, text: &[char]) -> ExprError {
+        ExprError::new(kind, col + 1, &text.iter().collect::<String>(), self.src)
+    }
+
+    /// The number starting at `start` and the index after it.
+    fn number(&self, start: usize) -> Result<(Token, usize), ExprError> {
+        let cs = &self.cs;
+        let mut i = start;
+        // digits [. digits] [(e|E) [+-] digits]
+        while i < cs.len() && cs[i].is_ascii_digit() {
+            i += 1;
+        }
+        if i < cs.len() && cs[i] == '.' {
+            i += 1;
+            while i < cs.len() && cs[i].is_ascii_digit() {
+                i += 1;
+            }
+        }
+        let mut bad_exponent = false;
+        if i < cs.len() && (cs[i] == 'e' || cs[i] == 'E') {
+            let mut j = i + 1;
+            if j < cs.len() && (cs[j] == '+' || cs[j] == '-') {
+                j += 1;
+            }
+            let digits = j;
+            while j < cs.len() && cs[j].is_ascii_digit() {
+                j += 1;
+            }
+            if j > digits {
+                i = j;
+            } else {
+                bad_exponent = true;
+                i = digits;
+            }
+        }
+        if bad_exponent {
+            return Err(self.err(
+                K::BadNumber {
+                    text: cs[start..i].iter().collect(),
+                    reason: "the exponent needs digits",
+                },
+                start,
+                &cs[start..i],
+            ));
+        }
+        if i < cs.len() && (cs[i] == '.' || cs[i].is_ascii_digit()) {
+            let mut j = i;
+            while j < cs.len() && (cs[j] == '.' || is_cont(cs[j])) {
+                j += 1;
+            }
+            return Err(self.err(
+                K::BadNumber {
+                    text: cs[start..j].iter().collect(),
+                    reason: "too many `.`",
+                },
+                start,
+                &cs[start..j],
+            ));
+        }
+        let text: String = cs[start..i].iter().collect();
+        if i < cs.len() && is_start(cs[i]) {
+            let mut j = i;
+            while j < cs.len() && is_cont(cs[j]) {
+                j += 1;
+            }
+            let name: String = cs[i..j].iter().collect();
+            return Err(self.err(K::ImplicitMul { number: text, name }, i, &cs[i..j]));
+        }
+        // The scanned text always has Rust float syntax.
+        let v: f64 = text.parse().unwrap_or(f64::NAN);
+        if !v.is_finite() {
+            return Err(self.err(
+                K::BadNumber {
+                    text: text.clone(),
+                    reason: "out of range",
+                },
+                start,
+                &cs[start..i],
+            ));
+        }
+        let token = Token {
+            tok: Tok::Num(v),
+            col: start + 1,
+            text,
+        };
+        Ok((token, i))
+    }
+
+    /// The name starting at `start` and the index after it.
+    fn name(&self, start: usize) -> Result<(Token, usize), ExprError> {
+        let cs = &self.cs;
+        let mut i = start;
+        // part ("." part)* "'"{0,2}
+        loop {
+            while i < cs.len() && is_cont(cs[i]) {
+                i += 1;
+            }
+            if i < cs.len() && cs[i] == '.' {
+                if cs.get(i + 1).is_some_and(|&d| is_start(d)) {
+                    i += 1;
+                    continue;
+                }
+                return Err(self.err(
+                    K::BadName {
+                        text: cs[start..=i].iter().collect(),
+                        reason: "expected a name part after `.`",
+                    },
+                    start,
+                    &cs[start..=i],
+                ));
+            }
+            break;
+        }
+        let primes = cs[i..].iter().take_while(|&&p| p == '\'').count();
+        i += primes;
+        if primes > 2 {
+            return Err(self.err(
+                K::BadName {
+                    text: cs[start..i].iter().collect(),
+                    reason: "at most two `'` (velocity `'`, acceleration `''`)",
+                },
+                start,
+                &cs[start..i],
+            ));
+        }
+        let text: String = cs[start..i].iter().collect();
+        let token = Token {
+            tok: Tok::Name(text.clone()),
+            col: start + 1,
+            text,
+        };
+        Ok((token, i))
+    }
 }

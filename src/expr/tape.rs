@@ -52,7 +52,6 @@ pub(crate) fn build(code: &[Op]) -> (Vec<Step>, u32) {
 /// Forward pass into `vals` (one per step), then the reverse pass: `grad[s]` = d value / d slot s
 /// for the slots `reads` (other entries untouched). Returns the value. `work` is scratch
 /// (capacity 2 tape length: no allocation).
-#[allow(clippy::too_many_lines)] // over 100 lines before the lint: to split, not to grow
 pub(crate) fn gradient<S: Scalar>(
     tape: &[Step],
     out: u32,
@@ -67,78 +66,7 @@ pub(crate) fn gradient<S: Scalar>(
     let (vals, adj) = work.split_at_mut(n);
     for (i, st) in tape.iter().enumerate() {
         let (x, y) = (vals[st.a as usize], vals[st.b as usize]);
-        vals[i] = match st.op {
-            Op::Const(c) => S::from(c),
-            Op::Load(s) => slots[s as usize],
-            Op::Add => x + y,
-            Op::Sub => x - y,
-            Op::Mul => x * y,
-            Op::Div => x / y,
-            Op::Pow => pow(x, y),
-            Op::AddC(c) => {
-                let mut v = x;
-                v += c;
-                v
-            }
-            Op::SubC(c) => {
-                let mut v = x;
-                v -= c;
-                v
-            }
-            Op::RSubC(c) => S::from(c) - x,
-            Op::MulC(c) => {
-                let mut v = x;
-                v *= c;
-                v
-            }
-            Op::DivC(c) => {
-                let mut v = x;
-                v /= c;
-                v
-            }
-            Op::RDivC(c) => S::from(c) / x,
-            Op::AddL(s) => {
-                let mut v = x;
-                v += slots[s as usize];
-                v
-            }
-            Op::SubL(s) => {
-                let mut v = x;
-                v -= slots[s as usize];
-                v
-            }
-            Op::RSubL(s) => slots[s as usize] - x,
-            Op::MulL(s) => {
-                let mut v = x;
-                v *= slots[s as usize];
-                v
-            }
-            Op::DivL(s) => {
-                let mut v = x;
-                v /= slots[s as usize];
-                v
-            }
-            Op::RDivL(s) => slots[s as usize] / x,
-            Op::Neg => -x,
-            Op::Square => x * x,
-            Op::Powi(k) => x.powi(k),
-            Op::Powf(p) => powf(x, p),
-            Op::Sin => x.sin(),
-            Op::Cos => x.cos(),
-            Op::Tan => x.tan(),
-            Op::Asin => x.asin(),
-            Op::Acos => x.acos(),
-            Op::Atan => x.atan(),
-            Op::Atan2 => atan2(x, y),
-            Op::Exp => x.exp(),
-            Op::Ln => x.ln(),
-            Op::Sqrt => x.sqrt(),
-            Op::Abs => abs(x),
-            Op::Sinh => x.sinh(),
-            Op::Cosh => x.cosh(),
-            Op::Tanh => x.tanh(),
-            Op::Tee(_) | Op::Get(_) => unreachable!("no tape step"),
-        };
+        vals[i] = value(st.op, x, y, slots);
     }
     for &s in reads {
         grad[s] = S::zero();
@@ -146,101 +74,184 @@ pub(crate) fn gradient<S: Scalar>(
     let out = out as usize;
     adj[out] = S::one();
     for i in (0..=out).rev() {
-        let st = tape[i];
-        let d = adj[i];
-        let (a, b) = (st.a as usize, st.b as usize);
-        let (x, y, z) = (vals[a], vals[b], vals[i]);
-        match st.op {
-            Op::Const(_) => {}
-            Op::Load(s) => grad[s as usize] += d,
-            Op::Add => {
-                adj[a] += d;
-                adj[b] += d;
-            }
-            Op::Sub => {
-                adj[a] += d;
-                adj[b] -= d;
-            }
-            Op::Mul => {
-                adj[a] += d * y;
-                adj[b] += d * x;
-            }
-            Op::Div => {
-                adj[a] += d / y;
-                adj[b] -= d * z / y;
-            }
-            Op::Pow => {
-                adj[a] += d * y * z / x;
-                adj[b] += d * z * abs(x).ln();
-            }
-            Op::AddC(_) | Op::SubC(_) => adj[a] += d,
-            Op::RSubC(_) | Op::Neg => adj[a] -= d,
-            Op::MulC(c) => adj[a] += d * c,
-            Op::DivC(c) => adj[a] += d / c,
-            Op::RDivC(_) => adj[a] -= d * z / x,
-            Op::AddL(s) => {
-                adj[a] += d;
-                grad[s as usize] += d;
-            }
-            Op::SubL(s) => {
-                adj[a] += d;
-                grad[s as usize] -= d;
-            }
-            Op::RSubL(s) => {
-                adj[a] -= d;
-                grad[s as usize] += d;
-            }
-            Op::MulL(s) => {
-                adj[a] += d * slots[s as usize];
-                grad[s as usize] += d * x;
-            }
-            Op::DivL(s) => {
-                let w = slots[s as usize];
-                adj[a] += d / w;
-                grad[s as usize] -= d * z / w;
-            }
-            Op::RDivL(s) => {
-                adj[a] -= d * z / x;
-                grad[s as usize] += d / x;
-            }
-            Op::Square => adj[a] += d * x * 2.0,
-            Op::Powi(k) => {
-                if k != 0 {
-                    adj[a] += d * x.powi(k - 1) * k as f64
-                }
-            }
-            // num-dual's powf is NaN at 0; there, for p > 1, the derivative is 0 (as `powf`).
-            Op::Powf(p) => {
-                if !(x.re() == 0.0 && p > 1.0) {
-                    adj[a] += d * x.powf(p - 1.0) * p
-                }
-            }
-            Op::Sin => adj[a] += d * x.cos(),
-            Op::Cos => adj[a] -= d * x.sin(),
-            Op::Tan => adj[a] += d * (z * z + 1.0),
-            Op::Asin => adj[a] += d / (-(x * x) + 1.0).sqrt(),
-            Op::Acos => adj[a] -= d / (-(x * x) + 1.0).sqrt(),
-            Op::Atan => adj[a] += d / (x * x + 1.0),
-            Op::Atan2 => {
-                let r2 = x * x + y * y;
-                adj[a] += d * y / r2;
-                adj[b] -= d * x / r2;
-            }
-            Op::Exp => adj[a] += d * z,
-            Op::Ln => adj[a] += d / x,
-            Op::Sqrt => adj[a] += d / (z * 2.0),
-            Op::Abs => {
-                if x.re() < 0.0 {
-                    adj[a] -= d
-                } else {
-                    adj[a] += d
-                }
-            }
-            Op::Sinh => adj[a] += d * x.cosh(),
-            Op::Cosh => adj[a] += d * x.sinh(),
-            Op::Tanh => adj[a] += d * (-(z * z) + 1.0),
-            Op::Tee(_) | Op::Get(_) => unreachable!("no tape step"),
-        }
+        adjoint(tape[i], i, vals, slots, adj, grad);
     }
     vals[out]
+}
+
+/// The value of one step with operands `x`, `y` (forward pass).
+#[inline]
+fn value<S: Scalar>(op: Op, x: S, y: S, slots: &[S]) -> S {
+    match op {
+        Op::Const(c) => S::from(c),
+        Op::Load(s) => slots[s as usize],
+        Op::Add => x + y,
+        Op::Sub => x - y,
+        Op::Mul => x * y,
+        Op::Div => x / y,
+        Op::Pow => pow(x, y),
+        Op::AddC(c) => {
+            let mut v = x;
+            v += c;
+            v
+        }
+        Op::SubC(c) => {
+            let mut v = x;
+            v -= c;
+            v
+        }
+        Op::RSubC(c) => S::from(c) - x,
+        Op::MulC(c) => {
+            let mut v = x;
+            v *= c;
+            v
+        }
+        Op::DivC(c) => {
+            let mut v = x;
+            v /= c;
+            v
+        }
+        Op::RDivC(c) => S::from(c) / x,
+        Op::AddL(s) => {
+            let mut v = x;
+            v += slots[s as usize];
+            v
+        }
+        Op::SubL(s) => {
+            let mut v = x;
+            v -= slots[s as usize];
+            v
+        }
+        Op::RSubL(s) => slots[s as usize] - x,
+        Op::MulL(s) => {
+            let mut v = x;
+            v *= slots[s as usize];
+            v
+        }
+        Op::DivL(s) => {
+            let mut v = x;
+            v /= slots[s as usize];
+            v
+        }
+        Op::RDivL(s) => slots[s as usize] / x,
+        Op::Neg => -x,
+        Op::Square => x * x,
+        Op::Powi(k) => x.powi(k),
+        Op::Powf(p) => powf(x, p),
+        Op::Sin => x.sin(),
+        Op::Cos => x.cos(),
+        Op::Tan => x.tan(),
+        Op::Asin => x.asin(),
+        Op::Acos => x.acos(),
+        Op::Atan => x.atan(),
+        Op::Atan2 => atan2(x, y),
+        Op::Exp => x.exp(),
+        Op::Ln => x.ln(),
+        Op::Sqrt => x.sqrt(),
+        Op::Abs => abs(x),
+        Op::Sinh => x.sinh(),
+        Op::Cosh => x.cosh(),
+        Op::Tanh => x.tanh(),
+        Op::Tee(_) | Op::Get(_) => unreachable!("no tape step"),
+    }
+}
+
+/// One step `st` (tape index `i`) of the reverse pass: its adjoint `adj[i]` passed on to its
+/// operands' adjoints and to the gradient of the slots it reads.
+#[inline]
+fn adjoint<S: Scalar>(st: Step, i: usize, vals: &[S], slots: &[S], adj: &mut [S], grad: &mut [S]) {
+    let d = adj[i];
+    let (a, b) = (st.a as usize, st.b as usize);
+    let (x, y, z) = (vals[a], vals[b], vals[i]);
+    match st.op {
+        Op::Const(_) => {}
+        Op::Load(s) => grad[s as usize] += d,
+        Op::Add => {
+            adj[a] += d;
+            adj[b] += d;
+        }
+        Op::Sub => {
+            adj[a] += d;
+            adj[b] -= d;
+        }
+        Op::Mul => {
+            adj[a] += d * y;
+            adj[b] += d * x;
+        }
+        Op::Div => {
+            adj[a] += d / y;
+            adj[b] -= d * z / y;
+        }
+        Op::Pow => {
+            adj[a] += d * y * z / x;
+            adj[b] += d * z * abs(x).ln();
+        }
+        Op::AddC(_) | Op::SubC(_) => adj[a] += d,
+        Op::RSubC(_) | Op::Neg => adj[a] -= d,
+        Op::MulC(c) => adj[a] += d * c,
+        Op::DivC(c) => adj[a] += d / c,
+        Op::RDivC(_) => adj[a] -= d * z / x,
+        Op::AddL(s) => {
+            adj[a] += d;
+            grad[s as usize] += d;
+        }
+        Op::SubL(s) => {
+            adj[a] += d;
+            grad[s as usize] -= d;
+        }
+        Op::RSubL(s) => {
+            adj[a] -= d;
+            grad[s as usize] += d;
+        }
+        Op::MulL(s) => {
+            adj[a] += d * slots[s as usize];
+            grad[s as usize] += d * x;
+        }
+        Op::DivL(s) => {
+            let w = slots[s as usize];
+            adj[a] += d / w;
+            grad[s as usize] -= d * z / w;
+        }
+        Op::RDivL(s) => {
+            adj[a] -= d * z / x;
+            grad[s as usize] += d / x;
+        }
+        Op::Square => adj[a] += d * x * 2.0,
+        Op::Powi(k) => {
+            if k != 0 {
+                adj[a] += d * x.powi(k - 1) * k as f64
+            }
+        }
+        // num-dual's powf is NaN at 0; there, for p > 1, the derivative is 0 (as `powf`).
+        Op::Powf(p) => {
+            if !(x.re() == 0.0 && p > 1.0) {
+                adj[a] += d * x.powf(p - 1.0) * p
+            }
+        }
+        Op::Sin => adj[a] += d * x.cos(),
+        Op::Cos => adj[a] -= d * x.sin(),
+        Op::Tan => adj[a] += d * (z * z + 1.0),
+        Op::Asin => adj[a] += d / (-(x * x) + 1.0).sqrt(),
+        Op::Acos => adj[a] -= d / (-(x * x) + 1.0).sqrt(),
+        Op::Atan => adj[a] += d / (x * x + 1.0),
+        Op::Atan2 => {
+            let r2 = x * x + y * y;
+            adj[a] += d * y / r2;
+            adj[b] -= d * x / r2;
+        }
+        Op::Exp => adj[a] += d * z,
+        Op::Ln => adj[a] += d / x,
+        Op::Sqrt => adj[a] += d / (z * 2.0),
+        Op::Abs => {
+            if x.re() < 0.0 {
+                adj[a] -= d
+            } else {
+                adj[a] += d
+            }
+        }
+        Op::Sinh => adj[a] += d * x.cosh(),
+        Op::Cosh => adj[a] += d * x.sinh(),
+        Op::Tanh => adj[a] += d * (-(z * z) + 1.0),
+        Op::Tee(_) | Op::Get(_) => unreachable!("no tape step"),
+    }
 }

@@ -9,6 +9,8 @@
     clippy::too_many_arguments
 )]
 
+use std::ops::ControlFlow;
+
 use super::control::StepControl;
 use super::{
     fixed_step_count, h_min, initial_step, rms, Accept, DenseOutput, DriverOptions,
@@ -456,6 +458,32 @@ impl DenseOutput for NoDense {
     }
 }
 
+/// What a piece of an attempted step decides (the step drivers of this module and of Radau IIA):
+/// go on with a `T`, retry the step from the same point (`Break(None)`, the state holding the new
+/// step size) or end the run with an outcome.
+pub(super) type Attempt<E, T = ()> = ControlFlow<Option<Outcome<E>>, T>;
+
+/// The settings of one run of [`ErkWork::run`], fixed at its start.
+struct ErkSettings {
+    kind: Kind,
+    t0: f64,
+    t1: f64,
+    fixed: Option<f64>,
+    nfixed: Option<usize>,
+    adaptive: bool,
+}
+
+/// The state [`ErkWork::run`] carries from one attempted step to the next.
+struct ErkState {
+    t: f64,
+    /// Proposed size of the next step.
+    h: f64,
+    /// Steps taken in fixed-step mode.
+    ifixed: usize,
+    last_rejected: bool,
+    ctl: StepControl,
+}
+
 /// Workspace of the explicit methods.
 pub(crate) struct ErkWork {
     n: usize,
@@ -658,7 +686,6 @@ impl ErkWork {
 
     /// The step driver of the explicit methods. `fixed` is the fixed step (always for RK4).
     #[allow(clippy::too_many_arguments)]
-    #[allow(clippy::too_many_lines)] // over 100 lines before the lint: to split, not to grow
     pub(crate) fn run<P: OdeProblem>(
         &mut self,
         kind: Kind,
@@ -671,9 +698,8 @@ impl ErkWork {
         stats: &mut IntegratorStats,
     ) -> Outcome<P::Error> {
         let n = self.n;
-        let fs = kind.stages();
-        let mut ctl = controller(kind);
-        let mut t = t0;
+        let ctl = controller(kind);
+        let t = t0;
         stats.rhs_evals += 1;
         if let Err(error) = problem.rhs(t, y, &mut self.k[..n]) {
             return Outcome::Problem { t, error };
@@ -683,172 +709,246 @@ impl ErkWork {
         }
         // Fixed-step mode: number of steps and the running index.
         let fixed = fixed.filter(|h| *h > 0.0);
-        let nfixed = fixed.map(|h| fixed_step_count(t0, t1, h));
-        let mut ifixed = 0usize;
-        let mut h = match (fixed, opts.h0) {
+        let set = ErkSettings {
+            kind,
+            t0,
+            t1,
+            fixed,
+            nfixed: fixed.map(|h| fixed_step_count(t0, t1, h)),
+            adaptive: fixed.is_none(),
+        };
+        let h = match self.first_step(&set, opts, problem, y, stats) {
+            Ok(h) => h,
+            Err(error) => return Outcome::Problem { t, error },
+        };
+        let mut st = ErkState {
+            t,
+            h,
+            ifixed: 0,
+            last_rejected: false,
+            ctl,
+        };
+        loop {
+            if let ControlFlow::Break(Some(outcome)) =
+                self.attempt(&set, &mut st, opts, problem, y, stats)
+            {
+                return outcome;
+            }
+        }
+    }
+
+    /// The first step size: the fixed one, the user's h0 or the estimate of `initial_step`.
+    fn first_step<P: OdeProblem>(
+        &mut self,
+        set: &ErkSettings,
+        opts: &DriverOptions,
+        problem: &mut P,
+        y: &[f64],
+        stats: &mut IntegratorStats,
+    ) -> Result<f64, P::Error> {
+        let n = self.n;
+        Ok(match (set.fixed, opts.h0) {
             (Some(h), _) => h,
             (None, Some(h0)) => h0.min(opts.h_max),
             (None, None) => {
                 let (k0, rest) = self.k.split_at_mut(n);
-                match initial_step(
+                initial_step(
                     problem,
-                    t0,
+                    set.t0,
                     y,
                     k0,
-                    kind.err_order(),
+                    set.kind.err_order(),
                     opts.atol,
                     opts.rtol,
                     opts.h_max,
-                    t1 - t0,
+                    set.t1 - set.t0,
                     &mut self.sc,
                     &mut self.ytmp,
                     &mut rest[..n],
                     stats,
-                ) {
-                    Ok(h) => h,
-                    Err(error) => return Outcome::Problem { t, error },
+                )?
+            }
+        })
+    }
+
+    /// One attempted step from `st.t`, accepted or rejected.
+    fn attempt<P: OdeProblem>(
+        &mut self,
+        set: &ErkSettings,
+        st: &mut ErkState,
+        opts: &DriverOptions,
+        problem: &mut P,
+        y: &mut [f64],
+        stats: &mut IntegratorStats,
+    ) -> Attempt<P::Error> {
+        let (t, t1) = (st.t, set.t1);
+        let attempts = stats.steps + stats.rejected;
+        if attempts >= opts.max_steps {
+            return ControlFlow::Break(Some(Outcome::MaxSteps { t }));
+        }
+        // Step length of this attempt and whether it lands on t1.
+        let (hs, last) = match (set.fixed, set.nfixed) {
+            (Some(hf), Some(nf)) => {
+                if st.ifixed + 1 >= nf {
+                    (t1 - t, true)
+                } else {
+                    (hf, false)
+                }
+            }
+            _ => {
+                if st.h < h_min(opts, t) {
+                    return ControlFlow::Break(Some(Outcome::StepTooSmall { t, h: st.h }));
+                }
+                if t + 1.01 * st.h >= t1 {
+                    (t1 - t, true)
+                } else {
+                    (st.h, false)
                 }
             }
         };
-        let mut last_rejected = false;
-        loop {
-            let attempts = stats.steps + stats.rejected;
-            if attempts >= opts.max_steps {
-                return Outcome::MaxSteps { t };
-            }
-            // Step length of this attempt and whether it lands on t1.
-            let (hs, last) = match (fixed, nfixed) {
-                (Some(hf), Some(nf)) => {
-                    if ifixed + 1 >= nf {
-                        (t1 - t, true)
-                    } else {
-                        (hf, false)
-                    }
-                }
-                _ => {
-                    if h < h_min(opts, t) {
-                        return Outcome::StepTooSmall { t, h };
-                    }
-                    if t + 1.01 * h >= t1 {
-                        (t1 - t, true)
-                    } else {
-                        (h, false)
-                    }
-                }
-            };
-            let adaptive = fixed.is_none();
-            let (trial, err) = match self.trial(
-                kind,
-                problem,
-                t,
-                y,
-                hs,
-                adaptive && kind != Kind::Rk4,
-                opts,
-                stats,
-            ) {
-                Ok(r) => r,
-                // A failed evaluation inside a trial step (a stage past a singular point) is not
-                // evidence about the trajectory: reject and shrink, and report the error only when
-                // the step cannot shrink any more, so that the stop is localized.
-                Err(error) => {
-                    stats.rejected += 1;
-                    h = hs * 0.25;
-                    last_rejected = true;
-                    if !adaptive || h < h_min(opts, t) {
-                        return Outcome::Problem { t, error };
-                    }
-                    continue;
-                }
-            };
-            if let Trial::NonFinite = trial {
+        let err = self.checked_trial(set, st, opts, problem, hs, y, stats)?;
+        let mut hnew = st.h;
+        if set.adaptive {
+            if err > 1.0 {
                 stats.rejected += 1;
-                if !adaptive {
-                    return Outcome::NonFinite { t };
-                }
-                h = hs * 0.25;
-                last_rejected = true;
-                if h < h_min(opts, t) {
-                    return Outcome::NonFinite { t };
-                }
-                continue;
+                st.h = hs / st.ctl.rejected(err, st.ctl.safe);
+                st.last_rejected = true;
+                return ControlFlow::Break(None);
             }
-            let mut hnew = h;
-            if adaptive {
-                if err > 1.0 {
-                    stats.rejected += 1;
-                    h = hs / ctl.rejected(err, ctl.safe);
-                    last_rejected = true;
-                    continue;
-                }
-                hnew = ctl.accepted(err, hs, ctl.safe, opts.h_max, last_rejected);
-                last_rejected = false;
-            }
-            // Accepted. Without dense output this step, the stage f(t + h, y_new) waits until the
-            // problem has seen (and perhaps projected) y_new: it is then f at the state the next
-            // step starts from, the same value FSAL would give when nothing changed.
-            let want_dense = problem.needs_dense(t, t + hs);
-            if want_dense {
-                if let Err(error) = self.prepare_dense(kind, problem, t, y, hs, stats) {
-                    // As for a failed stage: shrink while the step can.
-                    stats.rejected += 1;
-                    h = hs * 0.25;
-                    last_rejected = true;
-                    if !adaptive || h < h_min(opts, t) {
-                        return Outcome::Problem { t, error };
-                    }
-                    continue;
-                }
-            }
-            let t_fsal = t + hs;
-            y.copy_from_slice(&self.ynew);
-            let tnew = if last {
-                t1
-            } else if let Some(hf) = fixed {
-                t0 + (ifixed + 1) as f64 * hf
-            } else {
-                t + hs
-            };
-            stats.steps += 1;
-            ifixed += 1;
-            let acc = if want_dense {
-                let dense = PolyDense {
-                    t0: t,
-                    h: hs,
-                    n,
-                    r: &self.rcont[..kind.rcont_terms() * n],
-                };
-                problem.accepted(t, tnew, y, &dense)
-            } else {
-                problem.accepted(t, tnew, y, &NoDense)
-            };
-            t = tnew;
-            // Dormand-Prince 5(4) has its FSAL stage from the error estimate already.
-            let fsal_ready = want_dense || kind == Kind::Dopri5;
-            match acc {
-                Err(error) => return Outcome::Problem { t, error },
-                Ok(Accept::Unchanged) if fsal_ready => {
-                    self.k.copy_within(fs * n..(fs + 1) * n, 0);
-                }
-                Ok(Accept::Unchanged) => {
-                    // The deferred FSAL stage, at the abscissa t + h of the method.
-                    stats.rhs_evals += 1;
-                    if let Err(error) = problem.rhs(t_fsal, y, &mut self.k[..n]) {
-                        return Outcome::Problem { t, error };
-                    }
-                }
-                Ok(Accept::Changed) => {
-                    stats.rhs_evals += 1;
-                    if let Err(error) = problem.rhs(t, y, &mut self.k[..n]) {
-                        return Outcome::Problem { t, error };
-                    }
-                }
-            }
-            if last {
-                return Outcome::Finished;
-            }
-            h = hnew;
+            hnew = st
+                .ctl
+                .accepted(err, hs, st.ctl.safe, opts.h_max, st.last_rejected);
+            st.last_rejected = false;
         }
+        self.accept(set, st, opts, problem, hs, hnew, last, y, stats)
+    }
+
+    /// The trial step of size `hs`, going on with its error norm; a failed evaluation or a
+    /// non-finite result rejects the step.
+    fn checked_trial<P: OdeProblem>(
+        &mut self,
+        set: &ErkSettings,
+        st: &mut ErkState,
+        opts: &DriverOptions,
+        problem: &mut P,
+        hs: f64,
+        y: &[f64],
+        stats: &mut IntegratorStats,
+    ) -> Attempt<P::Error, f64> {
+        let (t, adaptive) = (st.t, set.adaptive);
+        let want_err = adaptive && set.kind != Kind::Rk4;
+        let (trial, err) = match self.trial(set.kind, problem, t, y, hs, want_err, opts, stats) {
+            Ok(r) => r,
+            // A failed evaluation inside a trial step (a stage past a singular point) is not
+            // evidence about the trajectory: reject and shrink, and report the error only when
+            // the step cannot shrink any more, so that the stop is localized.
+            Err(error) => {
+                stats.rejected += 1;
+                st.h = hs * 0.25;
+                st.last_rejected = true;
+                if !adaptive || st.h < h_min(opts, t) {
+                    return ControlFlow::Break(Some(Outcome::Problem { t, error }));
+                }
+                return ControlFlow::Break(None);
+            }
+        };
+        if let Trial::NonFinite = trial {
+            stats.rejected += 1;
+            if !adaptive {
+                return ControlFlow::Break(Some(Outcome::NonFinite { t }));
+            }
+            st.h = hs * 0.25;
+            st.last_rejected = true;
+            if st.h < h_min(opts, t) {
+                return ControlFlow::Break(Some(Outcome::NonFinite { t }));
+            }
+            return ControlFlow::Break(None);
+        }
+        ControlFlow::Continue(err)
+    }
+
+    /// An accepted step: dense output if wanted, the new y, the `accepted` hook, the FSAL stage
+    /// and the next step size `hnew`.
+    fn accept<P: OdeProblem>(
+        &mut self,
+        set: &ErkSettings,
+        st: &mut ErkState,
+        opts: &DriverOptions,
+        problem: &mut P,
+        hs: f64,
+        hnew: f64,
+        last: bool,
+        y: &mut [f64],
+        stats: &mut IntegratorStats,
+    ) -> Attempt<P::Error> {
+        let (n, kind, fs) = (self.n, set.kind, set.kind.stages());
+        let t = st.t;
+        // Accepted. Without dense output this step, the stage f(t + h, y_new) waits until the
+        // problem has seen (and perhaps projected) y_new: it is then f at the state the next
+        // step starts from, the same value FSAL would give when nothing changed.
+        let want_dense = problem.needs_dense(t, t + hs);
+        if want_dense {
+            if let Err(error) = self.prepare_dense(kind, problem, t, y, hs, stats) {
+                // As for a failed stage: shrink while the step can.
+                stats.rejected += 1;
+                st.h = hs * 0.25;
+                st.last_rejected = true;
+                if !set.adaptive || st.h < h_min(opts, t) {
+                    return ControlFlow::Break(Some(Outcome::Problem { t, error }));
+                }
+                return ControlFlow::Break(None);
+            }
+        }
+        let t_fsal = t + hs;
+        y.copy_from_slice(&self.ynew);
+        let tnew = if last {
+            set.t1
+        } else if let Some(hf) = set.fixed {
+            set.t0 + (st.ifixed + 1) as f64 * hf
+        } else {
+            t + hs
+        };
+        stats.steps += 1;
+        st.ifixed += 1;
+        let acc = if want_dense {
+            let dense = PolyDense {
+                t0: t,
+                h: hs,
+                n,
+                r: &self.rcont[..kind.rcont_terms() * n],
+            };
+            problem.accepted(t, tnew, y, &dense)
+        } else {
+            problem.accepted(t, tnew, y, &NoDense)
+        };
+        st.t = tnew;
+        let t = tnew;
+        // Dormand-Prince 5(4) has its FSAL stage from the error estimate already.
+        let fsal_ready = want_dense || kind == Kind::Dopri5;
+        match acc {
+            Err(error) => return ControlFlow::Break(Some(Outcome::Problem { t, error })),
+            Ok(Accept::Unchanged) if fsal_ready => {
+                self.k.copy_within(fs * n..(fs + 1) * n, 0);
+            }
+            Ok(Accept::Unchanged) => {
+                // The deferred FSAL stage, at the abscissa t + h of the method.
+                stats.rhs_evals += 1;
+                if let Err(error) = problem.rhs(t_fsal, y, &mut self.k[..n]) {
+                    return ControlFlow::Break(Some(Outcome::Problem { t, error }));
+                }
+            }
+            Ok(Accept::Changed) => {
+                stats.rhs_evals += 1;
+                if let Err(error) = problem.rhs(t, y, &mut self.k[..n]) {
+                    return ControlFlow::Break(Some(Outcome::Problem { t, error }));
+                }
+            }
+        }
+        if last {
+            return ControlFlow::Break(Some(Outcome::Finished));
+        }
+        st.h = hnew;
+        ControlFlow::Continue(())
     }
 }
 

@@ -21,9 +21,12 @@
 // Index loops mirror the formulas.
 #![allow(clippy::needless_range_loop, clippy::too_many_arguments)]
 
+use std::ops::ControlFlow;
+
 use nalgebra::{Complex, DMatrix, Matrix3};
 
 use super::control::StepControl;
+use super::erk::Attempt;
 use super::{
     fixed_step_count, h_min, initial_step, rms, Accept, DenseOutput, DriverOptions,
     IntegratorStats, OdeProblem, Outcome,
@@ -195,6 +198,67 @@ enum Newton {
     NonFinite,
 }
 
+/// The settings of one run of [`RadauWork::run`], fixed at its start.
+struct RadauSettings {
+    t0: f64,
+    t1: f64,
+    /// Transformed tolerances (RADAU5).
+    rtol: f64,
+    atol: f64,
+    /// Newton stopping tolerance.
+    fnewt: f64,
+    fixed: Option<f64>,
+    adaptive: bool,
+    nfixed: Option<usize>,
+}
+
+impl RadauSettings {
+    fn new(opts: &DriverOptions, t0: f64, t1: f64) -> Self {
+        // RADAU5's tolerance transformation (the error estimate is of order 3).
+        let (rtol, atol) = if opts.rtol > 0.0 {
+            let r = 0.1 * opts.rtol.powf(2.0 / 3.0);
+            (r, r * opts.atol / opts.rtol)
+        } else {
+            (0.0, opts.atol)
+        };
+        // Newton stopping tolerance (RADAU5's default), kept finite for rtol -> 0.
+        let rtol_f = rtol.max(10.0 * f64::EPSILON);
+        let fnewt = (10.0 * f64::EPSILON / rtol_f).max(0.03f64.min(rtol_f.sqrt()));
+        let fixed = opts.fixed_step.filter(|h| *h > 0.0);
+        RadauSettings {
+            t0,
+            t1,
+            rtol,
+            atol,
+            fnewt,
+            fixed,
+            adaptive: fixed.is_none(),
+            nfixed: fixed.map(|h| fixed_step_count(t0, t1, h)),
+        }
+    }
+}
+
+/// The state [`RadauWork::run`] carries from one attempted step to the next.
+struct RadauState {
+    t: f64,
+    /// Proposed size of the next step.
+    h: f64,
+    /// Steps taken in fixed-step mode.
+    ifixed: usize,
+    need_jac: bool,
+    /// The Jacobian was evaluated at the current point.
+    caljac: bool,
+    /// Step size of the current LU factors (NaN: none).
+    h_lu: f64,
+    first: bool,
+    reject: bool,
+    faccon: f64,
+    theta: f64,
+    /// Size of the last accepted step.
+    hold: f64,
+    ctl: StepControl,
+}
+
 impl RadauWork {
     pub(crate) fn new(n: usize) -> Self {
         RadauWork {
@@ -343,7 +407,6 @@ impl RadauWork {
     }
 
     /// The Radau5 step driver.
-    #[allow(clippy::too_many_lines)] // over 100 lines before the lint: to split, not to grow
     pub(crate) fn run<P: OdeProblem>(
         &mut self,
         opts: &DriverOptions,
@@ -353,26 +416,8 @@ impl RadauWork {
         y: &mut [f64],
         stats: &mut IntegratorStats,
     ) -> Outcome<P::Error> {
-        let n = self.n;
-        let kc = self.k.clone();
-        let [c1, c2, _] = kc.c;
-        let (c1m1, c2m1, c1mc2) = (c1 - 1.0, c2 - 1.0, c1 - c2);
-        // RADAU5's tolerance transformation (the error estimate is of order 3).
-        let (rtol, atol) = if opts.rtol > 0.0 {
-            let r = 0.1 * opts.rtol.powf(2.0 / 3.0);
-            (r, r * opts.atol / opts.rtol)
-        } else {
-            (0.0, opts.atol)
-        };
-        // Newton stopping tolerance (RADAU5's default), kept finite for rtol -> 0.
-        let rtol_f = rtol.max(10.0 * f64::EPSILON);
-        let fnewt = (10.0 * f64::EPSILON / rtol_f).max(0.03f64.min(rtol_f.sqrt()));
-        let fixed = opts.fixed_step.filter(|h| *h > 0.0);
-        let adaptive = fixed.is_none();
-        let nfixed = fixed.map(|h| fixed_step_count(t0, t1, h));
-        let mut ifixed = 0usize;
-
-        let mut t = t0;
+        let set = RadauSettings::new(opts, t0, t1);
+        let t = t0;
         stats.rhs_evals += 1;
         if let Err(error) = problem.rhs(t, y, &mut self.f0) {
             return Outcome::Problem { t, error };
@@ -380,263 +425,376 @@ impl RadauWork {
         if !self.f0.iter().all(|v| v.is_finite()) {
             return Outcome::NonFinite { t };
         }
-        let mut h = match (fixed, opts.h0) {
+        let h = match self.first_step(opts, &set, problem, y, stats) {
+            Ok(h) => h,
+            Err(error) => return Outcome::Problem { t, error },
+        };
+        let mut st = RadauState {
+            t,
+            h,
+            ifixed: 0,
+            need_jac: true,
+            caljac: false,
+            h_lu: f64::NAN,
+            first: true,
+            reject: false,
+            faccon: 1.0,
+            theta: THET,
+            hold: h,
+            // Gustafsson's predictive controller (HNW II, IV.8, (8.25)); err = O(h^4).
+            ctl: StepControl::predictive(0.25, SAFE, FACR, FACL),
+        };
+        loop {
+            if let ControlFlow::Break(Some(outcome)) =
+                self.attempt(opts, &set, &mut st, problem, y, stats)
+            {
+                return outcome;
+            }
+        }
+    }
+
+    /// The first step size: the fixed one, the user's h0 or the estimate of `initial_step`.
+    fn first_step<P: OdeProblem>(
+        &mut self,
+        opts: &DriverOptions,
+        set: &RadauSettings,
+        problem: &mut P,
+        y: &[f64],
+        stats: &mut IntegratorStats,
+    ) -> Result<f64, P::Error> {
+        Ok(match (set.fixed, opts.h0) {
             (Some(h), _) => h,
             (None, Some(h0)) => h0.min(opts.h_max),
-            (None, None) => match initial_step(
+            (None, None) => initial_step(
                 problem,
-                t0,
+                set.t0,
                 y,
                 &self.f0,
                 3,
-                atol,
-                rtol,
+                set.atol,
+                set.rtol,
                 opts.h_max,
-                t1 - t0,
+                set.t1 - set.t0,
                 &mut self.scal,
                 &mut self.ytmp,
                 &mut self.ebuf,
                 stats,
-            ) {
-                Ok(h) => h,
-                Err(error) => return Outcome::Problem { t, error },
-            },
-        };
+            )?,
+        })
+    }
 
-        let mut need_jac = true;
-        let mut caljac = false;
-        let mut h_lu = f64::NAN;
-        let mut first = true;
-        let mut reject = false;
-        let mut faccon = 1.0f64;
-        let mut theta = THET;
-        let mut hold = h;
-        // Gustafsson's predictive controller (HNW II, IV.8, (8.25)); err = O(h^4).
-        let mut ctl = StepControl::predictive(0.25, SAFE, FACR, FACL);
-        loop {
-            if stats.steps + stats.rejected >= opts.max_steps {
-                return Outcome::MaxSteps { t };
-            }
-            let (hs, last) = match (fixed, nfixed) {
-                (Some(hf), Some(nf)) => {
-                    if ifixed + 1 >= nf {
-                        (t1 - t, true)
-                    } else {
-                        (hf, false)
-                    }
-                }
-                _ => {
-                    if h < h_min(opts, t) {
-                        return Outcome::StepTooSmall { t, h };
-                    }
-                    if t + 1.01 * h >= t1 {
-                        (t1 - t, true)
-                    } else {
-                        (h, false)
-                    }
-                }
-            };
-            if need_jac {
-                stats.jacobian_evals += 1;
-                if let Err(error) = problem.jacobian(t, y, &mut self.jac) {
-                    return Outcome::Problem { t, error };
-                }
-                need_jac = false;
-                caljac = true;
-                h_lu = f64::NAN;
-            }
-            if hs != h_lu {
-                stats.lu_decompositions += 1;
-                if !self.decompose(hs) {
-                    // Singular (or non-finite) iteration matrix: halve the step.
-                    stats.rejected += 1;
-                    h_lu = f64::NAN;
-                    if !adaptive {
-                        return Outcome::StepTooSmall { t, h: hs };
-                    }
-                    if !self.jac.iter().all(|v| v.is_finite()) {
-                        h = hs * 0.25;
-                        if h < h_min(opts, t) {
-                            return Outcome::NonFinite { t };
-                        }
-                        need_jac = !caljac;
-                    } else {
-                        h = hs * 0.5;
-                    }
-                    reject = true;
-                    continue;
-                }
-                h_lu = hs;
-            }
-            problem.error_scale(y, y, atol, rtol, &mut self.scal);
-            // Starting values: zero on the first step, else the extrapolated collocation polynomial.
-            if first {
-                self.z.fill(0.0);
-                self.w.fill(0.0);
-            } else {
-                let c3q = hs / hold;
-                for i in 0..n {
-                    let (ak1, ak2, ak3) =
-                        (self.cont[n + i], self.cont[2 * n + i], self.cont[3 * n + i]);
-                    let mut zz = [0.0; 3];
-                    for (s, zs) in zz.iter_mut().enumerate() {
-                        let q = kc.c[s] * c3q;
-                        *zs = q * (ak1 + (q - c2m1) * (ak2 + (q - c1m1) * ak3));
-                        self.z[s * n + i] = *zs;
-                    }
-                    for r in 0..3 {
-                        self.w[r * n + i] =
-                            kc.ti[r][0] * zz[0] + kc.ti[r][1] * zz[1] + kc.ti[r][2] * zz[2];
-                    }
+    /// One attempted step from `st.t`, accepted or rejected.
+    fn attempt<P: OdeProblem>(
+        &mut self,
+        opts: &DriverOptions,
+        set: &RadauSettings,
+        st: &mut RadauState,
+        problem: &mut P,
+        y: &mut [f64],
+        stats: &mut IntegratorStats,
+    ) -> Attempt<P::Error> {
+        let (t, t1) = (st.t, set.t1);
+        if stats.steps + stats.rejected >= opts.max_steps {
+            return ControlFlow::Break(Some(Outcome::MaxSteps { t }));
+        }
+        let (hs, last) = match (set.fixed, set.nfixed) {
+            (Some(hf), Some(nf)) => {
+                if st.ifixed + 1 >= nf {
+                    (t1 - t, true)
+                } else {
+                    (hf, false)
                 }
             }
-            let newt = match self.newton(
-                problem,
-                t,
-                y,
-                hs,
-                fnewt,
-                adaptive,
-                &mut faccon,
-                &mut theta,
-                stats,
-            ) {
-                // A failed evaluation at a collocation stage: reject and shrink (see erk.rs).
-                Err(error) => {
-                    stats.rejected += 1;
-                    reject = true;
-                    h = hs * 0.25;
-                    if !adaptive || h < h_min(opts, t) {
-                        return Outcome::Problem { t, error };
-                    }
-                    continue;
+            _ => {
+                if st.h < h_min(opts, t) {
+                    return ControlFlow::Break(Some(Outcome::StepTooSmall { t, h: st.h }));
                 }
-                Ok(Newton::Converged(it)) => it,
-                Ok(Newton::Fail(fac)) => {
-                    stats.rejected += 1;
-                    reject = true;
-                    if !adaptive {
-                        if caljac {
-                            return Outcome::StepTooSmall { t, h: hs };
-                        }
-                        need_jac = true;
-                        continue;
-                    }
-                    h = hs * fac;
-                    need_jac = !caljac;
-                    continue;
+                if t + 1.01 * st.h >= t1 {
+                    (t1 - t, true)
+                } else {
+                    (st.h, false)
                 }
-                Ok(Newton::NonFinite) => {
-                    stats.rejected += 1;
-                    if !adaptive {
-                        return Outcome::NonFinite { t };
-                    }
-                    reject = true;
-                    h = hs * 0.25;
-                    if h < h_min(opts, t) {
-                        return Outcome::NonFinite { t };
-                    }
-                    continue;
-                }
-            };
-            let mut hnew = hs;
-            if adaptive {
-                let err = match self.estimate(problem, t, y, hs, atol, rtol, first || reject, stats)
-                {
-                    Ok(e) => e,
-                    Err(error) => {
-                        stats.rejected += 1;
-                        reject = true;
-                        h = hs * 0.25;
-                        if h < h_min(opts, t) {
-                            return Outcome::Problem { t, error };
-                        }
-                        continue;
-                    }
-                };
-                if !err.is_finite() {
-                    stats.rejected += 1;
-                    reject = true;
-                    h = hs * 0.25;
-                    if h < h_min(opts, t) {
-                        return Outcome::NonFinite { t };
-                    }
-                    continue;
-                }
-                // Safety factor decreasing with the Newton iterations.
-                let fac = SAFE.min(SAFE * (1 + 2 * NIT) as f64 / (newt + 2 * NIT) as f64);
-                if err >= 1.0 {
-                    stats.rejected += 1;
-                    h = if first {
-                        hs * 0.1
-                    } else {
-                        hs / ctl.rejected(err, fac)
-                    };
-                    reject = true;
-                    need_jac = !caljac;
-                    continue;
-                }
-                hnew = ctl.accepted(err, hs, fac, opts.h_max, reject);
             }
-            // Accepted: new y and collocation polynomial.
-            first = false;
+        };
+        self.iteration_matrices(opts, set, st, problem, hs, y, stats)?;
+        problem.error_scale(y, y, set.atol, set.rtol, &mut self.scal);
+        self.starting_values(st, hs);
+        let newt = self.solve_stages(opts, set, st, problem, hs, y, stats)?;
+        let mut hnew = hs;
+        if set.adaptive {
+            hnew = self.control_error(opts, set, st, problem, hs, newt, y, stats)?;
+        }
+        self.accept(set, st, problem, hs, hnew, last, y, stats)
+    }
+
+    /// The Jacobian when needed, and the factors of E1, E2 when h changed; a singular iteration
+    /// matrix rejects the step.
+    fn iteration_matrices<P: OdeProblem>(
+        &mut self,
+        opts: &DriverOptions,
+        set: &RadauSettings,
+        st: &mut RadauState,
+        problem: &mut P,
+        hs: f64,
+        y: &[f64],
+        stats: &mut IntegratorStats,
+    ) -> Attempt<P::Error> {
+        let t = st.t;
+        if st.need_jac {
+            stats.jacobian_evals += 1;
+            if let Err(error) = problem.jacobian(t, y, &mut self.jac) {
+                return ControlFlow::Break(Some(Outcome::Problem { t, error }));
+            }
+            st.need_jac = false;
+            st.caljac = true;
+            st.h_lu = f64::NAN;
+        }
+        if hs != st.h_lu {
+            stats.lu_decompositions += 1;
+            if !self.decompose(hs) {
+                // Singular (or non-finite) iteration matrix: halve the step.
+                stats.rejected += 1;
+                st.h_lu = f64::NAN;
+                if !set.adaptive {
+                    return ControlFlow::Break(Some(Outcome::StepTooSmall { t, h: hs }));
+                }
+                if !self.jac.iter().all(|v| v.is_finite()) {
+                    st.h = hs * 0.25;
+                    if st.h < h_min(opts, t) {
+                        return ControlFlow::Break(Some(Outcome::NonFinite { t }));
+                    }
+                    st.need_jac = !st.caljac;
+                } else {
+                    st.h = hs * 0.5;
+                }
+                st.reject = true;
+                return ControlFlow::Break(None);
+            }
+            st.h_lu = hs;
+        }
+        ControlFlow::Continue(())
+    }
+
+    /// Starting values: zero on the first step, else the extrapolated collocation polynomial.
+    fn starting_values(&mut self, st: &RadauState, hs: f64) {
+        let n = self.n;
+        let kc = &self.k;
+        let [c1, c2, _] = kc.c;
+        let (c1m1, c2m1) = (c1 - 1.0, c2 - 1.0);
+        if st.first {
+            self.z.fill(0.0);
+            self.w.fill(0.0);
+        } else {
+            let c3q = hs / st.hold;
             for i in 0..n {
-                let (z1, z2, z3) = (self.z[i], self.z[n + i], self.z[2 * n + i]);
-                y[i] += z3;
-                let cont1 = (z2 - z3) / c2m1;
-                let ak = (z1 - z2) / c1mc2;
-                let acont3 = (ak - z1 / c1) / c2;
-                let cont2 = (ak - cont1) / c1m1;
-                self.cont[i] = y[i];
-                self.cont[n + i] = cont1;
-                self.cont[2 * n + i] = cont2;
-                self.cont[3 * n + i] = cont2 - acont3;
-            }
-            hold = hs;
-            let tnew = if last {
-                t1
-            } else if let Some(hf) = fixed {
-                t0 + (ifixed + 1) as f64 * hf
-            } else {
-                t + hs
-            };
-            stats.steps += 1;
-            ifixed += 1;
-            let dense = RadauDense {
-                t1: tnew,
-                h: hs,
-                n,
-                cm: [c1m1, c2m1],
-                cont: &self.cont,
-            };
-            let acc = problem.accepted(t, tnew, y, &dense);
-            t = tnew;
-            match acc {
-                Err(error) => return Outcome::Problem { t, error },
-                Ok(Accept::Unchanged) | Ok(Accept::Changed) => {}
-            }
-            if last {
-                return Outcome::Finished;
-            }
-            // f(t, y) at the new point (always needed: not FSAL), after a possible projection.
-            stats.rhs_evals += 1;
-            if let Err(error) = problem.rhs(t, y, &mut self.f0) {
-                return Outcome::Problem { t, error };
-            }
-            caljac = false;
-            if !adaptive {
-                continue;
-            }
-            reject = false;
-            let qt = hnew / hs;
-            if theta <= THET && (QUOT1..=QUOT2).contains(&qt) {
-                // Keep h, the Jacobian and the LU factors.
-                h = hs;
-            } else {
-                h = hnew;
-                need_jac = theta > THET;
+                let (ak1, ak2, ak3) =
+                    (self.cont[n + i], self.cont[2 * n + i], self.cont[3 * n + i]);
+                let mut zz = [0.0; 3];
+                for (s, zs) in zz.iter_mut().enumerate() {
+                    let q = kc.c[s] * c3q;
+                    *zs = q * (ak1 + (q - c2m1) * (ak2 + (q - c1m1) * ak3));
+                    self.z[s * n + i] = *zs;
+                }
+                for r in 0..3 {
+                    self.w[r * n + i] =
+                        kc.ti[r][0] * zz[0] + kc.ti[r][1] * zz[1] + kc.ti[r][2] * zz[2];
+                }
             }
         }
+    }
+
+    /// The Newton iteration of the stage values, going on with its iteration count; a failed
+    /// iteration rejects the step.
+    fn solve_stages<P: OdeProblem>(
+        &mut self,
+        opts: &DriverOptions,
+        set: &RadauSettings,
+        st: &mut RadauState,
+        problem: &mut P,
+        hs: f64,
+        y: &[f64],
+        stats: &mut IntegratorStats,
+    ) -> Attempt<P::Error, usize> {
+        let (t, adaptive) = (st.t, set.adaptive);
+        match self.newton(
+            problem,
+            t,
+            y,
+            hs,
+            set.fnewt,
+            adaptive,
+            &mut st.faccon,
+            &mut st.theta,
+            stats,
+        ) {
+            // A failed evaluation at a collocation stage: reject and shrink (see erk.rs).
+            Err(error) => {
+                stats.rejected += 1;
+                st.reject = true;
+                st.h = hs * 0.25;
+                if !adaptive || st.h < h_min(opts, t) {
+                    return ControlFlow::Break(Some(Outcome::Problem { t, error }));
+                }
+                ControlFlow::Break(None)
+            }
+            Ok(Newton::Converged(it)) => ControlFlow::Continue(it),
+            Ok(Newton::Fail(fac)) => {
+                stats.rejected += 1;
+                st.reject = true;
+                if !adaptive {
+                    if st.caljac {
+                        return ControlFlow::Break(Some(Outcome::StepTooSmall { t, h: hs }));
+                    }
+                    st.need_jac = true;
+                    return ControlFlow::Break(None);
+                }
+                st.h = hs * fac;
+                st.need_jac = !st.caljac;
+                ControlFlow::Break(None)
+            }
+            Ok(Newton::NonFinite) => {
+                stats.rejected += 1;
+                if !adaptive {
+                    return ControlFlow::Break(Some(Outcome::NonFinite { t }));
+                }
+                st.reject = true;
+                st.h = hs * 0.25;
+                if st.h < h_min(opts, t) {
+                    return ControlFlow::Break(Some(Outcome::NonFinite { t }));
+                }
+                ControlFlow::Break(None)
+            }
+        }
+    }
+
+    /// The error test of an adaptive step, going on with the proposed next step size; a failed
+    /// test rejects the step.
+    fn control_error<P: OdeProblem>(
+        &mut self,
+        opts: &DriverOptions,
+        set: &RadauSettings,
+        st: &mut RadauState,
+        problem: &mut P,
+        hs: f64,
+        newt: usize,
+        y: &[f64],
+        stats: &mut IntegratorStats,
+    ) -> Attempt<P::Error, f64> {
+        let t = st.t;
+        let refine = st.first || st.reject;
+        let err = match self.estimate(problem, t, y, hs, set.atol, set.rtol, refine, stats) {
+            Ok(e) => e,
+            Err(error) => {
+                stats.rejected += 1;
+                st.reject = true;
+                st.h = hs * 0.25;
+                if st.h < h_min(opts, t) {
+                    return ControlFlow::Break(Some(Outcome::Problem { t, error }));
+                }
+                return ControlFlow::Break(None);
+            }
+        };
+        if !err.is_finite() {
+            stats.rejected += 1;
+            st.reject = true;
+            st.h = hs * 0.25;
+            if st.h < h_min(opts, t) {
+                return ControlFlow::Break(Some(Outcome::NonFinite { t }));
+            }
+            return ControlFlow::Break(None);
+        }
+        // Safety factor decreasing with the Newton iterations.
+        let fac = SAFE.min(SAFE * (1 + 2 * NIT) as f64 / (newt + 2 * NIT) as f64);
+        if err >= 1.0 {
+            stats.rejected += 1;
+            st.h = if st.first {
+                hs * 0.1
+            } else {
+                hs / st.ctl.rejected(err, fac)
+            };
+            st.reject = true;
+            st.need_jac = !st.caljac;
+            return ControlFlow::Break(None);
+        }
+        ControlFlow::Continue(st.ctl.accepted(err, hs, fac, opts.h_max, st.reject))
+    }
+
+    /// An accepted step: the new y and collocation polynomial, the `accepted` hook, f at the new
+    /// point and the next step size.
+    fn accept<P: OdeProblem>(
+        &mut self,
+        set: &RadauSettings,
+        st: &mut RadauState,
+        problem: &mut P,
+        hs: f64,
+        hnew: f64,
+        last: bool,
+        y: &mut [f64],
+        stats: &mut IntegratorStats,
+    ) -> Attempt<P::Error> {
+        let n = self.n;
+        let [c1, c2, _] = self.k.c;
+        let (c1m1, c2m1, c1mc2) = (c1 - 1.0, c2 - 1.0, c1 - c2);
+        // Accepted: new y and collocation polynomial.
+        st.first = false;
+        for i in 0..n {
+            let (z1, z2, z3) = (self.z[i], self.z[n + i], self.z[2 * n + i]);
+            y[i] += z3;
+            let cont1 = (z2 - z3) / c2m1;
+            let ak = (z1 - z2) / c1mc2;
+            let acont3 = (ak - z1 / c1) / c2;
+            let cont2 = (ak - cont1) / c1m1;
+            self.cont[i] = y[i];
+            self.cont[n + i] = cont1;
+            self.cont[2 * n + i] = cont2;
+            self.cont[3 * n + i] = cont2 - acont3;
+        }
+        st.hold = hs;
+        let tnew = if last {
+            set.t1
+        } else if let Some(hf) = set.fixed {
+            set.t0 + (st.ifixed + 1) as f64 * hf
+        } else {
+            st.t + hs
+        };
+        stats.steps += 1;
+        st.ifixed += 1;
+        let dense = RadauDense {
+            t1: tnew,
+            h: hs,
+            n,
+            cm: [c1m1, c2m1],
+            cont: &self.cont,
+        };
+        let acc = problem.accepted(st.t, tnew, y, &dense);
+        st.t = tnew;
+        let t = tnew;
+        match acc {
+            Err(error) => return ControlFlow::Break(Some(Outcome::Problem { t, error })),
+            Ok(Accept::Unchanged) | Ok(Accept::Changed) => {}
+        }
+        if last {
+            return ControlFlow::Break(Some(Outcome::Finished));
+        }
+        // f(t, y) at the new point (always needed: not FSAL), after a possible projection.
+        stats.rhs_evals += 1;
+        if let Err(error) = problem.rhs(t, y, &mut self.f0) {
+            return ControlFlow::Break(Some(Outcome::Problem { t, error }));
+        }
+        st.caljac = false;
+        if !set.adaptive {
+            return ControlFlow::Continue(());
+        }
+        st.reject = false;
+        let qt = hnew / hs;
+        if st.theta <= THET && (QUOT1..=QUOT2).contains(&qt) {
+            // Keep h, the Jacobian and the LU factors.
+            st.h = hs;
+        } else {
+            st.h = hnew;
+            st.need_jac = st.theta > THET;
+        }
+        ControlFlow::Continue(())
     }
 
     /// Error estimate (HNW II, IV.8, (8.19)-(8.20)): err = (gamma/h I - J)^{-1} (f0 + sum dd_i Z_i / h);

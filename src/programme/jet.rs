@@ -135,9 +135,7 @@ impl<C: Constraints, S: Scalar> Jet<C, S> {
 
     /// The generic passes over [`Constraints::eval`] (nv `Dual` passes per level and one `Dual2`
     /// pass); also the independent reference the specialised jets are tested against.
-    #[allow(clippy::too_many_lines)] // over 100 lines before the lint: to split, not to grow
     pub fn compute_generic(&mut self, c: &C, segments: &[Segment], t: S, q: &[S], v: &[S]) {
-        let nv = self.nv;
         crate::model::qdot(segments, q, v, &mut self.qd);
         for x in self.gdot.iter_mut() {
             *x = S::zero();
@@ -151,79 +149,10 @@ impl<C: Constraints, S: Scalar> Jet<C, S> {
         let t1 = Dual::from_re(t);
 
         if self.has[0] {
-            // B_i = g_q N e_j: seed q along N(q) e_j.
-            for j in 0..nv {
-                direction(segments, q, j, &mut self.dir);
-                for k in 0..q.len() {
-                    self.q1[k] = Dual::new(q[k], self.dir[k]);
-                }
-                c.eval(
-                    &mut self.ws1,
-                    t1,
-                    &self.q1,
-                    &self.v1,
-                    &self.a1,
-                    &mut self.out1,
-                );
-                for i in 0..self.levels.len() {
-                    if self.levels[i] == Level::Position {
-                        self.b[(i, j)] = self.out1[i].eps;
-                    }
-                }
-            }
-            // Second derivative along the line (t + s, q + s N v).
-            for k in 0..q.len() {
-                self.q2[k] = Dual2::new(q[k], self.qd[k], S::zero());
-            }
-            for (x, &y) in self.v2.iter_mut().zip(v) {
-                *x = Dual2::from_re(y);
-            }
-            for x in self.a2.iter_mut() {
-                *x = Dual2::from_re(S::zero());
-            }
-            let t2 = Dual2::new(t, S::one(), S::zero());
-            c.eval(
-                &mut self.ws2,
-                t2,
-                &self.q2,
-                &self.v2,
-                &self.a2,
-                &mut self.out2,
-            );
-            for i in 0..self.levels.len() {
-                if self.levels[i] == Level::Position {
-                    self.value[i] = self.out2[i].re;
-                    self.gdot[i] = self.out2[i].v1;
-                    self.gamma[i] = -self.out2[i].v2;
-                }
-            }
+            self.position_rows(c, segments, t, t1, q, v);
             // g_q (dN/dt) v, nonzero only on quaternion blocks: d/ds [1/2 (q + s qd) (x) (0, w)].
             if self.has_quaternion {
-                for x in self.dir.iter_mut() {
-                    *x = S::zero();
-                }
-                for seg in segments {
-                    if let Segment::Quaternion { q: iq, v: iv } = *seg {
-                        let r = lie::quat_rate(&self.qd[iq..iq + 4], &v[iv..iv + 3]);
-                        self.dir[iq..iq + 4].copy_from_slice(&r);
-                    }
-                }
-                for k in 0..q.len() {
-                    self.q1[k] = Dual::new(q[k], self.dir[k]);
-                }
-                c.eval(
-                    &mut self.ws1,
-                    t1,
-                    &self.q1,
-                    &self.v1,
-                    &self.a1,
-                    &mut self.out1,
-                );
-                for i in 0..self.levels.len() {
-                    if self.levels[i] == Level::Position {
-                        self.gamma[i] -= self.out1[i].eps;
-                    }
-                }
+                self.position_rate_term(c, segments, t1, q, v);
             }
         }
 
@@ -233,65 +162,131 @@ impl<C: Constraints, S: Scalar> Jet<C, S> {
             }
         }
         if self.has[1] {
-            // B_i = df/dv_j.
-            for j in 0..nv {
-                self.v1[j] = Dual::new(v[j], S::one());
-                c.eval(
-                    &mut self.ws1,
-                    t1,
-                    &self.q1,
-                    &self.v1,
-                    &self.a1,
-                    &mut self.out1,
-                );
-                self.v1[j] = Dual::from_re(v[j]);
-                for i in 0..self.levels.len() {
-                    if self.levels[i] == Level::Velocity {
-                        self.b[(i, j)] = self.out1[i].eps;
-                    }
-                }
-            }
-            // f_t + f_q N v.
-            for k in 0..q.len() {
-                self.q1[k] = Dual::new(q[k], self.qd[k]);
-            }
-            c.eval(
-                &mut self.ws1,
-                Dual::new(t, S::one()),
-                &self.q1,
-                &self.v1,
-                &self.a1,
-                &mut self.out1,
-            );
-            for i in 0..self.levels.len() {
-                if self.levels[i] == Level::Velocity {
-                    self.value[i] = self.out1[i].re;
-                    self.gamma[i] = -self.out1[i].eps;
-                }
-            }
-            for k in 0..q.len() {
-                self.q1[k] = Dual::from_re(q[k]);
-            }
+            self.velocity_rows(c, t, t1, q, v);
         }
         if self.has[2] {
-            // h linear in a: B_i = dh/da_j, gamma_i = -h(t, q, v, 0).
-            for j in 0..nv {
-                self.a1[j] = Dual::new(S::zero(), S::one());
-                c.eval(
-                    &mut self.ws1,
-                    t1,
-                    &self.q1,
-                    &self.v1,
-                    &self.a1,
-                    &mut self.out1,
-                );
-                self.a1[j] = Dual::from_re(S::zero());
-                for i in 0..self.levels.len() {
-                    if self.levels[i] == Level::Acceleration {
-                        self.b[(i, j)] = self.out1[i].eps;
-                        self.value[i] = self.out1[i].re;
-                        self.gamma[i] = -self.out1[i].re;
-                    }
+            self.acceleration_rows(c, t1);
+        }
+    }
+
+    /// One `Dual` pass of the constraints at (t1, q1, v1, a1) into `out1`.
+    fn eval1(&mut self, c: &C, t1: Dual<S>) {
+        c.eval(
+            &mut self.ws1,
+            t1,
+            &self.q1,
+            &self.v1,
+            &self.a1,
+            &mut self.out1,
+        );
+    }
+
+    /// Position rows: B_i = g_q N, the value, dg/dt and the second derivative along the line
+    /// (t + s, q + s N v) into gamma.
+    fn position_rows(&mut self, c: &C, segments: &[Segment], t: S, t1: Dual<S>, q: &[S], v: &[S]) {
+        // B_i = g_q N e_j: seed q along N(q) e_j.
+        for j in 0..self.nv {
+            direction(segments, q, j, &mut self.dir);
+            for k in 0..q.len() {
+                self.q1[k] = Dual::new(q[k], self.dir[k]);
+            }
+            self.eval1(c, t1);
+            for i in 0..self.levels.len() {
+                if self.levels[i] == Level::Position {
+                    self.b[(i, j)] = self.out1[i].eps;
+                }
+            }
+        }
+        // Second derivative along the line (t + s, q + s N v).
+        for k in 0..q.len() {
+            self.q2[k] = Dual2::new(q[k], self.qd[k], S::zero());
+        }
+        for (x, &y) in self.v2.iter_mut().zip(v) {
+            *x = Dual2::from_re(y);
+        }
+        for x in self.a2.iter_mut() {
+            *x = Dual2::from_re(S::zero());
+        }
+        let t2 = Dual2::new(t, S::one(), S::zero());
+        c.eval(
+            &mut self.ws2,
+            t2,
+            &self.q2,
+            &self.v2,
+            &self.a2,
+            &mut self.out2,
+        );
+        for i in 0..self.levels.len() {
+            if self.levels[i] == Level::Position {
+                self.value[i] = self.out2[i].re;
+                self.gdot[i] = self.out2[i].v1;
+                self.gamma[i] = -self.out2[i].v2;
+            }
+        }
+    }
+
+    /// Position rows: gamma_i -= g_q (dN/dt) v (quaternion blocks only).
+    fn position_rate_term(&mut self, c: &C, segments: &[Segment], t1: Dual<S>, q: &[S], v: &[S]) {
+        for x in self.dir.iter_mut() {
+            *x = S::zero();
+        }
+        for seg in segments {
+            if let Segment::Quaternion { q: iq, v: iv } = *seg {
+                let r = lie::quat_rate(&self.qd[iq..iq + 4], &v[iv..iv + 3]);
+                self.dir[iq..iq + 4].copy_from_slice(&r);
+            }
+        }
+        for k in 0..q.len() {
+            self.q1[k] = Dual::new(q[k], self.dir[k]);
+        }
+        self.eval1(c, t1);
+        for i in 0..self.levels.len() {
+            if self.levels[i] == Level::Position {
+                self.gamma[i] -= self.out1[i].eps;
+            }
+        }
+    }
+
+    /// Velocity rows: B_i = df/dv, the value and gamma_i = -(f_t + f_q N v); q1 is left at q.
+    fn velocity_rows(&mut self, c: &C, t: S, t1: Dual<S>, q: &[S], v: &[S]) {
+        // B_i = df/dv_j.
+        for j in 0..self.nv {
+            self.v1[j] = Dual::new(v[j], S::one());
+            self.eval1(c, t1);
+            self.v1[j] = Dual::from_re(v[j]);
+            for i in 0..self.levels.len() {
+                if self.levels[i] == Level::Velocity {
+                    self.b[(i, j)] = self.out1[i].eps;
+                }
+            }
+        }
+        // f_t + f_q N v.
+        for k in 0..q.len() {
+            self.q1[k] = Dual::new(q[k], self.qd[k]);
+        }
+        self.eval1(c, Dual::new(t, S::one()));
+        for i in 0..self.levels.len() {
+            if self.levels[i] == Level::Velocity {
+                self.value[i] = self.out1[i].re;
+                self.gamma[i] = -self.out1[i].eps;
+            }
+        }
+        for k in 0..q.len() {
+            self.q1[k] = Dual::from_re(q[k]);
+        }
+    }
+
+    /// Acceleration rows, h linear in a: B_i = dh/da_j, gamma_i = -h(t, q, v, 0).
+    fn acceleration_rows(&mut self, c: &C, t1: Dual<S>) {
+        for j in 0..self.nv {
+            self.a1[j] = Dual::new(S::zero(), S::one());
+            self.eval1(c, t1);
+            self.a1[j] = Dual::from_re(S::zero());
+            for i in 0..self.levels.len() {
+                if self.levels[i] == Level::Acceleration {
+                    self.b[(i, j)] = self.out1[i].eps;
+                    self.value[i] = self.out1[i].re;
+                    self.gamma[i] = -self.out1[i].re;
                 }
             }
         }

@@ -126,7 +126,7 @@ pub(crate) struct MotionOde<'a, M: Model, C: Constraints> {
     last_sample_t: f64,
     budget: StepBudget,
     /// Relative degrees and t0 decoupling row norms of a servo programme (actuators), else None.
-    servo_degrees: Option<(Vec<usize>, Vec<f64>, Option<crate::servo::Reduction>)>,
+    servo_degrees: Option<ServoDegrees>,
     /// The between-evaluations row-gradient monitor ([`DipWatch`]).
     dip: DipWatch,
 }
@@ -236,14 +236,167 @@ fn chord_min(a: &[f64], b: &[f64]) -> Option<(f64, f64)> {
     Some((s, m))
 }
 
+/// The servo-constraints' structure at t0: relative degrees, row norms of B, reduction.
+type ServoDegrees = (Vec<usize>, Vec<f64>, Option<crate::servo::Reduction>);
+
+/// The initial state of a run while [`MotionOde::new`] checks and assembles it.
+struct InitialState<'a, M: Model, C: Constraints> {
+    segments: Vec<Segment>,
+    q: Vec<f64>,
+    v: Vec<f64>,
+    levels: Vec<Level>,
+    proj: Projector<'a, M, C>,
+    /// Residuals and rates of the rows.
+    res: Vec<f64>,
+    rate: Vec<f64>,
+    initial_correction: Option<InitialCorrection>,
+    servo_degrees: Option<ServoDegrees>,
+}
+
+impl<M: Model, C: Constraints> InitialState<'_, M, C> {
+    /// The largest residual of a state row at (t0, q, v) and its row (position rows: residual or
+    /// rate; a NaN wins).
+    fn worst(&mut self, t0: f64) -> (f64, usize) {
+        let (levels, res, rate) = (&self.levels, &mut self.res, &mut self.rate);
+        self.proj.residuals(t0, &self.q, &self.v, res, rate);
+        let mut w = (0.0f64, 0usize);
+        for i in 0..levels.len() {
+            if !is_state_row(levels[i]) {
+                continue;
+            }
+            let r = if levels[i] == Level::Position {
+                res[i].abs().max(rate[i].abs())
+            } else {
+                res[i].abs()
+            };
+            if r > w.0 || r.is_nan() {
+                w = (r, i);
+            }
+        }
+        w
+    }
+
+    /// Consistency of the rows (2.5): refuse an inconsistent state, or assemble it when the
+    /// settings ask for it.
+    fn assemble_rows(
+        &mut self,
+        t0: f64,
+        names: &[String],
+        settings: &Settings,
+    ) -> Result<(), ReturnCode> {
+        let (r0, i0) = self.worst(t0);
+        if r0 > settings.consistency_tol || r0.is_nan() {
+            if !settings.assemble {
+                return Err(ReturnCode::InconsistentInitialState {
+                    row: names[i0].clone(),
+                    residual: r0,
+                });
+            }
+            let rep = self.proj.project(
+                t0,
+                &mut self.q,
+                &mut self.v,
+                settings.consistency_tol * 1e-3,
+                50,
+            );
+            let (r1, i1) = self.worst(t0);
+            if r1 > settings.consistency_tol || r1.is_nan() {
+                return Err(ReturnCode::InconsistentInitialState {
+                    row: format!("{} (assembly failed)", names[i1]),
+                    residual: r1,
+                });
+            }
+            self.initial_correction = Some(InitialCorrection {
+                position: rep.dq,
+                velocity: rep.dv,
+            });
+        }
+        Ok(())
+    }
+
+    /// The hidden constraints of a servo programme (y^(k), k < r) must hold at t0 too.
+    fn assemble_hidden(
+        &mut self,
+        problem: &Problem<M, C>,
+        settings: &Settings,
+    ) -> Result<(), ReturnCode> {
+        let (m, c, t0) = (&problem.model, &problem.constraints, problem.t0);
+        if let (Some((d, _, r)), Some(act)) = (&self.servo_degrees, c.actuation()) {
+            let servo = crate::servo::Servo::new(m, c, act).reduced(r.as_ref());
+            let hidden_worst = |q: &[f64], v: &[f64]| -> (f64, usize) {
+                let mut h = vec![];
+                if servo.hidden(t0, q, v, d, &mut h).is_err() {
+                    return (f64::NAN, 0);
+                }
+                h.iter().enumerate().fold((0.0f64, 0), |w, (k, x)| {
+                    if x.abs() > w.0 || x.is_nan() {
+                        (x.abs(), k)
+                    } else {
+                        w
+                    }
+                })
+            };
+            let names = servo.hidden_names(d);
+            let (r0, k0) = hidden_worst(&self.q, &self.v);
+            if r0 > settings.consistency_tol || r0.is_nan() {
+                if !settings.assemble {
+                    return Err(ReturnCode::InconsistentInitialState {
+                        row: names[k0].1.clone(),
+                        residual: r0,
+                    });
+                }
+                let rep = self.proj.project(
+                    t0,
+                    &mut self.q,
+                    &mut self.v,
+                    settings.consistency_tol * 1e-3,
+                    50,
+                );
+                let (r1, k1) = hidden_worst(&self.q, &self.v);
+                if r1 > settings.consistency_tol || r1.is_nan() {
+                    return Err(ReturnCode::InconsistentInitialState {
+                        row: format!("{} (assembly failed)", names[k1].1),
+                        residual: r1,
+                    });
+                }
+                self.initial_correction = Some(InitialCorrection {
+                    position: rep.dq,
+                    velocity: rep.dv,
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
 impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
     /// Check and (optionally) assemble the initial state, emit the first sample.
-    #[allow(clippy::too_many_lines)] // over 100 lines before the lint: to split, not to grow
     pub fn new(
         problem: &'a Problem<M, C>,
         settings: &'a Settings,
         sink: &'a mut dyn SampleSink,
     ) -> Result<Self, ReturnCode> {
+        let t0 = problem.t0;
+        let init = Self::initial_state(problem, settings)?;
+        let mut me = Self::from_initial(problem, settings, sink, init);
+        me.acc_q = me.q.clone();
+        me.acc_v = me.v.clone();
+        let (q0, v0) = (me.q.clone(), me.v.clone());
+        if let Err(stop) = me.emit(t0, &q0, &v0) {
+            return Err(me.code_of(stop, t0));
+        }
+        me.dip.step_done(t0, 0.0);
+        me.monitor(t0).map_err(|stop| me.code_of(stop, t0))?;
+        Ok(me)
+    }
+
+    /// The checked initial state: dimensions and finiteness of (q0, v0), q0 normalized, the
+    /// servo-constraints' structure at t0, consistency (2.5) of the rows and of the hidden
+    /// constraints, assembled when the settings ask for it.
+    fn initial_state(
+        problem: &'a Problem<M, C>,
+        settings: &'a Settings,
+    ) -> Result<InitialState<'a, M, C>, ReturnCode> {
         let m = &problem.model;
         let c = &problem.constraints;
         let (nq, nv, s) = (m.nq(), m.nv(), c.rows().len());
@@ -263,7 +416,7 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
         let segments = m.segments().to_vec();
         let mut q = problem.q0.clone();
         model::normalize(&segments, &mut q);
-        let mut v = problem.v0.clone();
+        let v = problem.v0.clone();
         let levels: Vec<Level> = c.rows().iter().map(|r| r.level).collect();
         let names: Vec<String> = c.rows().iter().map(|r| r.name.clone()).collect();
         let mut proj = Projector::new(m, c);
@@ -282,95 +435,45 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
         if let Some((d, _, r)) = &servo_degrees {
             proj.set_servo(d.clone(), r.clone());
         }
-
-        // Consistency of the initial state (2.5).
-        let mut res = vec![0.0; s];
-        let mut rate = vec![0.0; s];
-        let worst = |proj: &mut Projector<'a, M, C>,
-                     q: &[f64],
-                     v: &[f64],
-                     res: &mut [f64],
-                     rate: &mut [f64]| {
-            proj.residuals(t0, q, v, res, rate);
-            let mut w = (0.0f64, 0usize);
-            for i in 0..s {
-                if !is_state_row(levels[i]) {
-                    continue;
-                }
-                let r = if levels[i] == Level::Position {
-                    res[i].abs().max(rate[i].abs())
-                } else {
-                    res[i].abs()
-                };
-                if r > w.0 || r.is_nan() {
-                    w = (r, i);
-                }
-            }
-            w
+        let mut init = InitialState {
+            segments,
+            q,
+            v,
+            levels,
+            proj,
+            // Consistency of the initial state (2.5).
+            res: vec![0.0; s],
+            rate: vec![0.0; s],
+            initial_correction: None,
+            servo_degrees,
         };
-        let (r0, i0) = worst(&mut proj, &q, &v, &mut res, &mut rate);
-        let mut initial_correction = None;
-        if r0 > settings.consistency_tol || r0.is_nan() {
-            if !settings.assemble {
-                return Err(ReturnCode::InconsistentInitialState {
-                    row: names[i0].clone(),
-                    residual: r0,
-                });
-            }
-            let rep = proj.project(t0, &mut q, &mut v, settings.consistency_tol * 1e-3, 50);
-            let (r1, i1) = worst(&mut proj, &q, &v, &mut res, &mut rate);
-            if r1 > settings.consistency_tol || r1.is_nan() {
-                return Err(ReturnCode::InconsistentInitialState {
-                    row: format!("{} (assembly failed)", names[i1]),
-                    residual: r1,
-                });
-            }
-            initial_correction = Some(InitialCorrection {
-                position: rep.dq,
-                velocity: rep.dv,
-            });
-        }
+        init.assemble_rows(t0, &names, settings)?;
+        init.assemble_hidden(problem, settings)?;
+        Ok(init)
+    }
 
-        // The hidden constraints of a servo programme (y^(k), k < r) must hold at t0 too.
-        if let (Some((d, _, r)), Some(act)) = (&servo_degrees, c.actuation()) {
-            let servo = crate::servo::Servo::new(m, c, act).reduced(r.as_ref());
-            let hidden_worst = |q: &[f64], v: &[f64]| -> (f64, usize) {
-                let mut h = vec![];
-                if servo.hidden(t0, q, v, d, &mut h).is_err() {
-                    return (f64::NAN, 0);
-                }
-                h.iter().enumerate().fold((0.0f64, 0), |w, (k, x)| {
-                    if x.abs() > w.0 || x.is_nan() {
-                        (x.abs(), k)
-                    } else {
-                        w
-                    }
-                })
-            };
-            let names = servo.hidden_names(d);
-            let (r0, k0) = hidden_worst(&q, &v);
-            if r0 > settings.consistency_tol || r0.is_nan() {
-                if !settings.assemble {
-                    return Err(ReturnCode::InconsistentInitialState {
-                        row: names[k0].1.clone(),
-                        residual: r0,
-                    });
-                }
-                let rep = proj.project(t0, &mut q, &mut v, settings.consistency_tol * 1e-3, 50);
-                let (r1, k1) = hidden_worst(&q, &v);
-                if r1 > settings.consistency_tol || r1.is_nan() {
-                    return Err(ReturnCode::InconsistentInitialState {
-                        row: format!("{} (assembly failed)", names[k1].1),
-                        residual: r1,
-                    });
-                }
-                initial_correction = Some(InitialCorrection {
-                    position: rep.dq,
-                    velocity: rep.dv,
-                });
-            }
-        }
-
+    /// The ODE at the checked initial state, with its evaluator and empty monitors.
+    fn from_initial(
+        problem: &'a Problem<M, C>,
+        settings: &'a Settings,
+        sink: &'a mut dyn SampleSink,
+        init: InitialState<'a, M, C>,
+    ) -> Self {
+        let m = &problem.model;
+        let c = &problem.constraints;
+        let (nq, nv, s) = (m.nq(), m.nv(), c.rows().len());
+        let t0 = problem.t0;
+        let InitialState {
+            segments,
+            q,
+            v,
+            levels,
+            proj,
+            res,
+            rate,
+            initial_correction,
+            servo_degrees,
+        } = init;
         let mut ev = Evaluator::new(m, c);
         if let Some((d, b, r)) = &servo_degrees {
             ev.set_servo(d.clone(), b.clone(), r.clone());
@@ -381,7 +484,7 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
             DriftControl::Baumgarte { alpha, beta } => Some(Baumgarte { alpha, beta }),
             _ => None,
         };
-        let mut me = MotionOde {
+        MotionOde {
             problem,
             settings,
             ev,
@@ -432,16 +535,7 @@ impl<'a, M: Model, C: Constraints> MotionOde<'a, M, C> {
                 asked: std::cell::Cell::new(None),
             },
             servo_degrees,
-        };
-        me.acc_q = me.q.clone();
-        me.acc_v = me.v.clone();
-        let (q0, v0) = (me.q.clone(), me.v.clone());
-        if let Err(stop) = me.emit(t0, &q0, &v0) {
-            return Err(me.code_of(stop, t0));
         }
-        me.dip.step_done(t0, 0.0);
-        me.monitor(t0).map_err(|stop| me.code_of(stop, t0))?;
-        Ok(me)
     }
 
     /// y(t0) = (0, v0).

@@ -342,299 +342,385 @@ fn finite(x: &[f64]) -> bool {
     x.iter().all(|v| v.is_finite())
 }
 
-impl Model {
-    /// Validate and build. Bodies must be listed parents first; names of bodies and joints must be
-    /// unique and not [`WORLD`].
-    #[allow(clippy::too_many_lines)] // over 100 lines before the lint: to split, not to grow
-    pub fn new(specs: &[BodySpec], fields: Fields) -> Result<Model, ModelError> {
-        let berr = |b: &str, m: String| ModelError::Body {
-            body: b.to_string(),
-            msg: m,
-        };
-        let jerr = |b: &str, j: &str, m: String| ModelError::Joint {
-            body: b.to_string(),
-            joint: j.to_string(),
-            msg: m,
-        };
-        if !finite(&fields.gravity) {
-            return Err(ModelError::Fields("gravity is not finite".into()));
+fn berr(b: &str, m: String) -> ModelError {
+    ModelError::Body {
+        body: b.to_string(),
+        msg: m,
+    }
+}
+
+fn jerr(b: &str, j: &str, m: String) -> ModelError {
+    ModelError::Joint {
+        body: b.to_string(),
+        joint: j.to_string(),
+        msg: m,
+    }
+}
+
+/// Gravity and attractors must be finite.
+fn check_fields(fields: &Fields) -> Result<(), ModelError> {
+    if !finite(&fields.gravity) {
+        return Err(ModelError::Fields("gravity is not finite".into()));
+    }
+    for a in &fields.attractors {
+        if !finite(&a.point) || !a.mu.is_finite() {
+            return Err(ModelError::Fields(
+                "attractor point or mu is not finite".into(),
+            ));
         }
-        for a in &fields.attractors {
-            if !finite(&a.point) || !a.mu.is_finite() {
-                return Err(ModelError::Fields(
-                    "attractor point or mu is not finite".into(),
-                ));
-            }
+    }
+    Ok(())
+}
+
+/// A body's placement: normalised quaternion (w, x, y, z), rotation (body -> parent), position.
+type Placement = ([f64; 4], Matrix3<f64>, Vector3<f64>);
+
+/// A body's placement, checked.
+fn placement(name: &str, s: &BodySpec) -> Result<Placement, ModelError> {
+    if !finite(&s.pos) || !finite(&s.quat) {
+        return Err(berr(name, "placement is not finite".into()));
+    }
+    let qn = s.quat.iter().map(|x| x * x).sum::<f64>().sqrt();
+    if qn < 1e-9 {
+        return Err(berr(name, "placement quaternion is zero".into()));
+    }
+    let quat = [
+        s.quat[0] / qn,
+        s.quat[1] / qn,
+        s.quat[2] / qn,
+        s.quat[3] / qn,
+    ];
+    let rot = rot_quat(quat[0], quat[1], quat[2], quat[3]);
+    let pos = Vector3::from(s.pos);
+    Ok((quat, rot, pos))
+}
+
+/// A body's mass properties: the inertia about the CoM and the CoM, checked.
+fn mass_properties(name: &str, s: &BodySpec) -> Result<(Matrix3<f64>, Vector3<f64>), ModelError> {
+    let inertia = Matrix3::from_row_slice(&s.inertia.concat());
+    let com = Vector3::from(s.com);
+    if !s.mass.is_finite() || !finite(&s.com) || !finite(inertia.as_slice()) {
+        return Err(berr(name, "mass properties are not finite".into()));
+    }
+    if s.massless {
+        if s.mass != 0.0 || inertia.iter().any(|x| *x != 0.0) {
+            return Err(berr(
+                name,
+                "flagged massless but mass or inertia is nonzero".into(),
+            ));
         }
-        let mut bodies: Vec<Body> = Vec::with_capacity(specs.len());
-        let mut joints: Vec<Joint> = Vec::new();
-        let mut links: Vec<Link> = Vec::new();
-        let mut body_link = Vec::with_capacity(specs.len());
-        let (mut nq, mut nv) = (0usize, 0usize);
-        let mut q_names = Vec::new();
-        let mut v_names = Vec::new();
-        for s in specs {
-            let name = s.name.as_str();
-            if name.is_empty() || name == WORLD {
-                return Err(berr(
+    } else {
+        if s.mass <= 0.0 {
+            return Err(berr(
+                name,
+                format!(
+                    "mass must be positive, got {} (set massless = true for a massless body)",
+                    s.mass
+                ),
+            ));
+        }
+        check_inertia(&inertia).map_err(|m| berr(name, m))?;
+    }
+    Ok((inertia, com))
+}
+
+/// The validated kind of joint `k` of body `s` (`parent`: its parent body, `None` for the world).
+fn joint_kind(
+    name: &str,
+    s: &BodySpec,
+    parent: Option<usize>,
+    k: usize,
+    js: &JointSpec,
+) -> Result<JointKind, ModelError> {
+    let jn = js.name.as_str();
+    if !finite(&js.anchor)
+        || !js.stiffness.is_finite()
+        || !js.spring_ref.is_finite()
+        || !js.damping.is_finite()
+        || !js.armature.is_finite()
+        || !js.reference.is_finite()
+    {
+        return Err(jerr(name, jn, "parameters are not finite".into()));
+    }
+    if js.stiffness < 0.0 || js.damping < 0.0 || js.armature < 0.0 {
+        return Err(jerr(
+            name,
+            jn,
+            "stiffness, damping and armature must be >= 0".into(),
+        ));
+    }
+    let unit = |a: &[f64; 3]| -> Result<Vector3<f64>, ModelError> {
+        let u = Vector3::from(*a);
+        let n = u.norm();
+        if !n.is_finite() || n < 1e-12 {
+            return Err(jerr(name, jn, format!("axis {a:?} is zero or not finite")));
+        }
+        Ok(u / n)
+    };
+    let kind = match &js.kind {
+        JointType::Hinge { axis } => JointKind::Hinge(unit(axis)?),
+        JointType::Slide { axis } => JointKind::Slide(unit(axis)?),
+        JointType::Ball => JointKind::Ball,
+        JointType::Free => {
+            if parent.is_some() || s.joints.len() != 1 || k != 0 {
+                return Err(jerr(
                     name,
-                    format!("invalid body name (empty or '{WORLD}')"),
+                    jn,
+                    "a free joint must be the only joint of a child of the world".into(),
                 ));
             }
-            if bodies.iter().any(|b| b.name == name) {
-                return Err(berr(name, "duplicate body name".into()));
+            if js.anchor != [0.0; 3] {
+                return Err(jerr(name, jn, "a free joint has no anchor".into()));
             }
-            let parent = if s.parent == WORLD {
-                None
-            } else {
-                match bodies.iter().position(|b| b.name == s.parent) {
-                    Some(p) => Some(p),
-                    None => {
-                        return Err(berr(
-                            name,
-                            format!(
-                            "unknown parent '{}' (parents must be defined before their children)",
-                            s.parent
-                        ),
-                        ))
-                    }
-                }
-            };
-            // placement
-            if !finite(&s.pos) || !finite(&s.quat) {
-                return Err(berr(name, "placement is not finite".into()));
+            JointKind::Free
+        }
+    };
+    if js.stiffness != 0.0 && matches!(kind, JointKind::Ball | JointKind::Free) {
+        return Err(jerr(
+            name,
+            jn,
+            "springs are supported on hinge and slide joints only".into(),
+        ));
+    }
+    if js.reference != 0.0 && matches!(kind, JointKind::Ball | JointKind::Free) {
+        return Err(jerr(
+            name,
+            jn,
+            "a reference position (ref) is supported on hinge and slide joints only".into(),
+        ));
+    }
+    Ok(kind)
+}
+
+/// The dof tree: within a joint, dof k follows dof k-1; the first dof of a joint follows the
+/// last dof of the nearest ancestor link that has a joint. Returns (dof_parent, dof_link).
+fn dof_tree(links: &[Link], joints: &[Joint], nv: usize) -> (Vec<Option<usize>>, Vec<usize>) {
+    let mut dof_parent = vec![None; nv];
+    let mut dof_link = vec![0; nv];
+    let mut last_dof: Vec<Option<usize>> = vec![None; links.len()];
+    for (i, link) in links.iter().enumerate() {
+        let inherited = link.parent.and_then(|p| last_dof[p]);
+        last_dof[i] = inherited;
+        if let Some(j) = link.joint {
+            let jt: &Joint = &joints[j];
+            let mut prev = inherited;
+            for k in 0..jt.nv {
+                dof_parent[jt.iv + k] = prev;
+                dof_link[jt.iv + k] = i;
+                prev = Some(jt.iv + k);
             }
-            let qn = s.quat.iter().map(|x| x * x).sum::<f64>().sqrt();
-            if qn < 1e-9 {
-                return Err(berr(name, "placement quaternion is zero".into()));
-            }
-            let quat = [
-                s.quat[0] / qn,
-                s.quat[1] / qn,
-                s.quat[2] / qn,
-                s.quat[3] / qn,
-            ];
-            let rot = rot_quat(quat[0], quat[1], quat[2], quat[3]);
-            let pos = Vector3::from(s.pos);
-            // mass properties
-            let inertia = Matrix3::from_row_slice(&s.inertia.concat());
-            let com = Vector3::from(s.com);
-            if !s.mass.is_finite() || !finite(&s.com) || !finite(inertia.as_slice()) {
-                return Err(berr(name, "mass properties are not finite".into()));
-            }
-            if s.massless {
-                if s.mass != 0.0 || inertia.iter().any(|x| *x != 0.0) {
-                    return Err(berr(
-                        name,
-                        "flagged massless but mass or inertia is nonzero".into(),
-                    ));
-                }
-            } else {
-                if s.mass <= 0.0 {
+            last_dof[i] = prev;
+        }
+    }
+    (dof_parent, dof_link)
+}
+
+/// A [`Model`] under construction: the bodies, joints and links so far.
+#[derive(Default)]
+struct ModelBuilder {
+    bodies: Vec<Body>,
+    joints: Vec<Joint>,
+    links: Vec<Link>,
+    body_link: Vec<usize>,
+    nq: usize,
+    nv: usize,
+    q_names: Vec<String>,
+    v_names: Vec<String>,
+}
+
+impl ModelBuilder {
+    /// Validate a body (its parent listed before it) and add it with its joints and links.
+    fn add_body(&mut self, s: &BodySpec) -> Result<(), ModelError> {
+        let name = s.name.as_str();
+        if name.is_empty() || name == WORLD {
+            return Err(berr(
+                name,
+                format!("invalid body name (empty or '{WORLD}')"),
+            ));
+        }
+        if self.bodies.iter().any(|b| b.name == name) {
+            return Err(berr(name, "duplicate body name".into()));
+        }
+        let parent = if s.parent == WORLD {
+            None
+        } else {
+            match self.bodies.iter().position(|b| b.name == s.parent) {
+                Some(p) => Some(p),
+                None => {
                     return Err(berr(
                         name,
                         format!(
-                            "mass must be positive, got {} (set massless = true for a massless body)",
-                            s.mass
+                            "unknown parent '{}' (parents must be defined before their children)",
+                            s.parent
                         ),
-                    ));
-                }
-                check_inertia(&inertia).map_err(|m| berr(name, m))?;
-            }
-            if !s.gravcomp.is_finite() {
-                return Err(berr(name, "gravcomp is not finite".into()));
-            }
-            // joints
-            let j0 = joints.len();
-            let b = bodies.len();
-            for (k, js) in s.joints.iter().enumerate() {
-                let jn = js.name.as_str();
-                if jn.is_empty() {
-                    return Err(jerr(name, jn, "empty joint name".into()));
-                }
-                if joints.iter().any(|j| j.name == jn) {
-                    return Err(jerr(name, jn, "duplicate joint name".into()));
-                }
-                if !finite(&js.anchor)
-                    || !js.stiffness.is_finite()
-                    || !js.spring_ref.is_finite()
-                    || !js.damping.is_finite()
-                    || !js.armature.is_finite()
-                    || !js.reference.is_finite()
-                {
-                    return Err(jerr(name, jn, "parameters are not finite".into()));
-                }
-                if js.stiffness < 0.0 || js.damping < 0.0 || js.armature < 0.0 {
-                    return Err(jerr(
-                        name,
-                        jn,
-                        "stiffness, damping and armature must be >= 0".into(),
-                    ));
-                }
-                let unit = |a: &[f64; 3]| -> Result<Vector3<f64>, ModelError> {
-                    let u = Vector3::from(*a);
-                    let n = u.norm();
-                    if !n.is_finite() || n < 1e-12 {
-                        return Err(jerr(name, jn, format!("axis {a:?} is zero or not finite")));
-                    }
-                    Ok(u / n)
-                };
-                let kind = match &js.kind {
-                    JointType::Hinge { axis } => JointKind::Hinge(unit(axis)?),
-                    JointType::Slide { axis } => JointKind::Slide(unit(axis)?),
-                    JointType::Ball => JointKind::Ball,
-                    JointType::Free => {
-                        if parent.is_some() || s.joints.len() != 1 || k != 0 {
-                            return Err(jerr(
-                                name,
-                                jn,
-                                "a free joint must be the only joint of a child of the world"
-                                    .into(),
-                            ));
-                        }
-                        if js.anchor != [0.0; 3] {
-                            return Err(jerr(name, jn, "a free joint has no anchor".into()));
-                        }
-                        JointKind::Free
-                    }
-                };
-                if js.stiffness != 0.0 && matches!(kind, JointKind::Ball | JointKind::Free) {
-                    return Err(jerr(
-                        name,
-                        jn,
-                        "springs are supported on hinge and slide joints only".into(),
-                    ));
-                }
-                if js.reference != 0.0 && matches!(kind, JointKind::Ball | JointKind::Free) {
-                    return Err(jerr(
-                        name,
-                        jn,
-                        "a reference position (ref) is supported on hinge and slide joints only"
-                            .into(),
-                    ));
-                }
-                let (jnq, jnv) = (js.kind.nq(), js.kind.nv());
-                match kind {
-                    JointKind::Hinge(_) | JointKind::Slide(_) => {
-                        q_names.push(jn.to_string());
-                        v_names.push(jn.to_string());
-                    }
-                    JointKind::Ball => {
-                        for e in ["qw", "qx", "qy", "qz"] {
-                            q_names.push(format!("{jn}.{e}"));
-                        }
-                        for e in ["wx", "wy", "wz"] {
-                            v_names.push(format!("{jn}.{e}"));
-                        }
-                    }
-                    JointKind::Free => {
-                        for e in ["x", "y", "z", "qw", "qx", "qy", "qz"] {
-                            q_names.push(format!("{jn}.{e}"));
-                        }
-                        for e in ["vx", "vy", "vz", "wx", "wy", "wz"] {
-                            v_names.push(format!("{jn}.{e}"));
-                        }
-                    }
-                }
-                joints.push(Joint {
-                    name: jn.to_string(),
-                    body: b,
-                    kind,
-                    anchor: Vector3::from(js.anchor),
-                    stiffness: js.stiffness,
-                    spring_ref: js.spring_ref,
-                    damping: js.damping,
-                    armature: js.armature,
-                    reference: js.reference,
-                    iq: nq,
-                    iv: nv,
-                    nq: jnq,
-                    nv: jnv,
-                });
-                nq += jnq;
-                nv += jnv;
-            }
-            // links
-            let parent_link = parent.map(|p| body_link[p]);
-            let place = if matches!(s.joints.first().map(|j| &j.kind), Some(JointType::Free)) {
-                Xform::identity() // q of the free joint is the world pose
-            } else {
-                Xform::from_pose(rot, pos)
-            };
-            let inertia6 = if s.massless {
-                None
-            } else {
-                Some(Inertia::from_com(s.mass, com, inertia))
-            };
-            let nj = s.joints.len();
-            if nj == 0 {
-                links.push(Link {
-                    parent: parent_link,
-                    place,
-                    joint: None,
-                    inertia: inertia6,
-                });
-            } else {
-                for k in 0..nj {
-                    let par = if k == 0 {
-                        parent_link
-                    } else {
-                        Some(links.len() - 1)
-                    };
-                    links.push(Link {
-                        parent: par,
-                        place: if k == 0 { place } else { Xform::identity() },
-                        joint: Some(j0 + k),
-                        inertia: if k + 1 == nj { inertia6 } else { None },
-                    });
+                    ))
                 }
             }
-            body_link.push(links.len() - 1);
-            bodies.push(Body {
-                name: name.to_string(),
-                parent,
-                pos,
-                rot,
-                quat,
-                mass: s.mass,
-                com,
-                inertia,
-                massless: s.massless,
-                gravcomp: s.gravcomp,
-                joints: j0..joints.len(),
+        };
+        // placement
+        let (quat, rot, pos) = placement(name, s)?;
+        // mass properties
+        let (inertia, com) = mass_properties(name, s)?;
+        if !s.gravcomp.is_finite() {
+            return Err(berr(name, "gravcomp is not finite".into()));
+        }
+        // joints
+        let j0 = self.joints.len();
+        let b = self.bodies.len();
+        for (k, js) in s.joints.iter().enumerate() {
+            self.add_joint(name, s, parent, b, k, js)?;
+        }
+        let body = Body {
+            name: name.to_string(),
+            parent,
+            pos,
+            rot,
+            quat,
+            mass: s.mass,
+            com,
+            inertia,
+            massless: s.massless,
+            gravcomp: s.gravcomp,
+            joints: j0..self.joints.len(),
+        };
+        // links
+        self.add_links(s, &body);
+        self.bodies.push(body);
+        Ok(())
+    }
+
+    /// Validate joint `k` of body `s` (index `b`) and add it with the names of its coordinates.
+    fn add_joint(
+        &mut self,
+        name: &str,
+        s: &BodySpec,
+        parent: Option<usize>,
+        b: usize,
+        k: usize,
+        js: &JointSpec,
+    ) -> Result<(), ModelError> {
+        let jn = js.name.as_str();
+        if jn.is_empty() {
+            return Err(jerr(name, jn, "empty joint name".into()));
+        }
+        if self.joints.iter().any(|j| j.name == jn) {
+            return Err(jerr(name, jn, "duplicate joint name".into()));
+        }
+        let kind = joint_kind(name, s, parent, k, js)?;
+        let (jnq, jnv) = (js.kind.nq(), js.kind.nv());
+        let (q_names, v_names) = (&mut self.q_names, &mut self.v_names);
+        match kind {
+            JointKind::Hinge(_) | JointKind::Slide(_) => {
+                q_names.push(jn.to_string());
+                v_names.push(jn.to_string());
+            }
+            JointKind::Ball => {
+                for e in ["qw", "qx", "qy", "qz"] {
+                    q_names.push(format!("{jn}.{e}"));
+                }
+                for e in ["wx", "wy", "wz"] {
+                    v_names.push(format!("{jn}.{e}"));
+                }
+            }
+            JointKind::Free => {
+                for e in ["x", "y", "z", "qw", "qx", "qy", "qz"] {
+                    q_names.push(format!("{jn}.{e}"));
+                }
+                for e in ["vx", "vy", "vz", "wx", "wy", "wz"] {
+                    v_names.push(format!("{jn}.{e}"));
+                }
+            }
+        }
+        self.joints.push(Joint {
+            name: jn.to_string(),
+            body: b,
+            kind,
+            anchor: Vector3::from(js.anchor),
+            stiffness: js.stiffness,
+            spring_ref: js.spring_ref,
+            damping: js.damping,
+            armature: js.armature,
+            reference: js.reference,
+            iq: self.nq,
+            iv: self.nv,
+            nq: jnq,
+            nv: jnv,
+        });
+        self.nq += jnq;
+        self.nv += jnv;
+        Ok(())
+    }
+
+    /// The links of body `s` (validated as `body`): one per joint (the first placed, the last
+    /// carrying the inertia), or one fixed link.
+    fn add_links(&mut self, s: &BodySpec, body: &Body) {
+        let (rot, pos, com, inertia) = (body.rot, body.pos, body.com, body.inertia);
+        let j0 = body.joints.start;
+        let links = &mut self.links;
+        let parent_link = body.parent.map(|p| self.body_link[p]);
+        let place = if matches!(s.joints.first().map(|j| &j.kind), Some(JointType::Free)) {
+            Xform::identity() // q of the free joint is the world pose
+        } else {
+            Xform::from_pose(rot, pos)
+        };
+        let inertia6 = if s.massless {
+            None
+        } else {
+            Some(Inertia::from_com(s.mass, com, inertia))
+        };
+        let nj = s.joints.len();
+        if nj == 0 {
+            links.push(Link {
+                parent: parent_link,
+                place,
+                joint: None,
+                inertia: inertia6,
             });
-        }
-        // dof tree: within a joint, dof k follows dof k-1; the first dof of a joint follows the
-        // last dof of the nearest ancestor link that has a joint.
-        let mut dof_parent = vec![None; nv];
-        let mut dof_link = vec![0; nv];
-        let mut last_dof: Vec<Option<usize>> = vec![None; links.len()];
-        for (i, link) in links.iter().enumerate() {
-            let inherited = link.parent.and_then(|p| last_dof[p]);
-            last_dof[i] = inherited;
-            if let Some(j) = link.joint {
-                let jt: &Joint = &joints[j];
-                let mut prev = inherited;
-                for k in 0..jt.nv {
-                    dof_parent[jt.iv + k] = prev;
-                    dof_link[jt.iv + k] = i;
-                    prev = Some(jt.iv + k);
-                }
-                last_dof[i] = prev;
+        } else {
+            for k in 0..nj {
+                let par = if k == 0 {
+                    parent_link
+                } else {
+                    Some(links.len() - 1)
+                };
+                links.push(Link {
+                    parent: par,
+                    place: if k == 0 { place } else { Xform::identity() },
+                    joint: Some(j0 + k),
+                    inertia: if k + 1 == nj { inertia6 } else { None },
+                });
             }
         }
+        self.body_link.push(links.len() - 1);
+    }
+}
+
+impl Model {
+    /// Validate and build. Bodies must be listed parents first; names of bodies and joints must be
+    /// unique and not [`WORLD`].
+    pub fn new(specs: &[BodySpec], fields: Fields) -> Result<Model, ModelError> {
+        check_fields(&fields)?;
+        let mut m = ModelBuilder {
+            bodies: Vec::with_capacity(specs.len()),
+            body_link: Vec::with_capacity(specs.len()),
+            ..ModelBuilder::default()
+        };
+        for s in specs {
+            m.add_body(s)?;
+        }
+        let (dof_parent, dof_link) = dof_tree(&m.links, &m.joints, m.nv);
         Ok(Model {
-            bodies,
-            joints,
-            links,
-            body_link,
+            bodies: m.bodies,
+            joints: m.joints,
+            links: m.links,
+            body_link: m.body_link,
             dof_parent,
             dof_link,
             fields,
-            nq,
-            nv,
-            q_names,
-            v_names,
+            nq: m.nq,
+            nv: m.nv,
+            q_names: m.q_names,
+            v_names: m.v_names,
         })
     }
 
