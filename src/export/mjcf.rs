@@ -27,13 +27,89 @@ pub fn mjcf(tree: &Model, options: &ExportOptions) -> Result<(String, ExportRepo
 /// enabled and the constraint solver at its tightest (Newton, 200 iterations, tolerance 1e-15).
 /// A `distance` closure is [`ExportError::Unsupported`]: MuJoCo offers no exact one; nor does it
 /// offer a point on a line or in a plane (`line`, `plane`) or rolling without slip (`rolling`).
-#[allow(clippy::too_many_lines)] // over 100 lines before the lint: to split, not to grow
 pub fn mjcf_closed(
     tree: &Model,
     closures: &[ClosureExport],
     options: &ExportOptions,
 ) -> Result<(String, ExportReport), ExportError> {
     check_options(options)?;
+    refuse_closures(closures, options)?;
+    // sites per body index (tree.bodies().len(): the world)
+    let sites = closure_sites(tree, closures)?;
+    let g = tree.fields().gravity;
+    let mut x = String::new();
+    write_header(&mut x, tree, closures, options);
+    let _ = writeln!(x, "  <worldbody>");
+    for s in &sites[tree.bodies().len()] {
+        let _ = writeln!(x, "    {s}");
+    }
+
+    let mut report = ExportReport {
+        format: Format::Mjcf,
+        mass_changes: vec![],
+        harness_forces: attractor_forces(tree),
+        q_map: Vec::new(),
+        v_map: Vec::new(),
+        gravity: g,
+        root_joint: None,
+        closures: vec![],
+        armature: vec![],
+        notes: vec![
+            "qpos/qvel conventions equal ours (quaternions w, x, y, z; free joint linear velocity \
+             world-frame, angular body-frame)"
+                .into(),
+            "no actuators: write generalized forces to d.qfrc_applied".into(),
+        ],
+    };
+    let mut w = Bodies {
+        tree,
+        options,
+        x,
+        qmap: vec![None; tree.nq()],
+        vmap: vec![None; tree.nv()],
+        sq: 0,
+        sv: 0,
+    };
+    let ch = children(tree);
+    let n = tree.bodies().len();
+    // Preorder DFS; MuJoCo numbers joints in the same order.
+    let mut stack: Vec<(usize, usize, bool)> =
+        ch[n].iter().rev().map(|&b| (b, 2usize, false)).collect();
+    while let Some((b, depth, closing)) = stack.pop() {
+        // indentation stops growing at MAX_INDENT levels: a deep chain's document stays linear
+        let ind = "  ".repeat(depth.min(super::MAX_INDENT));
+        if closing {
+            let _ = writeln!(w.x, "{ind}</body>");
+            continue;
+        }
+        w.write_body(b, &ind, &mut report);
+        for s in &sites[b] {
+            let _ = writeln!(w.x, "{ind}  {s}");
+        }
+        stack.push((b, depth, true));
+        for &c in ch[b].iter().rev() {
+            stack.push((c, depth + 1, false));
+        }
+    }
+    let mut x = w.x;
+    let _ = writeln!(x, "  </worldbody>");
+    write_equalities(&mut x, closures, options);
+    let _ = writeln!(x, "</mujoco>");
+    report.q_map = coord_map(tree.q_names(), w.qmap);
+    report.v_map = coord_map(tree.v_names(), w.vmap);
+    if !closures.is_empty() {
+        report.notes.push(format!(
+            "closures: equality solref timeconst = {MUJOCO_SOLREF_STEPS} x timestep (keep the \
+             ratio when replaying at another step), solimp {}",
+            nums(&MUJOCO_SOLIMP)
+        ));
+    }
+    report.closures = closures.to_vec();
+    Ok((x, report))
+}
+
+/// The closures MuJoCo cannot hold exactly: distance, line, plane and rolling.
+fn refuse_closures(closures: &[ClosureExport], options: &ExportOptions) -> Result<(), ExportError> {
     if let Some(c) = closures.iter().find(|c| c.kind == "distance") {
         return Err(ExportError::Unsupported {
             format: Format::Mjcf,
@@ -71,13 +147,20 @@ pub fn mjcf_closed(
             ),
         });
     }
+    Ok(())
+}
+
+/// The `<site>` elements of the closures per body index (`tree.bodies().len()`: the world).
+fn closure_sites(
+    tree: &Model,
+    closures: &[ClosureExport],
+) -> Result<Vec<Vec<String>>, ExportError> {
     let body_of = |name: &str| {
         tree.body_id(name).ok_or_else(|| ExportError::Unsupported {
             format: Format::Mjcf,
             what: format!("closure body '{name}' is not in the tree"),
         })
     };
-    // sites per body index (tree.bodies().len(): the world)
     let mut sites: Vec<Vec<String>> = vec![vec![]; tree.bodies().len() + 1];
     for c in closures {
         let site = |name: &str, p: &[f64; 3], q: &[f64; 4]| {
@@ -95,6 +178,11 @@ pub fn mjcf_closed(
         };
         sites[b].push(site(&c.site_b, &c.point_b, &c.quat_b));
     }
+    Ok(sites)
+}
+
+/// `<mujoco>`, `<compiler>` and `<option>` with its flags.
+fn write_header(x: &mut String, tree: &Model, closures: &[ClosureExport], options: &ExportOptions) {
     let has_spring = tree.joints().iter().any(|j| j.stiffness != 0.0);
     // MuJoCo 4.0 computes gravcomp in its passive forces, skipped when both the spring and the
     // damper flags are disabled (measured: qfrc_gravcomp = 0 then); the damper flag stays enabled
@@ -102,7 +190,6 @@ pub fn mjcf_closed(
     let has_gravcomp = tree.bodies().iter().any(|b| b.gravcomp != 0.0);
     let has_damper = tree.joints().iter().any(|j| j.damping != 0.0) || has_gravcomp;
     let g = tree.fields().gravity;
-    let mut x = String::new();
     let _ = writeln!(x, "<mujoco model=\"{}\">", esc(&options.name));
     let _ = writeln!(
         x,
@@ -132,44 +219,25 @@ pub fn mjcf_closed(
         onoff(has_damper)
     );
     let _ = writeln!(x, "  </option>");
-    let _ = writeln!(x, "  <worldbody>");
-    for s in &sites[tree.bodies().len()] {
-        let _ = writeln!(x, "    {s}");
-    }
+}
 
-    let mut report = ExportReport {
-        format: Format::Mjcf,
-        mass_changes: vec![],
-        harness_forces: attractor_forces(tree),
-        q_map: Vec::new(),
-        v_map: Vec::new(),
-        gravity: g,
-        root_joint: None,
-        closures: vec![],
-        armature: vec![],
-        notes: vec![
-            "qpos/qvel conventions equal ours (quaternions w, x, y, z; free joint linear velocity \
-             world-frame, angular body-frame)"
-                .into(),
-            "no actuators: write generalized forces to d.qfrc_applied".into(),
-        ],
-    };
-    let mut qmap = vec![None; tree.nq()];
-    let mut vmap = vec![None; tree.nv()];
-    let (mut sq, mut sv) = (0usize, 0usize);
-    let ch = children(tree);
-    let n = tree.bodies().len();
-    // Preorder DFS; MuJoCo numbers joints in the same order.
-    let mut stack: Vec<(usize, usize, bool)> =
-        ch[n].iter().rev().map(|&b| (b, 2usize, false)).collect();
-    while let Some((b, depth, closing)) = stack.pop() {
-        // indentation stops growing at MAX_INDENT levels: a deep chain's document stays linear
-        let ind = "  ".repeat(depth.min(super::MAX_INDENT));
-        if closing {
-            let _ = writeln!(x, "{ind}</body>");
-            continue;
-        }
-        let body = &tree.bodies()[b];
+/// The writer of the `<body>` elements: the document so far, and the simulator offsets of the
+/// q and v entries written (qpos, qvel offsets `sq`, `sv` of the next joint).
+struct Bodies<'t> {
+    tree: &'t Model,
+    options: &'t ExportOptions,
+    x: String,
+    qmap: Vec<Option<(usize, String)>>,
+    vmap: Vec<Option<(usize, String)>>,
+    sq: usize,
+    sv: usize,
+}
+
+impl Bodies<'_> {
+    /// The opening `<body>` of body `b`, its `<inertial>` (mass floor in the report) and joints.
+    fn write_body(&mut self, b: usize, ind: &str, report: &mut ExportReport) {
+        let x = &mut self.x;
+        let body = &self.tree.bodies()[b];
         let gravcomp = if body.gravcomp != 0.0 {
             format!(" gravcomp=\"{}\"", num(body.gravcomp))
         } else {
@@ -182,7 +250,7 @@ pub fn mjcf_closed(
             nums(body.pos.as_slice()),
             nums(&body.quat)
         );
-        let (mass, inertia, change) = floored(body, options);
+        let (mass, inertia, change) = floored(body, self.options);
         report.mass_changes.extend(change);
         let diag = inertia[(0, 1)] == 0.0 && inertia[(0, 2)] == 0.0 && inertia[(1, 2)] == 0.0;
         // fullinertia order: ixx iyy izz ixy ixz iyz (about the CoM, body frame).
@@ -211,86 +279,72 @@ pub fn mjcf_closed(
             num(mass)
         );
         for j in body.joints.clone() {
-            let jt = &tree.joints()[j];
-            let (ty, geo) = match jt.joint_type() {
-                JointType::Hinge { axis } => (
-                    "hinge",
-                    format!(
-                        " axis=\"{}\" pos=\"{}\"",
-                        nums(&axis),
-                        nums(jt.anchor.as_slice())
-                    ),
+            self.write_joint(j, ind);
+        }
+    }
+
+    /// The `<joint>` element of our joint `j` and its entries in the q and v maps.
+    fn write_joint(&mut self, j: usize, ind: &str) {
+        let jt = &self.tree.joints()[j];
+        let (ty, geo) = match jt.joint_type() {
+            JointType::Hinge { axis } => (
+                "hinge",
+                format!(
+                    " axis=\"{}\" pos=\"{}\"",
+                    nums(&axis),
+                    nums(jt.anchor.as_slice())
                 ),
-                JointType::Slide { axis } => ("slide", format!(" axis=\"{}\"", nums(&axis))),
-                JointType::Ball => ("ball", format!(" pos=\"{}\"", nums(jt.anchor.as_slice()))),
-                JointType::Free => ("free", String::new()),
-            };
-            let mut dyn_ = format!(" armature=\"{}\"", armature(jt.armature));
-            if jt.reference != 0.0 {
-                let _ = write!(dyn_, " ref=\"{}\"", num(jt.reference));
-            }
-            if jt.damping != 0.0 {
-                let _ = write!(dyn_, " damping=\"{}\"", num(jt.damping));
-            }
-            if jt.stiffness != 0.0 {
-                let _ = write!(
-                    dyn_,
-                    " stiffness=\"{}\" springref=\"{}\"",
-                    num(jt.stiffness),
-                    num(jt.spring_ref)
-                );
-            }
-            let _ = writeln!(
-                x,
-                "{ind}  <joint name=\"{}\" type=\"{ty}\"{geo}{dyn_}/>",
-                esc(&jt.name)
+            ),
+            JointType::Slide { axis } => ("slide", format!(" axis=\"{}\"", nums(&axis))),
+            JointType::Ball => ("ball", format!(" pos=\"{}\"", nums(jt.anchor.as_slice()))),
+            JointType::Free => ("free", String::new()),
+        };
+        let mut dyn_ = format!(" armature=\"{}\"", armature(jt.armature));
+        if jt.reference != 0.0 {
+            let _ = write!(dyn_, " ref=\"{}\"", num(jt.reference));
+        }
+        if jt.damping != 0.0 {
+            let _ = write!(dyn_, " damping=\"{}\"", num(jt.damping));
+        }
+        if jt.stiffness != 0.0 {
+            let _ = write!(
+                dyn_,
+                " stiffness=\"{}\" springref=\"{}\"",
+                num(jt.stiffness),
+                num(jt.spring_ref)
             );
-            for k in 0..jt.nq {
-                qmap[jt.iq + k] = Some((sq + k, jt.name.clone()));
-            }
-            for k in 0..jt.nv {
-                vmap[jt.iv + k] = Some((sv + k, jt.name.clone()));
-            }
-            sq += jt.nq;
-            sv += jt.nv;
         }
-        for s in &sites[b] {
-            let _ = writeln!(x, "{ind}  {s}");
+        let _ = writeln!(
+            self.x,
+            "{ind}  <joint name=\"{}\" type=\"{ty}\"{geo}{dyn_}/>",
+            esc(&jt.name)
+        );
+        for k in 0..jt.nq {
+            self.qmap[jt.iq + k] = Some((self.sq + k, jt.name.clone()));
         }
-        stack.push((b, depth, true));
-        for &c in ch[b].iter().rev() {
-            stack.push((c, depth + 1, false));
+        for k in 0..jt.nv {
+            self.vmap[jt.iv + k] = Some((self.sv + k, jt.name.clone()));
         }
+        self.sq += jt.nq;
+        self.sv += jt.nv;
     }
-    let _ = writeln!(x, "  </worldbody>");
-    write_equalities(&mut x, closures, options);
-    let _ = writeln!(x, "</mujoco>");
-    let mk = |names: &[String], m: Vec<Option<(usize, String)>>| {
-        m.into_iter()
-            .enumerate()
-            .map(|(i, e)| {
-                let (sim_index, sim_joint) = e.expect("every joint is written");
-                CoordMap {
-                    index: i,
-                    name: names[i].clone(),
-                    sim_index,
-                    sim_joint,
-                    conversion: Conversion::Same,
-                }
-            })
-            .collect::<Vec<_>>()
-    };
-    report.q_map = mk(tree.q_names(), qmap);
-    report.v_map = mk(tree.v_names(), vmap);
-    if !closures.is_empty() {
-        report.notes.push(format!(
-            "closures: equality solref timeconst = {MUJOCO_SOLREF_STEPS} x timestep (keep the \
-             ratio when replaying at another step), solimp {}",
-            nums(&MUJOCO_SOLIMP)
-        ));
-    }
-    report.closures = closures.to_vec();
-    Ok((x, report))
+}
+
+/// The report's map of our entries (`names`) to the simulator's (`m`: offset and joint).
+fn coord_map(names: &[String], m: Vec<Option<(usize, String)>>) -> Vec<CoordMap> {
+    m.into_iter()
+        .enumerate()
+        .map(|(i, e)| {
+            let (sim_index, sim_joint) = e.expect("every joint is written");
+            CoordMap {
+                index: i,
+                name: names[i].clone(),
+                sim_index,
+                sim_joint,
+                conversion: Conversion::Same,
+            }
+        })
+        .collect::<Vec<_>>()
 }
 
 /// The armature attribute: `0` as before armature was modelled (documents stay byte-identical),

@@ -63,7 +63,6 @@ pub fn urdf(tree: &Model, options: &ExportOptions) -> Result<(String, UrdfReport
 /// [`urdf`] with the sites of loop closures (see [`ClosureExport`]): each site is a massless link
 /// `site` on a fixed joint `{site}__fixed` (a frame in Pinocchio; no coordinates), placed in its
 /// body's link frame; the harness closes the loops with Pinocchio constraint models.
-#[allow(clippy::too_many_lines)] // over 100 lines before the lint: to split, not to grow
 pub fn urdf_closed(
     tree: &Model,
     closures: &[ClosureExport],
@@ -72,17 +71,96 @@ pub fn urdf_closed(
     check_options(options)?;
     let bodies = tree.bodies();
     let joints = tree.joints();
-    let n = bodies.len();
-    let ch = children(tree);
-    let unsupported = |what: String| ExportError::Unsupported {
+    let mut u = Urdf {
+        tree,
+        root_ball: root_ball(tree)?,
+        link_names: HashSet::new(),
+        joint_names: HashSet::new(),
+    };
+    // Names: links and joints must be unique.
+    if u.root_ball.is_none() {
+        u.link_names.insert("world".to_string());
+    }
+
+    // Elements in our body order (URDF elements are unordered).
+    let mut links = String::new();
+    let mut ujoints = String::new();
+    // URDF child joints per link name: (joint name, child link, Some(our joint) or None if fixed)
+    let mut child_joints: ChildJoints = HashMap::new();
+    let mut harness_forces = attractor_forces(tree);
+    harness_forces.extend(gravcomp_forces(tree));
+    let mut armature = vec![];
+    for b in 0..bodies.len() {
+        u.write_links(b, &mut links)?;
+        u.write_joints(b, &mut ujoints, &mut child_joints)?;
+    }
+
+    // Pinocchio's joint order: DFS from the root link, child joints sorted by name.
+    let root_link = match u.root_ball {
+        Some(j) => u.link_of(joints[j].body, 0),
+        None => "world".to_string(),
+    };
+    let mut order: Vec<usize> = u.root_ball.into_iter().collect();
+    dfs(root_link, None, &mut child_joints, &mut order);
+    let (qmap, vmap) = coord_maps(tree, &order, &mut harness_forces, &mut armature);
+
+    let mut x = String::new();
+    let _ = writeln!(x, "<?xml version=\"1.0\"?>");
+    let _ = writeln!(x, "<robot name=\"{}\">", esc(&options.name));
+    if u.root_ball.is_none() {
+        let _ = writeln!(x, "  <link name=\"world\"/>");
+    }
+    x.push_str(&links);
+    x.push_str(&ujoints);
+    u.write_sites(&mut x, closures)?;
+    let _ = writeln!(x, "</robot>");
+
+    let (notes, root_joint) = notes_and_root_joint(tree, u.root_ball);
+    let report = ExportReport {
+        format: Format::Urdf,
+        mass_changes: vec![],
+        harness_forces,
+        q_map: qmap
+            .into_iter()
+            .map(|m| m.expect("every joint is mapped"))
+            .collect(),
+        v_map: vmap
+            .into_iter()
+            .map(|m| m.expect("every joint is mapped"))
+            .collect(),
+        gravity: tree.fields().gravity,
+        root_joint,
+        notes,
+        closures: closures.to_vec(),
+        armature,
+    };
+    Ok((x, report))
+}
+
+fn unsupported(what: String) -> ExportError {
+    ExportError::Unsupported {
         format: Format::Urdf,
         what,
-    };
+    }
+}
 
-    // Ball joints: only as the root joint (first joint of the only child of the world, centred at
-    // the world origin, body unrotated) since Pinocchio places a root joint at the identity.
+fn collide(name: &str) -> ExportError {
+    ExportError::NameCollision {
+        format: Format::Urdf,
+        name: name.to_string(),
+    }
+}
+
+/// The ball joint exported as the URDF root, if any.
+///
+/// Ball joints: only as the root joint (first joint of the only child of the world, centred at
+/// the world origin, body unrotated) since Pinocchio places a root joint at the identity.
+fn root_ball(tree: &Model) -> Result<Option<usize>, ExportError> {
+    let bodies = tree.bodies();
+    let n = bodies.len();
+    let ch = children(tree);
     let mut root_ball: Option<usize> = None;
-    for (j, jt) in joints.iter().enumerate() {
+    for (j, jt) in tree.joints().iter().enumerate() {
         if jt.joint_type() != JointType::Ball {
             continue;
         }
@@ -104,63 +182,65 @@ pub fn urdf_closed(
             )));
         }
     }
+    Ok(root_ball)
+}
 
-    // Effective anchor of a joint: hinge/ball rotate about it, slides/free have none.
-    let anchor = |j: usize| -> Vector3<f64> {
+/// What the writers of one URDF document share: the tree, its root ball joint and the names
+/// given so far (links and joints must be unique).
+struct Urdf<'t> {
+    tree: &'t Model,
+    root_ball: Option<usize>,
+    link_names: HashSet<String>,
+    joint_names: HashSet<String>,
+}
+
+impl Urdf<'_> {
+    /// Effective anchor of a joint: hinge/ball rotate about it, slides/free have none.
+    fn anchor(&self, j: usize) -> Vector3<f64> {
+        let joints = self.tree.joints();
         match joints[j].joint_type() {
             JointType::Hinge { .. } | JointType::Ball => joints[j].anchor,
             _ => Vector3::zeros(),
         }
-    };
-    // Link frame of a body = body frame translated by the anchor of its last joint.
-    let off = |b: usize| -> Vector3<f64> {
-        let r = bodies[b].joints.clone();
+    }
+
+    /// Link frame of a body = body frame translated by the anchor of its last joint.
+    fn off(&self, b: usize) -> Vector3<f64> {
+        let r = self.tree.bodies()[b].joints.clone();
         if r.is_empty() {
             Vector3::zeros()
         } else {
-            anchor(r.end - 1)
+            self.anchor(r.end - 1)
         }
-    };
-
-    // Names: links and joints must be unique.
-    let mut link_names = HashSet::new();
-    let mut joint_names = HashSet::new();
-    let collide = |name: &str| ExportError::NameCollision {
-        format: Format::Urdf,
-        name: name.to_string(),
-    };
-    if root_ball.is_none() {
-        link_names.insert("world".to_string());
     }
-    let link_of = |b: usize, k: usize| -> String {
-        let body = &bodies[b];
+
+    /// Name of link `k` of body `b`: the body's name for its last link.
+    fn link_of(&self, b: usize, k: usize) -> String {
+        let body = &self.tree.bodies()[b];
         if body.joints.is_empty() || k + 1 == body.joints.len() {
             body.name.clone()
         } else {
-            format!("{}__{}", body.name, joints[body.joints.start + k].name)
+            format!(
+                "{}__{}",
+                body.name,
+                self.tree.joints()[body.joints.start + k].name
+            )
         }
-    };
+    }
 
-    // Elements in our body order (URDF elements are unordered).
-    let mut links = String::new();
-    let mut ujoints = String::new();
-    // URDF child joints per link name: (joint name, child link, Some(our joint) or None if fixed)
-    let mut child_joints: ChildJoints = HashMap::new();
-    let mut harness_forces = attractor_forces(tree);
-    harness_forces.extend(gravcomp_forces(tree));
-    let mut armature = vec![];
-    for (b, body) in bodies.iter().enumerate() {
-        let nj = body.joints.len();
-        let nlinks = nj.max(1);
+    /// The links of body `b`: one per joint (at least one), the last with the body's inertia.
+    fn write_links(&mut self, b: usize, links: &mut String) -> Result<(), ExportError> {
+        let body = &self.tree.bodies()[b];
+        let nlinks = body.joints.len().max(1);
         for k in 0..nlinks {
-            let lname = link_of(b, k);
-            if !link_names.insert(lname.clone()) {
+            let lname = self.link_of(b, k);
+            if !self.link_names.insert(lname.clone()) {
                 return Err(collide(&lname));
             }
             let _ = write!(links, "  <link name=\"{}\">", esc(&lname));
             if k + 1 == nlinks && !body.massless {
                 let i = &body.inertia;
-                let c = body.com - off(b);
+                let c = body.com - self.off(b);
                 let _ = write!(
                     links,
                     "\n    <inertial>\n      <origin xyz=\"{}\" rpy=\"0 0 0\"/>\n      \
@@ -178,76 +258,48 @@ pub fn urdf_closed(
             }
             let _ = writeln!(links, "</link>");
         }
-        let (parent_link, parent_off) = match body.parent {
-            None => ("world".to_string(), Vector3::zeros()),
-            Some(p) => (bodies[p].name.clone(), off(p)),
+        Ok(())
+    }
+
+    /// The joints of body `b` (a fixed one if it has none), each entered in `child_joints`.
+    fn write_joints(
+        &mut self,
+        b: usize,
+        ujoints: &mut String,
+        child_joints: &mut ChildJoints,
+    ) -> Result<(), ExportError> {
+        let body = &self.tree.bodies()[b];
+        let joints = self.tree.joints();
+        let nj = body.joints.len();
+        let nlinks = nj.max(1);
+        let parent_link = match body.parent {
+            None => "world".to_string(),
+            Some(p) => self.tree.bodies()[p].name.clone(),
         };
         for k in 0..nlinks {
             let j = body.joints.start + k;
-            if Some(j) == root_ball {
+            if Some(j) == self.root_ball {
                 continue; // the root joint, passed by the harness
             }
             let plink = if k == 0 {
                 parent_link.clone()
             } else {
-                link_of(b, k - 1)
+                self.link_of(b, k - 1)
             };
-            let clink = link_of(b, k);
-            // origin = T(-off_parent) P T(a_0) for the first joint, T(a_k - a_{k-1}) after.
-            let (mut xyz, mut rot) = if nj == 0 {
-                (body.pos - parent_off, body.rot)
-            } else if k == 0 {
-                if joints[j].joint_type() == JointType::Free {
-                    // q of a free joint is the world pose of the body: identity placement
-                    (-parent_off, Matrix3::identity())
-                } else {
-                    (body.pos + body.rot * anchor(j) - parent_off, body.rot)
-                }
-            } else {
-                (anchor(j) - anchor(j - 1), Matrix3::identity())
-            };
-            // reference position: J(q - ref) = J(-ref) J(q) (same axis), J(-ref) into the origin
-            if nj > 0 && joints[j].reference != 0.0 {
-                let r = joints[j].reference;
-                match joints[j].joint_type() {
-                    JointType::Hinge { axis } => {
-                        let u = nalgebra::Unit::new_normalize(Vector3::from(axis));
-                        rot *= nalgebra::Rotation3::from_axis_angle(&u, -r).into_inner();
-                    }
-                    JointType::Slide { axis } => xyz -= rot * Vector3::from(axis) * r,
-                    _ => unreachable!("the model refuses ref on ball and free joints"),
-                }
-            }
+            let clink = self.link_of(b, k);
+            let (xyz, rot) = self.joint_origin(b, k);
             let jname = if nj == 0 {
                 format!("{}__fixed", body.name)
             } else {
                 joints[j].name.clone()
             };
-            if !joint_names.insert(jname.clone()) {
+            if !self.joint_names.insert(jname.clone()) {
                 return Err(collide(&jname));
             }
             let (ty, extra) = if nj == 0 {
                 ("fixed", String::new())
             } else {
-                let lim = format!(
-                    "\n    <limit lower=\"{}\" upper=\"{}\" effort=\"{}\" velocity=\"{}\"/>",
-                    num(-OPEN),
-                    num(OPEN),
-                    num(OPEN),
-                    num(OPEN)
-                );
-                match joints[j].joint_type() {
-                    JointType::Hinge { axis } => (
-                        "revolute",
-                        format!("\n    <axis xyz=\"{}\"/>{lim}", nums(&axis)),
-                    ),
-                    JointType::Slide { axis } => (
-                        "prismatic",
-                        format!("\n    <axis xyz=\"{}\"/>{lim}", nums(&axis)),
-                    ),
-                    JointType::Free => ("floating", String::new()),
-                    JointType::Ball => unreachable!("checked above"),
-                }
+                joint_type(&joints[j])
             };
             let _ = writeln!(
                 ujoints,
@@ -264,20 +316,135 @@ pub fn urdf_closed(
                 .or_default()
                 .push((jname, clink, (nj > 0).then_some(j)));
         }
+        Ok(())
     }
 
-    // Pinocchio's joint order: DFS from the root link, child joints sorted by name.
-    let root_link = match root_ball {
-        Some(j) => link_of(joints[j].body, 0),
-        None => "world".to_string(),
-    };
-    let mut order: Vec<usize> = root_ball.into_iter().collect();
-    dfs(root_link, None, &mut child_joints, &mut order);
+    /// The `<origin>` of the joint of link `k` of body `b`, the reference position folded in.
+    fn joint_origin(&self, b: usize, k: usize) -> (Vector3<f64>, Matrix3<f64>) {
+        let body = &self.tree.bodies()[b];
+        let joints = self.tree.joints();
+        let nj = body.joints.len();
+        let j = body.joints.start + k;
+        let parent_off = match body.parent {
+            None => Vector3::zeros(),
+            Some(p) => self.off(p),
+        };
+        // origin = T(-off_parent) P T(a_0) for the first joint, T(a_k - a_{k-1}) after.
+        let (mut xyz, mut rot) = if nj == 0 {
+            (body.pos - parent_off, body.rot)
+        } else if k == 0 {
+            if joints[j].joint_type() == JointType::Free {
+                // q of a free joint is the world pose of the body: identity placement
+                (-parent_off, Matrix3::identity())
+            } else {
+                (body.pos + body.rot * self.anchor(j) - parent_off, body.rot)
+            }
+        } else {
+            (self.anchor(j) - self.anchor(j - 1), Matrix3::identity())
+        };
+        // reference position: J(q - ref) = J(-ref) J(q) (same axis), J(-ref) into the origin
+        if nj > 0 && joints[j].reference != 0.0 {
+            let r = joints[j].reference;
+            match joints[j].joint_type() {
+                JointType::Hinge { axis } => {
+                    let u = nalgebra::Unit::new_normalize(Vector3::from(axis));
+                    rot *= nalgebra::Rotation3::from_axis_angle(&u, -r).into_inner();
+                }
+                JointType::Slide { axis } => xyz -= rot * Vector3::from(axis) * r,
+                _ => unreachable!("the model refuses ref on ball and free joints"),
+            }
+        }
+        (xyz, rot)
+    }
 
+    /// Closure sites: massless links on fixed joints, in the link frame of their body.
+    fn write_sites(
+        &mut self,
+        x: &mut String,
+        closures: &[ClosureExport],
+    ) -> Result<(), ExportError> {
+        for c in closures {
+            let sides = [
+                (&c.site_a, Some(&c.body_a), c.point_a, c.quat_a),
+                (&c.site_b, c.body_b.as_ref(), c.point_b, c.quat_b),
+            ];
+            for (site, body, point, quat) in sides {
+                let (parent, xyz) = match body {
+                    Some(name) => {
+                        let b = self.tree.body_id(name).ok_or_else(|| {
+                            unsupported(format!("closure body '{name}' is not in the tree"))
+                        })?;
+                        (name.clone(), Vector3::from(point) - self.off(b))
+                    }
+                    None if self.root_ball.is_none() => ("world".to_string(), Vector3::from(point)),
+                    None => continue, // no world link: the harness takes the report's point
+                };
+                if !self.link_names.insert(site.clone()) {
+                    return Err(collide(site));
+                }
+                let jname = format!("{site}__fixed");
+                if !self.joint_names.insert(jname.clone()) {
+                    return Err(collide(&jname));
+                }
+                let r = UnitQuaternion::from_quaternion(Quaternion::new(
+                    quat[0], quat[1], quat[2], quat[3],
+                ))
+                .to_rotation_matrix()
+                .into_inner();
+                let _ = writeln!(
+                    x,
+                    "  <link name=\"{}\"/>\n  <joint name=\"{}\" type=\"fixed\">\n    \
+                     <parent link=\"{}\"/>\n    <child link=\"{}\"/>\n    \
+                     <origin xyz=\"{}\" rpy=\"{}\"/>\n  </joint>",
+                    esc(site),
+                    esc(&jname),
+                    esc(&parent),
+                    esc(site),
+                    nums(xyz.as_slice()),
+                    nums(&rpy(&r))
+                );
+            }
+        }
+        Ok(())
+    }
+}
+
+/// URDF type of a moving joint and what follows its `<origin>` (axis and wide-open limits).
+fn joint_type(jt: &crate::tree::Joint) -> (&'static str, String) {
+    let lim = format!(
+        "\n    <limit lower=\"{}\" upper=\"{}\" effort=\"{}\" velocity=\"{}\"/>",
+        num(-OPEN),
+        num(OPEN),
+        num(OPEN),
+        num(OPEN)
+    );
+    match jt.joint_type() {
+        JointType::Hinge { axis } => (
+            "revolute",
+            format!("\n    <axis xyz=\"{}\"/>{lim}", nums(&axis)),
+        ),
+        JointType::Slide { axis } => (
+            "prismatic",
+            format!("\n    <axis xyz=\"{}\"/>{lim}", nums(&axis)),
+        ),
+        JointType::Free => ("floating", String::new()),
+        JointType::Ball => unreachable!("checked above"),
+    }
+}
+
+/// Our q and v entries -> Pinocchio's, joints in Pinocchio's `order`; the springs and dampers
+/// (harness forces) and armature of those joints at their simulator offsets.
+fn coord_maps(
+    tree: &Model,
+    order: &[usize],
+    harness_forces: &mut Vec<HarnessForce>,
+    armature: &mut Vec<ArmatureExport>,
+) -> (Vec<Option<CoordMap>>, Vec<Option<CoordMap>>) {
+    let joints = tree.joints();
     let mut qmap: Vec<Option<CoordMap>> = vec![None; tree.nq()];
     let mut vmap: Vec<Option<CoordMap>> = vec![None; tree.nv()];
     let (mut sq, mut sv) = (0usize, 0usize);
-    for &j in &order {
+    for &j in order {
         let jt = &joints[j];
         // (our offset, simulator offset, conversion) per q and v entry
         let (qperm, vconv): (Vec<usize>, Vec<Conversion>) = match jt.joint_type() {
@@ -337,67 +504,25 @@ pub fn urdf_closed(
         sq += jt.nq;
         sv += jt.nv;
     }
+    (qmap, vmap)
+}
 
-    let mut x = String::new();
-    let _ = writeln!(x, "<?xml version=\"1.0\"?>");
-    let _ = writeln!(x, "<robot name=\"{}\">", esc(&options.name));
-    if root_ball.is_none() {
-        let _ = writeln!(x, "  <link name=\"world\"/>");
-    }
-    x.push_str(&links);
-    x.push_str(&ujoints);
-    // closure sites: massless links on fixed joints, in the link frame of their body
-    for c in closures {
-        let sides = [
-            (&c.site_a, Some(&c.body_a), c.point_a, c.quat_a),
-            (&c.site_b, c.body_b.as_ref(), c.point_b, c.quat_b),
-        ];
-        for (site, body, point, quat) in sides {
-            let (parent, xyz) = match body {
-                Some(name) => {
-                    let b = tree.body_id(name).ok_or_else(|| {
-                        unsupported(format!("closure body '{name}' is not in the tree"))
-                    })?;
-                    (name.clone(), Vector3::from(point) - off(b))
-                }
-                None if root_ball.is_none() => ("world".to_string(), Vector3::from(point)),
-                None => continue, // no world link: the harness takes the report's point
-            };
-            if !link_names.insert(site.clone()) {
-                return Err(collide(site));
-            }
-            let jname = format!("{site}__fixed");
-            if !joint_names.insert(jname.clone()) {
-                return Err(collide(&jname));
-            }
-            let r = UnitQuaternion::from_quaternion(Quaternion::new(
-                quat[0], quat[1], quat[2], quat[3],
-            ))
-            .to_rotation_matrix()
-            .into_inner();
-            let _ = writeln!(
-                x,
-                "  <link name=\"{}\"/>\n  <joint name=\"{}\" type=\"fixed\">\n    \
-                 <parent link=\"{}\"/>\n    <child link=\"{}\"/>\n    \
-                 <origin xyz=\"{}\" rpy=\"{}\"/>\n  </joint>",
-                esc(site),
-                esc(&jname),
-                esc(&parent),
-                esc(site),
-                nums(xyz.as_slice()),
-                nums(&rpy(&r))
-            );
-        }
-    }
-    let _ = writeln!(x, "</robot>");
-
+/// The report's notes and the root joint the harness passes (the root ball joint, if any).
+fn notes_and_root_joint(
+    tree: &Model,
+    root_ball: Option<usize>,
+) -> (Vec<String>, Option<RootJoint>) {
     let mut notes = vec![
         "gravity is not part of URDF: set model.gravity.linear = report.gravity".to_string(),
         "quaternions in Pinocchio qpos are (x, y, z, w); the q map reorders them".to_string(),
         "massless intermediate links {body}__{joint} carry the joints of multi-joint bodies"
             .to_string(),
     ];
-    if joints.iter().any(|j| j.joint_type() == JointType::Free) {
+    if tree
+        .joints()
+        .iter()
+        .any(|j| j.joint_type() == JointType::Free)
+    {
         notes.push(
             "free joint: Pinocchio's linear velocity/force are body-frame (R^T v_world)".into(),
         );
@@ -408,26 +533,8 @@ pub fn urdf_closed(
         );
         RootJoint {
             python: "pin.JointModelSpherical()".into(),
-            name: joints[j].name.clone(),
+            name: tree.joints()[j].name.clone(),
         }
     });
-    let report = ExportReport {
-        format: Format::Urdf,
-        mass_changes: vec![],
-        harness_forces,
-        q_map: qmap
-            .into_iter()
-            .map(|m| m.expect("every joint is mapped"))
-            .collect(),
-        v_map: vmap
-            .into_iter()
-            .map(|m| m.expect("every joint is mapped"))
-            .collect(),
-        gravity: tree.fields().gravity,
-        root_joint,
-        notes,
-        closures: closures.to_vec(),
-        armature,
-    };
-    Ok((x, report))
+    (notes, root_joint)
 }

@@ -421,7 +421,6 @@ fn inertial(src: &Source, c: &Compiler, body: Node, name: &str, parent: &str) ->
 
 /// Read an MJCF document (`src` is the file and its text); `locked` joints are welded at the
 /// file's pose (q = their `ref`, the value reported in [`Robot::locked`]).
-#[allow(clippy::too_many_lines)] // over 100 lines before the lint: to split, not to grow
 pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
     let doc = super::parse_xml(src)?;
     let root = doc.root_element();
@@ -437,6 +436,61 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
     let defaults = Defaults::read(src, root)?;
     let mut notes = vec![];
     let mut rec = Recorder::new(src);
+    read_top_level(src, root, &mut notes, &mut rec)?;
+    let worldbodies: Vec<Node> = elements(root)
+        .filter(|n| n.has_tag_name("worldbody"))
+        .collect();
+    let mut w = Walk {
+        src,
+        c: &c,
+        defaults: &defaults,
+        locked,
+        used_locked: vec![false; locked.len()],
+        rec,
+        ranges: vec![],
+        locked_values: vec![],
+        bodies: vec![],
+        joints: vec![],
+        names: HashMap::new(),
+        joint_set: HashSet::new(),
+    };
+    // depth-first, parents first: (element, parent body name, inherited childclass)
+    let mut stack = top_bodies(src, &worldbodies)?;
+    while let Some((b, parent, class)) = stack.pop() {
+        let (name, class) = w.body(b, &parent, &class)?;
+        for ch in elements(b)
+            .filter(|x| x.has_tag_name("body"))
+            .collect::<Vec<_>>()
+            .into_iter()
+            .rev()
+        {
+            stack.push((ch, name.clone(), class.clone()));
+        }
+    }
+    if worldbodies.is_empty() || w.bodies.is_empty() {
+        return Err(err(src, root, "worldbody", "no <body> in <worldbody>"));
+    }
+    if let Some(k) = w.used_locked.iter().position(|u| !u) {
+        return Err(src.error(
+            0..0,
+            "locked_joints",
+            format!("locked joint `{}` is not a joint of this file", locked[k]),
+        ));
+    }
+    let unmodelled: Vec<Unmodelled> = w.rec.out;
+    Ok(Robot {
+        bodies: w.bodies,
+        joints: w.joints,
+        notes,
+        unmodelled,
+        ranges: w.ranges,
+        locked: w.locked_values,
+    })
+}
+
+/// The top-level elements besides `<worldbody>`: refused ones, the gravity note, and the records
+/// of fluid options, equalities, tendons, actuators and contact pairs/excludes.
+fn read_top_level(src: &Source, root: Node, notes: &mut Vec<String>, rec: &mut Recorder) -> R<()> {
     for n in elements(root) {
         let tag = n.tag_name().name();
         match tag {
@@ -472,18 +526,16 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
             _ => {}
         }
     }
-    let mut ranges: Vec<JointRange> = vec![];
-    let mut locked_values: Vec<(String, f64)> = vec![];
-    let worldbodies: Vec<Node> = elements(root)
-        .filter(|n| n.has_tag_name("worldbody"))
-        .collect();
-    let mut bodies = vec![];
-    let mut joints = vec![];
-    let mut used_locked = vec![false; locked.len()];
-    let mut names: HashMap<String, Node> = HashMap::new();
-    let mut joint_set: HashSet<String> = HashSet::new();
-    // depth-first, parents first: (element, parent body name, inherited childclass)
-    let mut stack: Vec<(Node, String, String)> = vec![];
+    Ok(())
+}
+
+/// A body still to read: (element, parent body name, inherited childclass).
+type Pending<'a, 'i> = (Node<'a, 'i>, String, String);
+
+/// The bodies of the `<worldbody>` elements as a stack (the first on top); a `<frame>`,
+/// `<replicate>`, `<attach>` or `<include>` in a worldbody is refused.
+fn top_bodies<'a, 'i>(src: &Source, worldbodies: &[Node<'a, 'i>]) -> R<Vec<Pending<'a, 'i>>> {
+    let mut stack: Vec<Pending> = vec![];
     for w in worldbodies.iter().rev() {
         for b in elements(*w)
             .filter(|b| b.has_tag_name("body"))
@@ -504,8 +556,31 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
             ));
         }
     }
-    while let Some((b, parent, class)) = stack.pop() {
-        let k = bodies.len();
+    Ok(stack)
+}
+
+/// What the depth-first walk over the bodies builds, and what it checks names against.
+struct Walk<'s, 'd, 'a, 'i> {
+    src: &'s Source,
+    c: &'d Compiler,
+    defaults: &'d Defaults<'a, 'i>,
+    locked: &'d [String],
+    used_locked: Vec<bool>,
+    rec: Recorder<'s>,
+    ranges: Vec<JointRange>,
+    locked_values: Vec<(String, f64)>,
+    bodies: Vec<BodySpec>,
+    joints: Vec<String>,
+    names: HashMap<String, Node<'a, 'i>>,
+    joint_set: HashSet<String>,
+}
+
+impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
+    /// Body `b` on `parent` with the inherited childclass `class`: its placement, mass properties,
+    /// gravcomp, colliding geoms and joints; returns its name and its childclass.
+    fn body(&mut self, b: Node<'a, 'i>, parent: &str, class: &str) -> R<(String, String)> {
+        let src = self.src;
+        let k = self.bodies.len();
         if k == crate::input::MAX_BODIES {
             return Err(err(
                 src,
@@ -525,7 +600,7 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         if name == WORLD {
             return Err(err(src, b, &what, "a body cannot be named `world`"));
         }
-        if names.insert(name.clone(), b).is_some() {
+        if self.names.insert(name.clone(), b).is_some() {
             return Err(err(
                 src,
                 b,
@@ -536,8 +611,8 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         if b.attribute("mocap") == Some("true") {
             return Err(err(src, b, &what, "mocap bodies are not supported"));
         }
-        let class = b.attribute("childclass").unwrap_or(&class).to_string();
-        if !defaults.classes.contains_key(&class) && class != MAIN {
+        let class = b.attribute("childclass").unwrap_or(class).to_string();
+        if !self.defaults.classes.contains_key(&class) && class != MAIN {
             return Err(err(
                 src,
                 b,
@@ -546,24 +621,15 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
             ));
         }
         let pos = attr_k::<3>(src, b, &format!("{what}.pos"), "pos", [0.0; 3])?;
-        let quat = orientation(src, &c, b, &what)?;
-        let mut spec = inertial(src, &c, b, &name, &parent)?.at(pos).rotated(quat);
+        let quat = orientation(src, self.c, b, &what)?;
+        let mut spec = inertial(src, self.c, b, &name, parent)?
+            .at(pos)
+            .rotated(quat);
         if let Some(t) = b.attribute("gravcomp") {
             spec = spec
                 .with_gravcomp(fixed::<1>(src, b, &format!("{what}.gravcomp"), "gravcomp", t)?[0]);
         }
-        for (gi, g) in elements(b).filter(|e| e.has_tag_name("geom")).enumerate() {
-            let gclass = g.attribute("class").unwrap_or(&class);
-            let collides = ["contype", "conaffinity"].iter().any(|a| {
-                defaults
-                    .geom_attr(g, gclass, a)
-                    .is_none_or(|v| v.trim().parse::<i64>() != Ok(0)) // MuJoCo's default: 1
-            });
-            if collides {
-                let gname = g.attribute("name").map_or(format!("{gi}"), String::from);
-                rec.push("contact", format!("{what}.geom[{gname}]"), g);
-            }
-        }
+        self.record_geoms(b, &what, &class);
         for e in elements(b) {
             let tag = e.tag_name().name();
             if tag == "frame" || tag == "replicate" || tag == "attach" || tag == "include" {
@@ -577,205 +643,266 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
             if tag != "joint" && tag != "freejoint" {
                 continue;
             }
-            let jclass = e.attribute("class").unwrap_or(&class);
-            if !defaults.classes.contains_key(jclass) && jclass != MAIN {
-                return Err(err(
-                    src,
-                    e,
-                    &format!("{what}.joint.class"),
-                    format!("unknown default class `{jclass}`"),
-                ));
+            if let Some(js) = self.joint(e, &what, &class, parent)? {
+                spec = spec.joint(js);
             }
-            let get = |a: &str| {
-                if tag == "freejoint" {
-                    e.attribute(a)
-                } else {
-                    defaults.joint_attr(e, jclass, a)
-                }
-            };
-            let Some(jname) = e.attribute("name") else {
-                return Err(err(
-                    src,
-                    e,
-                    &format!("{what}.{tag}"),
-                    "a joint needs a name: it names a coordinate",
-                ));
-            };
-            let jwhat = format!("joint[{jname}]");
-            if !is_identifier(jname) {
-                return Err(err(src, e, &jwhat, format!("joint name `{jname}` is not an identifier (letters, digits, _): it names a coordinate in rows")));
-            }
-            if !joint_set.insert(jname.to_string()) {
-                return Err(err(
-                    src,
-                    e,
-                    &jwhat,
-                    format!("joint `{jname}` is defined twice"),
-                ));
-            }
-            let kind = if tag == "freejoint" {
-                "free"
-            } else {
-                get("type").unwrap_or("hinge")
-            };
-            let num3 = |a: &str, d: [f64; 3]| -> R<[f64; 3]> {
-                match get(a) {
-                    None => Ok(d),
-                    Some(t) => fixed::<3>(src, e, &format!("{jwhat}.{a}"), a, t),
-                }
-            };
-            let anchor = num3("pos", [0.0; 3])?;
-            let axis = || -> R<[f64; 3]> {
-                Ok(unit(
-                    src,
-                    e,
-                    &format!("{jwhat}.axis"),
-                    num3("axis", [0.0, 0.0, 1.0])?,
-                    "axis",
-                )?
-                .into())
-            };
-            let js = match kind {
-                "hinge" => JointSpec::hinge(jname, axis()?).with_anchor(anchor),
-                "slide" => JointSpec::slide(jname, axis()?),
-                "ball" => JointSpec::ball(jname).with_anchor(anchor),
-                "free" if parent != WORLD => {
-                    return Err(err(
-                        src,
-                        e,
-                        &jwhat,
-                        "a free joint belongs to a top-level body (a child of <worldbody>), as MuJoCo requires",
-                    ))
-                }
-                "free" => JointSpec::free(jname),
-                other => {
-                    return Err(err(
-                        src,
-                        e,
-                        &format!("{jwhat}.type"),
-                        format!(
-                            "unknown joint type `{other}`: expected hinge, slide, ball or free"
-                        ),
-                    ))
-                }
-            };
-            // one number (`default` when absent); angles of hinges in the compiler's unit
-            let scalar = |a: &str, default: f64| -> R<f64> {
-                match get(a) {
-                    None => Ok(default),
-                    Some(t) => Ok(fixed::<1>(src, e, &format!("{jwhat}.{a}"), a, t)?[0]),
-                }
-            };
-            let hinge = kind == "hinge";
-            let angle = |x: f64| {
-                if hinge && c.degrees {
-                    x.to_radians()
-                } else {
-                    x
-                }
-            };
-            let nonzero = |a: &str| {
-                get(a).is_some_and(|v| v.split_whitespace().any(|x| x.parse::<f64>() != Ok(0.0)))
-            };
-            if get("springdamper").is_some() && nonzero("springdamper") {
-                return Err(err(src, e, &format!("{jwhat}.springdamper"), "`springdamper` (stiffness and damping from a time constant and the mass matrix at qpos0) is not supported: give stiffness and damping"));
-            }
-            let damping = scalar("damping", 0.0)?;
-            let armature = scalar("armature", 0.0)?;
-            let stiffness = scalar("stiffness", 0.0)?;
-            let (reference, springref) = if hinge || kind == "slide" {
-                (angle(scalar("ref", 0.0)?), angle(scalar("springref", 0.0)?))
-            } else {
-                (0.0, 0.0) // MuJoCo reads ref and springref of hinges and slides only
-            };
-            if stiffness != 0.0 && !(hinge || kind == "slide") {
-                return Err(err(src, e, &format!("{jwhat}.stiffness"), format!("a spring on a {kind} joint is not supported (springs on hinge and slide joints only)")));
-            }
-            for (a, v) in [
-                ("damping", damping),
-                ("armature", armature),
-                ("stiffness", stiffness),
-            ] {
-                if v < 0.0 {
-                    return Err(err(
-                        src,
-                        e,
-                        &format!("{jwhat}.{a}"),
-                        format!("`{a}` must be >= 0, got {v}"),
-                    ));
-                }
-            }
-            let js = js
-                .with_damping(damping)
-                .with_armature(armature)
-                .with_spring(stiffness, springref)
-                .with_reference(reference);
-            let is_locked = locked.iter().position(|l| l == jname);
-            if let Some(k) = is_locked {
-                used_locked[k] = true;
-                locked_values.push((jname.to_string(), reference));
-                continue; // welded: its limits, friction and forces act on no coordinate
-            }
-            let limited = match get("limited") {
-                Some("true") => true,
-                Some("false") => false,
-                _ => get("range").is_some(), // autolimits (MuJoCo's default)
-            };
-            if limited && kind != "free" {
-                rec.push("joint_limit", format!("{jwhat}.range"), e);
-                if hinge || kind == "slide" {
-                    let r = match get("range") {
-                        None => [0.0, 0.0],
-                        Some(t) => fixed::<2>(src, e, &format!("{jwhat}.range"), "range", t)?,
-                    };
-                    ranges.push(JointRange {
-                        joint: jname.to_string(),
-                        lower: angle(r[0]),
-                        upper: angle(r[1]),
-                    });
-                }
-            }
-            let frc_limited = match get("actuatorfrclimited") {
-                Some("true") => true,
-                Some("false") => false,
-                _ => get("actuatorfrcrange").is_some(),
-            };
-            if frc_limited {
-                rec.push("effort_limit", format!("{jwhat}.actuatorfrcrange"), e);
-            }
-            if nonzero("frictionloss") {
-                rec.push("frictionloss", format!("{jwhat}.frictionloss"), e);
-            }
-            spec = spec.joint(js);
-            joints.push(jname.to_string());
         }
-        bodies.push(spec);
-        for ch in elements(b)
-            .filter(|x| x.has_tag_name("body"))
-            .collect::<Vec<_>>()
-            .into_iter()
-            .rev()
-        {
-            stack.push((ch, name.clone(), class.clone()));
+        self.bodies.push(spec);
+        Ok((name, class))
+    }
+
+    /// One `contact` record per geom of body `b` that collides (`contype` or `conaffinity` not 0).
+    fn record_geoms(&mut self, b: Node<'a, 'i>, what: &str, class: &str) {
+        for (gi, g) in elements(b).filter(|e| e.has_tag_name("geom")).enumerate() {
+            let gclass = g.attribute("class").unwrap_or(class);
+            let collides = ["contype", "conaffinity"].iter().any(|a| {
+                self.defaults
+                    .geom_attr(g, gclass, a)
+                    .is_none_or(|v| v.trim().parse::<i64>() != Ok(0)) // MuJoCo's default: 1
+            });
+            if collides {
+                let gname = g.attribute("name").map_or(format!("{gi}"), String::from);
+                self.rec.push("contact", format!("{what}.geom[{gname}]"), g);
+            }
         }
     }
-    if worldbodies.is_empty() || bodies.is_empty() {
-        return Err(err(src, root, "worldbody", "no <body> in <worldbody>"));
+
+    /// Joint element `e` (`<joint>` or `<freejoint>`) of the body `what` on `parent`: its tree
+    /// joint, or `None` when it is locked (welded at its `ref`).
+    fn joint(
+        &mut self,
+        e: Node<'a, 'i>,
+        what: &str,
+        class: &str,
+        parent: &str,
+    ) -> R<Option<JointSpec>> {
+        let src = self.src;
+        let tag = e.tag_name().name();
+        let jclass = e.attribute("class").unwrap_or(class);
+        if !self.defaults.classes.contains_key(jclass) && jclass != MAIN {
+            return Err(err(
+                src,
+                e,
+                &format!("{what}.joint.class"),
+                format!("unknown default class `{jclass}`"),
+            ));
+        }
+        let Some(jname) = e.attribute("name") else {
+            return Err(err(
+                src,
+                e,
+                &format!("{what}.{tag}"),
+                "a joint needs a name: it names a coordinate",
+            ));
+        };
+        let jwhat = format!("joint[{jname}]");
+        if !is_identifier(jname) {
+            return Err(err(src, e, &jwhat, format!("joint name `{jname}` is not an identifier (letters, digits, _): it names a coordinate in rows")));
+        }
+        if !self.joint_set.insert(jname.to_string()) {
+            return Err(err(
+                src,
+                e,
+                &jwhat,
+                format!("joint `{jname}` is defined twice"),
+            ));
+        }
+        let a = JointAttrs {
+            src,
+            e,
+            freejoint: tag == "freejoint",
+            class: jclass,
+            defaults: self.defaults,
+            what: jwhat,
+        };
+        let kind = if a.freejoint {
+            "free"
+        } else {
+            a.get("type").unwrap_or("hinge")
+        };
+        let js = a.spec(jname, kind, parent)?;
+        let (js, reference) = a.dynamics(self.c, js, kind)?;
+        let is_locked = self.locked.iter().position(|l| l == jname);
+        if let Some(k) = is_locked {
+            self.used_locked[k] = true;
+            self.locked_values.push((jname.to_string(), reference));
+            return Ok(None); // welded: its limits, friction and forces act on no coordinate
+        }
+        self.record_joint(&a, jname, kind)?;
+        self.joints.push(jname.to_string());
+        Ok(Some(js))
     }
-    if let Some(k) = used_locked.iter().position(|u| !u) {
-        return Err(src.error(
-            0..0,
-            "locked_joints",
-            format!("locked joint `{}` is not a joint of this file", locked[k]),
-        ));
+
+    /// The records of a joint's limits (with its range), actuator force range and frictionloss.
+    fn record_joint(&mut self, a: &JointAttrs, jname: &str, kind: &str) -> R<()> {
+        let (src, e, jwhat) = (self.src, a.e, &a.what);
+        let hinge = kind == "hinge";
+        let limited = match a.get("limited") {
+            Some("true") => true,
+            Some("false") => false,
+            _ => a.get("range").is_some(), // autolimits (MuJoCo's default)
+        };
+        if limited && kind != "free" {
+            self.rec.push("joint_limit", format!("{jwhat}.range"), e);
+            if hinge || kind == "slide" {
+                let r = match a.get("range") {
+                    None => [0.0, 0.0],
+                    Some(t) => fixed::<2>(src, e, &format!("{jwhat}.range"), "range", t)?,
+                };
+                self.ranges.push(JointRange {
+                    joint: jname.to_string(),
+                    lower: joint_angle(self.c, kind, r[0]),
+                    upper: joint_angle(self.c, kind, r[1]),
+                });
+            }
+        }
+        let frc_limited = match a.get("actuatorfrclimited") {
+            Some("true") => true,
+            Some("false") => false,
+            _ => a.get("actuatorfrcrange").is_some(),
+        };
+        if frc_limited {
+            self.rec
+                .push("effort_limit", format!("{jwhat}.actuatorfrcrange"), e);
+        }
+        if a.nonzero("frictionloss") {
+            self.rec
+                .push("frictionloss", format!("{jwhat}.frictionloss"), e);
+        }
+        Ok(())
     }
-    let unmodelled: Vec<Unmodelled> = rec.out;
-    Ok(Robot {
-        bodies,
-        joints,
-        notes,
-        unmodelled,
-        ranges,
-        locked: locked_values,
-    })
+}
+
+/// An angle of a joint of type `kind`: a hinge's in the compiler's unit, converted to radians.
+fn joint_angle(c: &Compiler, kind: &str, x: f64) -> f64 {
+    if kind == "hinge" && c.degrees {
+        x.to_radians()
+    } else {
+        x
+    }
+}
+
+/// A joint element's attributes: its own, else (for a `<joint>`) its default class chain's.
+struct JointAttrs<'d, 'a, 'i> {
+    src: &'d Source,
+    e: Node<'a, 'i>,
+    /// A `<freejoint>` takes no defaults.
+    freejoint: bool,
+    class: &'d str,
+    defaults: &'d Defaults<'a, 'i>,
+    /// `joint[name]`, the element named in errors and records.
+    what: String,
+}
+
+impl<'a> JointAttrs<'_, 'a, '_> {
+    fn get(&self, a: &str) -> Option<&'a str> {
+        if self.freejoint {
+            self.e.attribute(a)
+        } else {
+            self.defaults.joint_attr(self.e, self.class, a)
+        }
+    }
+
+    fn nonzero(&self, a: &str) -> bool {
+        self.get(a)
+            .is_some_and(|v| v.split_whitespace().any(|x| x.parse::<f64>() != Ok(0.0)))
+    }
+
+    fn num3(&self, a: &str, d: [f64; 3]) -> R<[f64; 3]> {
+        match self.get(a) {
+            None => Ok(d),
+            Some(t) => fixed::<3>(self.src, self.e, &format!("{}.{a}", self.what), a, t),
+        }
+    }
+
+    /// One number (`default` when absent).
+    fn scalar(&self, a: &str, default: f64) -> R<f64> {
+        match self.get(a) {
+            None => Ok(default),
+            Some(t) => Ok(fixed::<1>(self.src, self.e, &format!("{}.{a}", self.what), a, t)?[0]),
+        }
+    }
+
+    /// The tree joint of type `kind` named `jname` (its axis and anchor), on body parent `parent`.
+    fn spec(&self, jname: &str, kind: &str, parent: &str) -> R<JointSpec> {
+        let (src, e, jwhat) = (self.src, self.e, &self.what);
+        let anchor = self.num3("pos", [0.0; 3])?;
+        let axis = || -> R<[f64; 3]> {
+            Ok(unit(
+                src,
+                e,
+                &format!("{jwhat}.axis"),
+                self.num3("axis", [0.0, 0.0, 1.0])?,
+                "axis",
+            )?
+            .into())
+        };
+        Ok(match kind {
+            "hinge" => JointSpec::hinge(jname, axis()?).with_anchor(anchor),
+            "slide" => JointSpec::slide(jname, axis()?),
+            "ball" => JointSpec::ball(jname).with_anchor(anchor),
+            "free" if parent != WORLD => {
+                return Err(err(
+                    src,
+                    e,
+                    jwhat,
+                    "a free joint belongs to a top-level body (a child of <worldbody>), as MuJoCo requires",
+                ))
+            }
+            "free" => JointSpec::free(jname),
+            other => {
+                return Err(err(
+                    src,
+                    e,
+                    &format!("{jwhat}.type"),
+                    format!("unknown joint type `{other}`: expected hinge, slide, ball or free"),
+                ))
+            }
+        })
+    }
+
+    /// `js` with its damping, armature, spring and reference (angles of hinges in the compiler's
+    /// unit), and the reference.
+    fn dynamics(&self, c: &Compiler, js: JointSpec, kind: &str) -> R<(JointSpec, f64)> {
+        let (src, e, jwhat) = (self.src, self.e, &self.what);
+        let hinge = kind == "hinge";
+        let angle = |x: f64| joint_angle(c, kind, x);
+        if self.get("springdamper").is_some() && self.nonzero("springdamper") {
+            return Err(err(src, e, &format!("{jwhat}.springdamper"), "`springdamper` (stiffness and damping from a time constant and the mass matrix at qpos0) is not supported: give stiffness and damping"));
+        }
+        let damping = self.scalar("damping", 0.0)?;
+        let armature = self.scalar("armature", 0.0)?;
+        let stiffness = self.scalar("stiffness", 0.0)?;
+        let (reference, springref) = if hinge || kind == "slide" {
+            (
+                angle(self.scalar("ref", 0.0)?),
+                angle(self.scalar("springref", 0.0)?),
+            )
+        } else {
+            (0.0, 0.0) // MuJoCo reads ref and springref of hinges and slides only
+        };
+        if stiffness != 0.0 && !(hinge || kind == "slide") {
+            return Err(err(src, e, &format!("{jwhat}.stiffness"), format!("a spring on a {kind} joint is not supported (springs on hinge and slide joints only)")));
+        }
+        for (a, v) in [
+            ("damping", damping),
+            ("armature", armature),
+            ("stiffness", stiffness),
+        ] {
+            if v < 0.0 {
+                return Err(err(
+                    src,
+                    e,
+                    &format!("{jwhat}.{a}"),
+                    format!("`{a}` must be >= 0, got {v}"),
+                ));
+            }
+        }
+        let js = js
+            .with_damping(damping)
+            .with_armature(armature)
+            .with_spring(stiffness, springref)
+            .with_reference(reference);
+        Ok((js, reference))
+    }
 }

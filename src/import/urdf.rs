@@ -211,7 +211,6 @@ fn loop_error(
 }
 
 /// Read a URDF document (`src` is the file and its text).
-#[allow(clippy::too_many_lines)] // over 100 lines before the lint: to split, not to grow
 pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot> {
     let doc = super::parse_xml(src)?;
     let robot = doc.root_element();
@@ -223,6 +222,88 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
             "the root element of a URDF file must be <robot>",
         ));
     }
+    let (links, link_order) = read_links(src, robot)?;
+    let graph = read_joints(src, robot, &links)?;
+    let root = find_root(src, robot, &links, &link_order, &graph.parent_joint)?;
+    let notes = vec![];
+    let mut w = Walk {
+        src,
+        locked,
+        used_locked: vec![false; locked.len()],
+        bodies: vec![],
+        joints: vec![],
+        rec: Recorder::new(src),
+        ranges: vec![],
+        locked_values: vec![],
+    };
+    record_collisions(&mut w.rec, &links, &link_order);
+    for t in robot.children().filter(|c| c.has_tag_name("transmission")) {
+        let name = t.attribute("name").unwrap_or("");
+        w.rec.push("actuator", format!("transmission[{name}]"), t);
+    }
+    // The root: a link named `world` without inertia is the world frame itself.
+    let root_is_world = root == WORLD && child(links[root], "inertial").is_none();
+    if !root_is_world {
+        let mut b = link_body(src, links[root], root, WORLD)?;
+        if root_joint == RootJoint::Free {
+            b = b.joint(JointSpec::free(ROOT_JOINT_NAME));
+            w.joints.push(ROOT_JOINT_NAME.to_string());
+        }
+        w.bodies.push(b);
+    } else if root_joint == RootJoint::Free {
+        return Err(err(
+            src,
+            links[root],
+            "link[world]",
+            "root_joint = \"free\" needs a root link other than `world`",
+        ));
+    }
+    let mut queue: VecDeque<&str> = VecDeque::from([root]);
+    let mut seen = 1usize;
+    let mut reached: HashSet<&str> = HashSet::from([root]);
+    while let Some(p) = queue.pop_front() {
+        for j in graph.children.get(p).map(|v| v.as_slice()).unwrap_or(&[]) {
+            let c = child(*j, "child")
+                .and_then(|n| n.attribute("link"))
+                .unwrap_or("");
+            let parent = if p == root && root_is_world { WORLD } else { p };
+            w.add_joint(*j, links[c], c, parent)?;
+            seen += 1;
+            reached.insert(c);
+            queue.push_back(c);
+        }
+    }
+    if seen < links.len() {
+        // one parent each and one root: the links not reached form a loop (with what hangs on it)
+        let start = link_order
+            .iter()
+            .copied()
+            .find(|l| !reached.contains(l))
+            .unwrap_or(root);
+        return Err(loop_error(src, &graph.parent_joint, start, Some(root)));
+    }
+    if let Some(k) = w.used_locked.iter().position(|u| !u) {
+        return Err(src.error(
+            0..0,
+            "locked_joints",
+            format!("locked joint `{}` is not a joint of this file", locked[k]),
+        ));
+    }
+    Ok(Robot {
+        bodies: w.bodies,
+        joints: w.joints,
+        notes,
+        unmodelled: w.rec.out,
+        ranges: w.ranges,
+        locked: w.locked_values,
+    })
+}
+
+/// The `<link>` elements by name, and their names in file order.
+type Links<'a, 'i> = (HashMap<&'a str, Node<'a, 'i>>, Vec<&'a str>);
+
+/// The links of `robot`: named, at most [`MAX_BODIES`], each defined once.
+fn read_links<'a, 'i>(src: &Source, robot: Node<'a, 'i>) -> R<Links<'a, 'i>> {
     let mut links: HashMap<&str, Node> = HashMap::new();
     let mut link_order = vec![];
     for l in robot.children().filter(|c| c.has_tag_name("link")) {
@@ -247,6 +328,23 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
         }
         link_order.push(name);
     }
+    Ok((links, link_order))
+}
+
+/// The joints as edges of the link tree.
+struct JointGraph<'a, 'i> {
+    /// The joint of each child link.
+    parent_joint: HashMap<&'a str, Node<'a, 'i>>,
+    /// The joints of each parent link, in file order.
+    children: HashMap<&'a str, Vec<Node<'a, 'i>>>,
+}
+
+/// The joints of `robot`: named once each, between known links, one parent per link.
+fn read_joints<'a, 'i>(
+    src: &Source,
+    robot: Node<'a, 'i>,
+    links: &HashMap<&'a str, Node<'a, 'i>>,
+) -> R<JointGraph<'a, 'i>> {
     // joint of each child link
     let mut parent_joint: HashMap<&str, Node> = HashMap::new();
     let mut children: HashMap<&str, Vec<Node>> = HashMap::new();
@@ -303,44 +401,52 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
         parent_joint.insert(c, j);
         children.entry(p).or_default().push(j);
     }
+    Ok(JointGraph {
+        parent_joint,
+        children,
+    })
+}
+
+/// The one link without a parent joint.
+fn find_root<'a>(
+    src: &Source,
+    robot: Node,
+    links: &HashMap<&'a str, Node>,
+    link_order: &[&'a str],
+    parent_joint: &HashMap<&str, Node>,
+) -> R<&'a str> {
     let roots: Vec<&str> = link_order
         .iter()
         .copied()
         .filter(|l| !parent_joint.contains_key(l))
         .collect();
-    let root = match roots.as_slice() {
-        [r] => *r,
-        [] => {
-            return Err(err(
-                src,
-                robot,
-                "robot",
-                if links.is_empty() {
-                    "no <link>".to_string()
-                } else {
-                    return Err(loop_error(src, &parent_joint, link_order[0], None));
-                },
-            ))
-        }
-        many => {
-            return Err(err(
-                src,
-                links[many[1]],
-                &format!("link[{}]", many[1]),
-                format!(
-                    "several root links ({}): a URDF describes one tree",
-                    many.join(", ")
-                ),
-            ))
-        }
-    };
-    let notes = vec![];
-    let mut bodies = vec![];
-    let mut joints = vec![];
-    let mut rec = Recorder::new(src);
-    let mut ranges = vec![];
-    let mut locked_values = vec![];
-    for l in &link_order {
+    match roots.as_slice() {
+        [r] => Ok(*r),
+        [] => Err(err(
+            src,
+            robot,
+            "robot",
+            if links.is_empty() {
+                "no <link>".to_string()
+            } else {
+                return Err(loop_error(src, parent_joint, link_order[0], None));
+            },
+        )),
+        many => Err(err(
+            src,
+            links[many[1]],
+            &format!("link[{}]", many[1]),
+            format!(
+                "several root links ({}): a URDF describes one tree",
+                many.join(", ")
+            ),
+        )),
+    }
+}
+
+/// One `contact` record per `<collision>` of every link.
+fn record_collisions(rec: &mut Recorder, links: &HashMap<&str, Node>, link_order: &[&str]) {
+    for l in link_order {
         let collisions: Vec<Node> = links[l]
             .children()
             .filter(|c| c.has_tag_name("collision"))
@@ -354,165 +460,154 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
             rec.push("contact", element, *c);
         }
     }
-    for t in robot.children().filter(|c| c.has_tag_name("transmission")) {
-        let name = t.attribute("name").unwrap_or("");
-        rec.push("actuator", format!("transmission[{name}]"), t);
-    }
-    // The root: a link named `world` without inertia is the world frame itself.
-    let root_is_world = root == WORLD && child(links[root], "inertial").is_none();
-    if !root_is_world {
-        let mut b = link_body(src, links[root], root, WORLD)?;
-        if root_joint == RootJoint::Free {
-            b = b.joint(JointSpec::free(ROOT_JOINT_NAME));
-            joints.push(ROOT_JOINT_NAME.to_string());
-        }
-        bodies.push(b);
-    } else if root_joint == RootJoint::Free {
-        return Err(err(
-            src,
-            links[root],
-            "link[world]",
-            "root_joint = \"free\" needs a root link other than `world`",
-        ));
-    }
-    let mut used_locked = vec![false; locked.len()];
-    let mut queue: VecDeque<&str> = VecDeque::from([root]);
-    let mut seen = 1usize;
-    let mut reached: HashSet<&str> = HashSet::from([root]);
-    while let Some(p) = queue.pop_front() {
-        for j in children.get(p).map(|v| v.as_slice()).unwrap_or(&[]) {
-            let name = j.attribute("name").unwrap_or("");
-            let what = format!("joint[{name}]");
-            let c = child(*j, "child")
-                .and_then(|n| n.attribute("link"))
-                .unwrap_or("");
-            let parent = if p == root && root_is_world { WORLD } else { p };
-            let (xyz, rpy) = origin(src, *j)?;
-            let mut b = link_body(src, links[c], c, parent)?
-                .at(xyz)
-                .rotated(rpy_quat(rpy));
-            let kind = j
-                .attribute("type")
-                .ok_or_else(|| err(src, *j, &what, "missing attribute `type`"))?;
-            let is_locked = match locked.iter().position(|l| l == name) {
-                Some(k) => {
-                    used_locked[k] = true;
-                    locked_values.push((name.to_string(), 0.0));
-                    true
-                }
-                None => false,
-            };
-            let axis = || -> R<[f64; 3]> {
-                let a = match child(*j, "axis") {
-                    None => [1.0, 0.0, 0.0], // the URDF default
-                    Some(n) => numbers(src, n, "xyz", Some([1.0, 0.0, 0.0]))?,
-                };
-                if a.iter().map(|x| x * x).sum::<f64>() < 1e-24 {
-                    return Err(err(src, *j, &format!("{what}.axis"), "the axis is zero"));
-                }
-                Ok(a)
-            };
-            let spec = match kind {
-                "revolute" | "continuous" => Some(JointSpec::hinge(name, axis()?)),
-                "prismatic" => Some(JointSpec::slide(name, axis()?)),
-                "floating" => Some(JointSpec::free(name)),
-                "fixed" => None,
-                "planar" => {
-                    return Err(err(src, *j, &format!("{what}.type"), "planar joints are not supported (no tree joint has their 3 dof in one)"))
-                }
-                other => {
-                    return Err(err(
-                        src,
-                        *j,
-                        &format!("{what}.type"),
-                        format!("unknown joint type `{other}`: expected revolute, continuous, prismatic, fixed or floating"),
-                    ))
-                }
-            };
-            if let Some(s) = spec.filter(|_| !is_locked) {
-                let id_ok = {
-                    let mut ch = name.chars();
-                    matches!(ch.next(), Some(c) if c.is_ascii_alphabetic() || c == '_')
-                        && ch.all(|c| c.is_ascii_alphanumeric() || c == '_')
-                };
-                if !id_ok || name == "t" || name == "pi" {
-                    return Err(err(src, *j, &what, format!("joint name `{name}` is not an identifier (letters, digits, _): it names a coordinate in rows")));
-                }
-                let mut s = s;
-                if let Some(m) = child(*j, "mimic") {
-                    rec.push("mimic", format!("{what}.mimic"), m);
-                }
-                if let Some(l) = child(*j, "limit") {
-                    let bounded = kind == "revolute" || kind == "prismatic";
-                    if bounded && (l.attribute("lower").is_some() || l.attribute("upper").is_some())
-                    {
-                        let [lower] = numbers::<1>(src, l, "lower", Some([0.0]))?;
-                        let [upper] = numbers::<1>(src, l, "upper", Some([0.0]))?;
-                        rec.push("joint_limit", format!("{what}.limit"), l);
-                        ranges.push(JointRange {
-                            joint: name.to_string(),
-                            lower,
-                            upper,
-                        });
-                    }
-                    if l.attribute("effort").is_some() {
-                        rec.push("effort_limit", format!("{what}.limit.effort"), l);
-                    }
-                    if l.attribute("velocity").is_some() {
-                        rec.push("velocity_limit", format!("{what}.limit.velocity"), l);
-                    }
-                }
-                if let Some(sc) = child(*j, "safety_controller") {
-                    rec.push("joint_limit", format!("{what}.safety_controller"), sc);
-                }
-                if let Some(d) = child(*j, "dynamics") {
-                    let [damping] = numbers::<1>(src, d, "damping", Some([0.0]))?;
-                    let [friction] = numbers::<1>(src, d, "friction", Some([0.0]))?;
-                    if damping < 0.0 {
-                        return Err(err(
-                            src,
-                            d,
-                            &format!("{what}.dynamics.damping"),
-                            format!("damping must be >= 0, got {damping}"),
-                        ));
-                    }
-                    s = s.with_damping(damping);
-                    if friction != 0.0 {
-                        rec.push("frictionloss", format!("{what}.dynamics.friction"), d);
-                    }
-                }
-                b = b.joint(s);
-                joints.push(name.to_string());
+}
+
+/// What the walk down the tree builds: bodies, coordinates, records, ranges and locked joints.
+struct Walk<'s, 'l> {
+    src: &'s Source,
+    locked: &'l [String],
+    used_locked: Vec<bool>,
+    bodies: Vec<BodySpec>,
+    joints: Vec<String>,
+    rec: Recorder<'s>,
+    ranges: Vec<JointRange>,
+    locked_values: Vec<(String, f64)>,
+}
+
+impl Walk<'_, '_> {
+    /// The body of link `c` (element `link`) placed by its joint `j` on `parent`.
+    fn add_joint(&mut self, j: Node, link: Node, c: &str, parent: &str) -> R<()> {
+        let src = self.src;
+        let name = j.attribute("name").unwrap_or("");
+        let what = format!("joint[{name}]");
+        let (xyz, rpy) = origin(src, j)?;
+        let mut b = link_body(src, link, c, parent)?
+            .at(xyz)
+            .rotated(rpy_quat(rpy));
+        let kind = j
+            .attribute("type")
+            .ok_or_else(|| err(src, j, &what, "missing attribute `type`"))?;
+        let is_locked = match self.locked.iter().position(|l| l == name) {
+            Some(k) => {
+                self.used_locked[k] = true;
+                self.locked_values.push((name.to_string(), 0.0));
+                true
             }
-            bodies.push(b);
-            seen += 1;
-            reached.insert(c);
-            queue.push_back(c);
+            None => false,
+        };
+        let spec = joint_spec(src, j, name, &what, kind)?;
+        if let Some(s) = spec.filter(|_| !is_locked) {
+            b = b.joint(self.coordinate(j, name, &what, kind, s)?);
+            self.joints.push(name.to_string());
         }
+        self.bodies.push(b);
+        Ok(())
     }
-    if seen < links.len() {
-        // one parent each and one root: the links not reached form a loop (with what hangs on it)
-        let start = link_order
-            .iter()
-            .copied()
-            .find(|l| !reached.contains(l))
-            .unwrap_or(root);
-        return Err(loop_error(src, &parent_joint, start, Some(root)));
+
+    /// The joint of an unlocked coordinate: its name checked, its `<dynamics damping>`, and the
+    /// records of what is read and not modelled (mimic, limits, safety controller, friction).
+    fn coordinate(
+        &mut self,
+        j: Node,
+        name: &str,
+        what: &str,
+        kind: &str,
+        s: JointSpec,
+    ) -> R<JointSpec> {
+        let src = self.src;
+        let id_ok = {
+            let mut ch = name.chars();
+            matches!(ch.next(), Some(c) if c.is_ascii_alphabetic() || c == '_')
+                && ch.all(|c| c.is_ascii_alphanumeric() || c == '_')
+        };
+        if !id_ok || name == "t" || name == "pi" {
+            return Err(err(src, j, what, format!("joint name `{name}` is not an identifier (letters, digits, _): it names a coordinate in rows")));
+        }
+        let mut s = s;
+        if let Some(m) = child(j, "mimic") {
+            self.rec.push("mimic", format!("{what}.mimic"), m);
+        }
+        if let Some(l) = child(j, "limit") {
+            self.limit(l, name, what, kind)?;
+        }
+        if let Some(sc) = child(j, "safety_controller") {
+            self.rec
+                .push("joint_limit", format!("{what}.safety_controller"), sc);
+        }
+        if let Some(d) = child(j, "dynamics") {
+            let [damping] = numbers::<1>(src, d, "damping", Some([0.0]))?;
+            let [friction] = numbers::<1>(src, d, "friction", Some([0.0]))?;
+            if damping < 0.0 {
+                return Err(err(
+                    src,
+                    d,
+                    &format!("{what}.dynamics.damping"),
+                    format!("damping must be >= 0, got {damping}"),
+                ));
+            }
+            s = s.with_damping(damping);
+            if friction != 0.0 {
+                self.rec
+                    .push("frictionloss", format!("{what}.dynamics.friction"), d);
+            }
+        }
+        Ok(s)
     }
-    if let Some(k) = used_locked.iter().position(|u| !u) {
-        return Err(src.error(
-            0..0,
-            "locked_joints",
-            format!("locked joint `{}` is not a joint of this file", locked[k]),
-        ));
+
+    /// A joint's `<limit>`: the range of a revolute or prismatic joint, effort and velocity.
+    fn limit(&mut self, l: Node, name: &str, what: &str, kind: &str) -> R<()> {
+        let src = self.src;
+        let bounded = kind == "revolute" || kind == "prismatic";
+        if bounded && (l.attribute("lower").is_some() || l.attribute("upper").is_some()) {
+            let [lower] = numbers::<1>(src, l, "lower", Some([0.0]))?;
+            let [upper] = numbers::<1>(src, l, "upper", Some([0.0]))?;
+            self.rec.push("joint_limit", format!("{what}.limit"), l);
+            self.ranges.push(JointRange {
+                joint: name.to_string(),
+                lower,
+                upper,
+            });
+        }
+        if l.attribute("effort").is_some() {
+            self.rec
+                .push("effort_limit", format!("{what}.limit.effort"), l);
+        }
+        if l.attribute("velocity").is_some() {
+            self.rec
+                .push("velocity_limit", format!("{what}.limit.velocity"), l);
+        }
+        Ok(())
     }
-    Ok(Robot {
-        bodies,
-        joints,
-        notes,
-        unmodelled: rec.out,
-        ranges,
-        locked: locked_values,
+}
+
+/// The tree joint of URDF joint `j` of type `kind` (`None`: fixed).
+fn joint_spec(src: &Source, j: Node, name: &str, what: &str, kind: &str) -> R<Option<JointSpec>> {
+    let axis = || -> R<[f64; 3]> {
+        let a = match child(j, "axis") {
+            None => [1.0, 0.0, 0.0], // the URDF default
+            Some(n) => numbers(src, n, "xyz", Some([1.0, 0.0, 0.0]))?,
+        };
+        if a.iter().map(|x| x * x).sum::<f64>() < 1e-24 {
+            return Err(err(src, j, &format!("{what}.axis"), "the axis is zero"));
+        }
+        Ok(a)
+    };
+    Ok(match kind {
+        "revolute" | "continuous" => Some(JointSpec::hinge(name, axis()?)),
+        "prismatic" => Some(JointSpec::slide(name, axis()?)),
+        "floating" => Some(JointSpec::free(name)),
+        "fixed" => None,
+        "planar" => {
+            return Err(err(src, j, &format!("{what}.type"), "planar joints are not supported (no tree joint has their 3 dof in one)"))
+        }
+        other => {
+            return Err(err(
+                src,
+                j,
+                &format!("{what}.type"),
+                format!("unknown joint type `{other}`: expected revolute, continuous, prismatic, fixed or floating"),
+            ))
+        }
     })
 }
 
