@@ -126,7 +126,6 @@ pub(super) type ClosureRows = (Vec<Closure>, Vec<(RowFile, String)>);
 /// Validate the closures of `m`, adding their synthetic sites to `sites`. Returns the closures and
 /// their rows (name and expression, spanned at the closure) in declaration order, with the field
 /// each row is reported under.
-#[allow(clippy::too_many_lines)] // over 100 lines before the lint: to split, not to grow
 pub(super) fn load(
     src: &Source,
     m: &ModelFile,
@@ -137,19 +136,91 @@ pub(super) fn load(
     let mut closures = vec![];
     let mut rows = vec![];
     for (ci, c) in m.closures.iter().enumerate() {
-        let cf: &ClosureFile = c.get_ref();
         let field = format!("model.closures[{ci}]");
-        let err = |key: &str, msg: String| src.error(c.span(), &format!("{field}.{key}"), msg);
+        let cx = ClosureCx {
+            src,
+            c,
+            cf: c.get_ref(),
+            field: &field,
+        };
+        let closure = cx.closure(tree, joint_names, sites, &closures)?;
+        for (name, expr) in closure.rows() {
+            let row = RowFile {
+                name: Spanned::new(c.span(), name),
+                expr: Spanned::new(c.span(), expr),
+            };
+            rows.push((row, field.clone()));
+        }
+        closures.push(closure);
+    }
+    Ok((closures, rows))
+}
+
+/// One `[[model.closures]]` table being validated; its errors point at the table.
+struct ClosureCx<'a> {
+    src: &'a Source,
+    c: &'a Spanned<ClosureFile>,
+    cf: &'a ClosureFile,
+    /// `model.closures[i]`.
+    field: &'a str,
+}
+
+impl ClosureCx<'_> {
+    fn err(&self, key: &str, msg: String) -> SceneError {
+        self.src
+            .error(self.c.span(), &format!("{}.{key}", self.field), msg)
+    }
+
+    /// The closure, checked against `tree` and the closures before it (`earlier`), its synthetic
+    /// sites added to `sites`.
+    fn closure(
+        &self,
+        tree: &tree::Model,
+        joint_names: &[&str],
+        sites: &mut Vec<Site>,
+        earlier: &[Closure],
+    ) -> Result<Closure, SceneError> {
+        let (cf, err) = (self.cf, |key: &str, msg: String| self.err(key, msg));
         if !super::load::is_identifier(&cf.name) {
             return Err(err("name", "a closure name must be an identifier".into()));
         }
-        if closures.iter().any(|x: &Closure| x.name == cf.name) {
+        if earlier.iter().any(|x: &Closure| x.name == cf.name) {
             return Err(err(
                 "name",
                 format!("closure name `{}` is used twice", cf.name),
             ));
         }
-        let kind = match cf.kind.get_ref().as_str() {
+        let kind = self.kind()?;
+        let (body_a, body_b) = self.bodies(tree)?;
+        let finite = cf.point_a.iter().chain(&cf.point_b).all(|x| x.is_finite());
+        if !finite {
+            return Err(err("point_a", "closure points must be finite".into()));
+        }
+        let (quat_a, quat_b) = self.quats(kind)?;
+        let distance = self.distance(kind)?;
+        let axis = self.axis(kind)?;
+        let (radius, normal) = self.rolling(kind, body_b)?;
+        self.add_sites(body_a, body_b, joint_names, sites)?;
+        Ok(Closure {
+            name: cf.name.clone(),
+            kind,
+            body_a: cf.body_a.clone(),
+            point_a: cf.point_a,
+            quat_a,
+            body_b: body_b.map(|_| cf.body_b.clone()),
+            point_b: cf.point_b,
+            quat_b,
+            distance,
+            axis,
+            radius,
+            normal,
+        })
+    }
+
+    /// `kind`, one of the closure kinds.
+    fn kind(&self) -> Result<ClosureKind, SceneError> {
+        let cf = self.cf;
+        Ok(match cf.kind.get_ref().as_str() {
             "point" => ClosureKind::Point,
             "weld" => ClosureKind::Weld,
             "distance" => ClosureKind::Distance,
@@ -157,16 +228,21 @@ pub(super) fn load(
             "plane" => ClosureKind::Plane,
             "rolling" => ClosureKind::Rolling,
             other => {
-                return Err(src.error(
+                return Err(self.src.error(
                     cf.kind.span(),
-                    &format!("{field}.kind"),
+                    &format!("{}.kind", self.field),
                     format!(
                         "unknown closure kind `{other}`: expected `point`, `weld`, `distance`, \
                          `line`, `plane` or `rolling`"
                     ),
                 ))
             }
-        };
+        })
+    }
+
+    /// Bodies a and b (None: the world), two different ones of the tree.
+    fn bodies(&self, tree: &tree::Model) -> Result<(usize, Option<usize>), SceneError> {
+        let (cf, err) = (self.cf, |key: &str, msg: String| self.err(key, msg));
         let body_a = tree
             .body_id(&cf.body_a)
             .ok_or_else(|| err("body_a", format!("unknown body `{}`", cf.body_a)))?;
@@ -187,10 +263,12 @@ pub(super) fn load(
                 ),
             ));
         }
-        let finite = cf.point_a.iter().chain(&cf.point_b).all(|x| x.is_finite());
-        if !finite {
-            return Err(err("point_a", "closure points must be finite".into()));
-        }
+        Ok((body_a, body_b))
+    }
+
+    /// The frames' orientations, normalised (`weld` only; the identity otherwise).
+    fn quats(&self, kind: ClosureKind) -> Result<([f64; 4], [f64; 4]), SceneError> {
+        let (cf, err) = (self.cf, |key: &str, msg: String| self.err(key, msg));
         if kind != ClosureKind::Weld && (cf.quat_a.is_some() || cf.quat_b.is_some()) {
             return Err(err(
                 "quat_a",
@@ -203,7 +281,13 @@ pub(super) fn load(
         };
         let quat_a = quat(cf.quat_a, "quat_a")?;
         let quat_b = quat(cf.quat_b, "quat_b")?;
-        let distance = match (kind, cf.distance) {
+        Ok((quat_a, quat_b))
+    }
+
+    /// `distance`: positive, for `distance` closures only.
+    fn distance(&self, kind: ClosureKind) -> Result<Option<f64>, SceneError> {
+        let err = |key: &str, msg: String| self.err(key, msg);
+        let distance = match (kind, self.cf.distance) {
             (ClosureKind::Distance, Some(d)) if d.is_finite() && d > 0.0 => Some(d),
             (ClosureKind::Distance, Some(d)) => {
                 return Err(err(
@@ -225,20 +309,28 @@ pub(super) fn load(
             }
             (_, None) => None,
         };
-        let unit = |a: [f64; 3], key: &str| {
-            let n = a.iter().map(|x| x * x).sum::<f64>().sqrt();
-            if n.is_finite() && n > 0.0 {
-                Ok(a.map(|x| x / n))
-            } else {
-                Err(err(
-                    key,
-                    format!("the {key} must be finite and nonzero, not {a:?}"),
-                ))
-            }
-        };
-        let axis = match (kind, cf.axis) {
+        Ok(distance)
+    }
+
+    /// `a` normalised, finite and nonzero.
+    fn unit(&self, a: [f64; 3], key: &str) -> Result<[f64; 3], SceneError> {
+        let n = a.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if n.is_finite() && n > 0.0 {
+            Ok(a.map(|x| x / n))
+        } else {
+            Err(self.err(
+                key,
+                format!("the {key} must be finite and nonzero, not {a:?}"),
+            ))
+        }
+    }
+
+    /// `axis`: a unit vector, needed by `line` and `plane`, optional for `rolling` (a disk).
+    fn axis(&self, kind: ClosureKind) -> Result<Option<[f64; 3]>, SceneError> {
+        let err = |key: &str, msg: String| self.err(key, msg);
+        let axis = match (kind, self.cf.axis) {
             (ClosureKind::Line | ClosureKind::Plane | ClosureKind::Rolling, Some(a)) => {
-                Some(unit(a, "axis")?)
+                Some(self.unit(a, "axis")?)
             }
             (ClosureKind::Rolling, None) => None,
             (ClosureKind::Line | ClosureKind::Plane, None) => {
@@ -259,6 +351,16 @@ pub(super) fn load(
             }
             (_, None) => None,
         };
+        Ok(axis)
+    }
+
+    /// `radius` and `normal` of a `rolling` closure (on a world plane); no other kind takes them.
+    fn rolling(
+        &self,
+        kind: ClosureKind,
+        body_b: Option<usize>,
+    ) -> Result<(Option<f64>, Option<[f64; 3]>), SceneError> {
+        let (cf, err) = (self.cf, |key: &str, msg: String| self.err(key, msg));
         let (radius, normal) = if kind == ClosureKind::Rolling {
             if body_b.is_some() {
                 return Err(err(
@@ -273,7 +375,7 @@ pub(super) fn load(
             };
             (
                 Some(r),
-                Some(unit(cf.normal.unwrap_or([0.0, 0.0, 1.0]), "normal")?),
+                Some(self.unit(cf.normal.unwrap_or([0.0, 0.0, 1.0]), "normal")?),
             )
         } else {
             for (key, given) in [
@@ -286,11 +388,23 @@ pub(super) fn load(
             }
             (None, None)
         };
+        Ok((radius, normal))
+    }
+
+    /// The synthetic sites `NAME__a` (and `NAME__b` unless body b is the world), names not taken.
+    fn add_sites(
+        &self,
+        body_a: usize,
+        body_b: Option<usize>,
+        joint_names: &[&str],
+        sites: &mut Vec<Site>,
+    ) -> Result<(), SceneError> {
+        let cf = self.cf;
         for (side, body, point) in [('a', Some(body_a), cf.point_a), ('b', body_b, cf.point_b)] {
             let Some(body) = body else { continue };
             let name = site_name(&cf.name, side);
             if sites.iter().any(|s| s.name == name) || joint_names.contains(&name.as_str()) {
-                return Err(err(
+                return Err(self.err(
                     "name",
                     format!(
                         "closure `{}` needs the site name `{name}`, already taken",
@@ -304,30 +418,8 @@ pub(super) fn load(
                 pos: point,
             });
         }
-        let closure = Closure {
-            name: cf.name.clone(),
-            kind,
-            body_a: cf.body_a.clone(),
-            point_a: cf.point_a,
-            quat_a,
-            body_b: body_b.map(|_| cf.body_b.clone()),
-            point_b: cf.point_b,
-            quat_b,
-            distance,
-            axis,
-            radius,
-            normal,
-        };
-        for (name, expr) in closure.rows() {
-            let row = RowFile {
-                name: Spanned::new(c.span(), name),
-                expr: Spanned::new(c.span(), expr),
-            };
-            rows.push((row, field.clone()));
-        }
-        closures.push(closure);
+        Ok(())
     }
-    Ok((closures, rows))
 }
 
 impl Closure {

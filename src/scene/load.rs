@@ -86,7 +86,6 @@ impl Symbols {
     }
 }
 
-#[allow(clippy::too_many_lines)] // over 100 lines before the lint: to split, not to grow
 pub(super) fn load(src: Source) -> R<Scene> {
     let file: SceneFile = toml::from_str(&src.text).map_err(|e| src.toml_error(&e))?;
     if file.name.trim().is_empty() {
@@ -101,76 +100,14 @@ pub(super) fn load(src: Source) -> R<Scene> {
     let params = parameters(&src, &file.parameters)?;
     let model = file.model.get_ref();
     let kind = model.kind.get_ref().as_str();
-    let mut import_notes = vec![];
-    let mut robot = None;
-    let mut extra: (Vec<Closure>, SetAsideRows) = (vec![], None);
-    let (system, spans) = match kind {
+    let (system, spans, import_notes, robot, extra) = match kind {
         "lagrangian" => {
-            if let Some(a) = file.actuators.first() {
-                let (span, field) = match &a.get_ref().joint {
-                    Some(j) => (j.span(), "actuators[0].joint"),
-                    None => (a.span(), "actuators[0]"),
-                };
-                return Err(src.error(
-                    span,
-                    field,
-                    "actuators need a tree or urdf model (they act on its joints); a lagrangian \
-                     scene realizes its programme ideally",
-                ));
-            }
-            let (m, mut sym) = lagrangian(&src, model, &params)?;
-            let (c, spans) = rows(&src, &file, &mut sym, &[])?;
-            let (q0, v0) = initial(&src, &file, &params, &m.q_names(), &m.v_names(), None)?;
-            let (t0, t1) = span(&file);
-            let p = Problem {
-                model: m,
-                constraints: c,
-                t0,
-                t1,
-                q0,
-                v0,
-            };
-            check_mass(&src, &file, &p)?;
-            check_finite_at_start(&src, &file, &p)?;
-            (SceneSystem::Lagrangian(p), spans)
+            let (system, spans) = lagrangian_system(&src, &file, &params)?;
+            (system, spans, vec![], None, (vec![], None))
         }
         "tree" | "urdf" | "mjcf" => {
-            let (m, mut sym, (notes, rf), (closures, closure_rows)) =
-                tree_scene(&src, model, &params)?;
-            import_notes = notes;
-            robot = rf;
-            let (c, mut spans) = rows(&src, &file, &mut sym, &closure_rows)?;
-            let neutral = tree::neutral(m.tree());
-            let (q0, v0) = initial(
-                &src,
-                &file,
-                &params,
-                &m.q_names(),
-                &m.v_names(),
-                Some((m.tree(), neutral.as_slice())),
-            )?;
-            let (t0, t1) = span(&file);
-            let mut p = Problem {
-                model: m,
-                constraints: c,
-                t0,
-                t1,
-                q0,
-                v0,
-            };
-            check_mass(&src, &file, &p)?;
-            check_finite_at_start(&src, &file, &p)?;
-            let set_aside = closure_rows_kept(
-                &src,
-                &file,
-                &mut p,
-                &mut spans,
-                closure_rows.len(),
-                &settings,
-            )?;
-            actuators(&src, &file, &params, &mut p, !closures.is_empty())?;
-            extra = (closures, set_aside);
-            (SceneSystem::Tree(p), spans)
+            let t = tree_system(&src, &file, &params, &settings)?;
+            (t.system, t.spans, t.import_notes, t.robot, t.extra)
         }
         other => {
             return Err(src.error(
@@ -214,230 +151,94 @@ pub(super) fn load(src: Source) -> R<Scene> {
     })
 }
 
-type SetAsideRows = Option<(Vec<SetAside>, ExprConstraints)>;
-
-/// `[[actuators]]`: the joints whose generalized forces realize the programme (servo-constraints,
-/// [`crate::servo`]). Hinge and slide joints of a model with Euclidean coordinates only, each once,
-/// as many as programme rows, no system constraints.
-#[allow(clippy::too_many_lines)] // over 100 lines before the lint: to split, not to grow
-fn actuators<M: Model>(
+/// The system of a `lagrangian` scene (no actuators: it realizes its programme ideally) and its
+/// rows' spans.
+fn lagrangian_system(
     src: &Source,
     file: &SceneFile,
     params: &[(String, f64)],
-    p: &mut Problem<M, ExprConstraints>,
-    has_closures: bool,
-) -> R<()> {
-    if file.actuators.is_empty() {
-        return Ok(());
-    }
-    let v_names = p.model.v_names();
-    let n = v_names.len();
-    // Where an actuator's messages point: its joint, else its direction, else its table.
-    let at = |i: usize| -> (Range<usize>, String) {
-        let a = &file.actuators[i];
-        match (&a.get_ref().joint, &a.get_ref().direction) {
-            (Some(j), _) => (j.span(), format!("actuators[{i}].joint")),
-            (None, Some(d)) => (d.span(), format!("actuators[{i}].direction")),
-            (None, None) => (a.span(), format!("actuators[{i}]")),
-        }
-    };
-    if has_closures || !file.constraints.is_empty() {
-        let (span, field) = at(0);
-        return Err(src.error(
-            span,
-            &field,
-            "actuators with system constraints or loop closures are not supported yet: their \
-             reactions would join tau in the index reduction",
-        ));
-    }
-    if let Some(j) = v_names.iter().find(|n| n.contains('.')) {
-        let joint = j.split('.').next().unwrap_or(j);
-        let (span, field) = at(0);
-        return Err(src.error(
-            span,
-            &field,
-            format!(
-                "actuators need a model of hinge and slide joints only; joint `{joint}` is a ball \
-                 or free joint (its quaternion coordinates are not supported by the servo solver yet)"
-            ),
-        ));
-    }
-    let mut consts = SymbolTable::new();
-    for (name, x) in params {
-        consts.define(name.clone(), *x);
-    }
-    // A direction's entries may read t and the coordinates (hinge and slide joints only here, so
-    // the coordinates are the velocities' names): slots [t, q_0, ..].
-    let mut state_table = consts.clone();
-    state_table.insert("t");
-    for name in &v_names {
-        state_table.insert(name.clone());
-    }
-    let slots0: Vec<f64> = std::iter::once(p.t0).chain(p.q0.iter().copied()).collect();
-    let mut entries: Vec<crate::servo::MapEntry> = vec![];
-    let mut names: Vec<String> = vec![];
-    let mut columns: Vec<Vec<f64>> = vec![];
-    let mut joints: Vec<usize> = vec![];
-    for (i, a) in file.actuators.iter().enumerate() {
-        let (span, field) = at(i);
-        let a = a.get_ref();
-        let mut col = vec![0.0; n];
-        let default_name = match (&a.joint, &a.direction) {
-            (Some(_), Some(_)) | (None, None) => {
-                return Err(src.error(
-                    span,
-                    &field,
-                    "an actuator has either `joint` (a hinge or slide joint) or `direction` (a \
-                     generalized force over the velocities), exactly one of the two",
-                ));
-            }
-            (Some(joint), None) => {
-                let joint = joint.get_ref();
-                let Some(d) = v_names.iter().position(|n| n == joint) else {
-                    return Err(src.error(
-                        span,
-                        &field,
-                        format!(
-                            "unknown joint `{joint}`: the actuated joints are among {}",
-                            and_list(&v_names.iter().map(String::as_str).collect::<Vec<_>>())
-                        ),
-                    ));
-                };
-                if joints.contains(&d) {
-                    return Err(src.error(
-                        span,
-                        &field,
-                        format!("joint `{joint}` is actuated twice"),
-                    ));
-                }
-                joints.push(d);
-                col[d] = 1.0;
-                Some(joint.clone())
-            }
-            (None, Some(dir)) => {
-                for (key, x) in dir.get_ref() {
-                    let f = format!("actuators[{i}].direction.{key}");
-                    let Some(d) = v_names.iter().position(|n| n == key) else {
-                        return Err(src.error(
-                            x.span(),
-                            &f,
-                            format!(
-                                "`{key}` is not a velocity{}: the direction's entries are among {}",
-                                check::did_you_mean(key, v_names.iter().map(String::as_str)),
-                                and_list(&v_names.iter().map(String::as_str).collect::<Vec<_>>())
-                            ),
-                        ));
-                    };
-                    let value = match x.get_ref() {
-                        Number::Value(v) => *v,
-                        // an expression of the parameters, t and the coordinates (H(t, q))
-                        Number::Expr(text) => {
-                            if let Ok(names) = expr::referenced_names(text) {
-                                if let Some(bad) = names.iter().find(|n| n.ends_with('\'')) {
-                                    return Err(src.error(
-                                        x.span(),
-                                        &f,
-                                        format!(
-                                            "`{bad}` is a velocity or acceleration: a direction \
-                                             may read the parameters, t and the coordinates \
-                                             (H(t, q))"
-                                        ),
-                                    ));
-                                }
-                            }
-                            let e = Expr::compile(text, &state_table)
-                                .map_err(|e| src.expr_error(x.span(), &f, &e))?;
-                            let at0 = e.value::<f64>(&slots0);
-                            if !at0.is_finite() {
-                                return Err(src.error(
-                                    x.span(),
-                                    &f,
-                                    format!("is {at0} at the initial state"),
-                                ));
-                            }
-                            if !e.slots().is_empty() {
-                                entries.push(crate::servo::MapEntry {
-                                    row: d,
-                                    col: i,
-                                    expr: e,
-                                });
-                            }
-                            at0
-                        }
-                    };
-                    if !value.is_finite() {
-                        return Err(src.error(x.span(), &f, format!("is {value}")));
-                    }
-                    col[d] = value;
-                }
-                None
-            }
+) -> R<(SceneSystem, Vec<Range<usize>>)> {
+    let model = file.model.get_ref();
+    if let Some(a) = file.actuators.first() {
+        let (span, field) = match &a.get_ref().joint {
+            Some(j) => (j.span(), "actuators[0].joint"),
+            None => (a.span(), "actuators[0]"),
         };
-        let name = match (&a.name, default_name) {
-            (Some(nm), _) => {
-                if !is_identifier(nm.get_ref()) {
-                    return Err(src.error(
-                        nm.span(),
-                        &format!("actuators[{i}].name"),
-                        "an actuator name must be an identifier",
-                    ));
-                }
-                if names.contains(nm.get_ref()) {
-                    return Err(src.error(
-                        nm.span(),
-                        &format!("actuators[{i}].name"),
-                        format!("actuator name `{}` is used twice", nm.get_ref()),
-                    ));
-                }
-                nm.get_ref().clone()
-            }
-            (None, Some(joint)) => joint,
-            (None, None) => {
-                return Err(src.error(
-                    span,
-                    &field,
-                    "an actuator with a `direction` needs a `name` (an identifier)",
-                ));
-            }
-        };
-        names.push(name);
-        columns.push(col);
-    }
-    let (m, s) = (columns.len(), file.programme.len());
-    if m != s {
-        let (span, field) = at(m.min(s).min(m - 1));
         return Err(src.error(
             span,
-            &field,
-            format!(
-                "{m} actuator(s) for {s} programme row(s) ({n} degrees of freedom): the servo \
-                 solver needs as many actuators as programme rows (a square decoupling matrix)"
-            ),
+            field,
+            "actuators need a tree or urdf model (they act on its joints); a lagrangian \
+             scene realizes its programme ideally",
         ));
     }
-    let built = if entries.is_empty() {
-        crate::servo::Actuation::new(names.clone(), columns)
-    } else {
-        crate::servo::Actuation::with_entries(names.clone(), columns, entries, p.t0, &p.q0)
+    let (m, mut sym) = lagrangian(src, model, params)?;
+    let (c, spans) = rows(src, file, &mut sym, &[])?;
+    let (q0, v0) = initial(src, file, params, &m.q_names(), &m.v_names(), None)?;
+    let (t0, t1) = span(file);
+    let p = Problem {
+        model: m,
+        constraints: c,
+        t0,
+        t1,
+        q0,
+        v0,
     };
-    let act = built.map_err(|e| match e {
-        crate::servo::ActuationError::Dependent { column, ratio } => {
-            let (span, field) = at(column);
-            src.error(
-                span,
-                &field,
-                format!(
-                    "actuator `{}` is zero or a combination of the actuators before it at the \
-                     initial state (its part outside theirs is {ratio:.1e} of its length): H needs \
-                     independent columns",
-                    names[column]
-                ),
-            )
-        }
-    })?;
-    p.constraints.set_actuation(act);
-    Ok(())
+    check_mass(src, file, &p)?;
+    check_finite_at_start(src, file, &p)?;
+    Ok((SceneSystem::Lagrangian(p), spans))
 }
+
+/// A tree (`tree`, `urdf`, `mjcf`) scene's system with what comes with it.
+struct TreeSystem {
+    system: SceneSystem,
+    spans: Vec<Range<usize>>,
+    import_notes: Vec<String>,
+    robot: Option<super::RobotFile>,
+    extra: (Vec<Closure>, SetAsideRows),
+}
+
+/// The system of a tree scene: the tree, its closures (dependent rows set aside) and actuators.
+fn tree_system(
+    src: &Source,
+    file: &SceneFile,
+    params: &[(String, f64)],
+    settings: &Settings,
+) -> R<TreeSystem> {
+    let model = file.model.get_ref();
+    let (m, mut sym, (notes, rf), (closures, closure_rows)) = tree_scene(src, model, params)?;
+    let (c, mut spans) = rows(src, file, &mut sym, &closure_rows)?;
+    let neutral = tree::neutral(m.tree());
+    let (q0, v0) = initial(
+        src,
+        file,
+        params,
+        &m.q_names(),
+        &m.v_names(),
+        Some((m.tree(), neutral.as_slice())),
+    )?;
+    let (t0, t1) = span(file);
+    let mut p = Problem {
+        model: m,
+        constraints: c,
+        t0,
+        t1,
+        q0,
+        v0,
+    };
+    check_mass(src, file, &p)?;
+    check_finite_at_start(src, file, &p)?;
+    let set_aside = closure_rows_kept(src, file, &mut p, &mut spans, closure_rows.len(), settings)?;
+    super::actuators::load(src, file, params, &mut p, !closures.is_empty())?;
+    Ok(TreeSystem {
+        system: SceneSystem::Tree(p),
+        spans,
+        import_notes: notes,
+        robot: rf,
+        extra: (closures, set_aside),
+    })
+}
+
+type SetAsideRows = Option<(Vec<SetAside>, ExprConstraints)>;
 
 /// Set aside the closure rows dependent at t0 ([`super::closures::set_aside_dependent`]), then
 /// check the number of rows left. The set-aside rows must hold at t0 too; they stay available
@@ -628,7 +429,7 @@ fn parents_first(specs: Vec<BodySpec>) -> Vec<BodySpec> {
 }
 
 /// "a, b and c".
-fn and_list(names: &[&str]) -> String {
+pub(super) fn and_list(names: &[&str]) -> String {
     match names.split_last() {
         Some((last, rest)) if !rest.is_empty() => format!("{} and {last}", rest.join(", ")),
         _ => names.join(""),
@@ -656,12 +457,24 @@ fn symbols(q: &[String], v: &[String], params: &[(String, f64)], signals: Signal
     }
 }
 
-#[allow(clippy::too_many_lines)] // over 100 lines before the lint: to split, not to grow
 fn lagrangian(
     src: &Source,
     m: &ModelFile,
     params: &[(String, f64)],
 ) -> R<(LagrangianModel, Symbols)> {
+    lagrangian_keys(src, m)?;
+    let names = coordinate_names(src, m, params)?;
+    let n = names.len();
+    let mut sym = symbols(&names, &names, params, Signals::none());
+    let mass = mass_entries(src, m, &mut sym, n)?;
+    let potential = potential(src, m, &mut sym, n)?;
+    let forces = lagrangian_forces(src, m, &mut sym, &names)?;
+    let model = LagrangianModel::new(names, sym.layout.clone(), mass, potential, forces);
+    Ok((model, sym))
+}
+
+/// A lagrangian model takes none of the tree or robot file keys, and some coordinates.
+fn lagrangian_keys(src: &Source, m: &ModelFile) -> R<()> {
     if !m.bodies.is_empty()
         || !m.sites.is_empty()
         || m.gravity.is_some()
@@ -700,6 +513,11 @@ fn lagrangian(
             ),
         ));
     }
+    Ok(())
+}
+
+/// The coordinates' names: identifiers, not `t`, `pi` or a parameter, each once.
+fn coordinate_names(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Vec<String>> {
     let mut names: Vec<String> = vec![];
     let mut seen = std::collections::HashSet::new();
     for c in &m.coordinates {
@@ -720,11 +538,17 @@ fn lagrangian(
         }
         names.push(n.clone());
     }
-    let n = names.len();
-    let mut sym = symbols(&names, &names, params, Signals::none());
-    #[allow(clippy::single_range_in_vec_init)] // a list of allowed slot ranges, here one
-    let q_only = [sym.layout.q..sym.layout.q + n];
-    let mut mass = vec![];
+    Ok(names)
+}
+
+/// The mass matrix's upper triangle (i <= j, constant-zero entries left out), from exactly one of
+/// `mass_matrix` and `mass_diagonal`; its entries read the coordinates only.
+fn mass_entries(
+    src: &Source,
+    m: &ModelFile,
+    sym: &mut Symbols,
+    n: usize,
+) -> R<Vec<(usize, usize, Expr)>> {
     match (&m.mass_matrix, &m.mass_diagonal) {
         (Some(_), Some(_)) | (None, None) => {
             let span = m
@@ -732,77 +556,125 @@ fn lagrangian(
                 .as_ref()
                 .map(|d| d.span())
                 .unwrap_or(m.kind.span());
-            return Err(src.error(
+            Err(src.error(
                 span,
                 "model",
                 "give exactly one of `mass_matrix` (n x n) and `mass_diagonal` (n entries)",
+            ))
+        }
+        (None, Some(diag)) => mass_diagonal(src, diag, sym, n),
+        (Some(full), None) => mass_matrix(src, full, sym, n),
+    }
+}
+
+/// `mass_diagonal`: n entries.
+fn mass_diagonal(
+    src: &Source,
+    diag: &Spanned<Vec<Spanned<String>>>,
+    sym: &mut Symbols,
+    n: usize,
+) -> R<Vec<(usize, usize, Expr)>> {
+    #[allow(clippy::single_range_in_vec_init)] // a list of allowed slot ranges, here one
+    let q_only = [sym.layout.q..sym.layout.q + n];
+    let mut mass = vec![];
+    if diag.get_ref().len() != n {
+        return Err(src.error(
+            diag.span(),
+            "model.mass_diagonal",
+            format!("has {} entries for {n} coordinates", diag.get_ref().len()),
+        ));
+    }
+    for (i, s) in diag.get_ref().iter().enumerate() {
+        let field = format!("model.mass_diagonal[{i}]");
+        let e = sym.compile(src, s, &field)?;
+        if let Some(bad) = sym.outside(&e, &q_only) {
+            return Err(src.error(
+                s.span(),
+                &field,
+                format!("the mass matrix may depend on the coordinates only, not on `{bad}`"),
             ));
         }
-        (None, Some(diag)) => {
-            if diag.get_ref().len() != n {
+        mass.push((i, i, e));
+    }
+    Ok(mass)
+}
+
+/// `mass_matrix`: n x n, symmetric; its upper triangle.
+fn mass_matrix(
+    src: &Source,
+    full: &Spanned<Vec<SpannedRow>>,
+    sym: &mut Symbols,
+    n: usize,
+) -> R<Vec<(usize, usize, Expr)>> {
+    #[allow(clippy::single_range_in_vec_init)] // a list of allowed slot ranges, here one
+    let q_only = [sym.layout.q..sym.layout.q + n];
+    let mut mass = vec![];
+    let rows = full.get_ref();
+    if rows.len() != n || rows.iter().any(|r| r.get_ref().len() != n) {
+        return Err(src.error(
+            full.span(),
+            "model.mass_matrix",
+            format!("must be {n} x {n} (one row per coordinate)"),
+        ));
+    }
+    for i in 0..n {
+        for j in i..n {
+            let s = &rows[i].get_ref()[j];
+            let field = format!("model.mass_matrix[{i}][{j}]");
+            let e = sym.compile(src, s, &field)?;
+            if let Some(bad) = sym.outside(&e, &q_only) {
                 return Err(src.error(
-                    diag.span(),
-                    "model.mass_diagonal",
-                    format!("has {} entries for {n} coordinates", diag.get_ref().len()),
+                    s.span(),
+                    &field,
+                    format!("the mass matrix may depend on the coordinates only, not on `{bad}`"),
                 ));
             }
-            for (i, s) in diag.get_ref().iter().enumerate() {
-                let field = format!("model.mass_diagonal[{i}]");
-                let e = sym.compile(src, s, &field)?;
-                if let Some(bad) = sym.outside(&e, &q_only) {
-                    return Err(src.error(
-                        s.span(),
-                        &field,
-                        format!(
-                            "the mass matrix may depend on the coordinates only, not on `{bad}`"
-                        ),
-                    ));
-                }
-                mass.push((i, i, e));
+            // The lower triangle must be the same expression text, or agree in value at
+            // a few probe points (two different texts used to pass unchecked unless both
+            // were constants).
+            let sl = &rows[j].get_ref()[i];
+            let fl = format!("model.mass_matrix[{j}][{i}]");
+            let el = sym.compile(src, sl, &fl)?;
+            if el.source().trim() != e.source().trim() {
+                symmetric(src, sym, (&e, &el), sl, &fl, (i, j))?;
             }
-        }
-        (Some(full), None) => {
-            let rows = full.get_ref();
-            if rows.len() != n || rows.iter().any(|r| r.get_ref().len() != n) {
-                return Err(src.error(
-                    full.span(),
-                    "model.mass_matrix",
-                    format!("must be {n} x {n} (one row per coordinate)"),
-                ));
-            }
-            for i in 0..n {
-                for j in i..n {
-                    let s = &rows[i].get_ref()[j];
-                    let field = format!("model.mass_matrix[{i}][{j}]");
-                    let e = sym.compile(src, s, &field)?;
-                    if let Some(bad) = sym.outside(&e, &q_only) {
-                        return Err(src.error(s.span(), &field, format!("the mass matrix may depend on the coordinates only, not on `{bad}`")));
-                    }
-                    // The lower triangle must be the same expression text, or agree in value at
-                    // a few probe points (two different texts used to pass unchecked unless both
-                    // were constants).
-                    let sl = &rows[j].get_ref()[i];
-                    let fl = format!("model.mass_matrix[{j}][{i}]");
-                    let el = sym.compile(src, sl, &fl)?;
-                    if el.source().trim() != e.source().trim() {
-                        for p in 0..3 {
-                            let probe: Vec<f64> = (0..sym.total_slots())
-                                .map(|k| 0.3 + 0.1 * k as f64 + 0.37 * (p * (k % 3)) as f64)
-                                .collect();
-                            let (x, y) = (e.value(&probe), el.value(&probe));
-                            let close = (x - y).abs() <= 1e-12 * x.abs().max(1.0); // false for NaN
-                            if !close {
-                                return Err(src.error(sl.span(), &fl, format!("the mass matrix must be symmetric: differs from entry [{i}][{j}]")));
-                            }
-                        }
-                    }
-                    if e.constant() != Some(0.0) {
-                        mass.push((i, j, e));
-                    }
-                }
+            if e.constant() != Some(0.0) {
+                mass.push((i, j, e));
             }
         }
     }
+    Ok(mass)
+}
+
+/// Entries [i][j] (`e`) and [j][i] (`el`, at `sl`) of two different texts agree at a few probe
+/// points.
+fn symmetric(
+    src: &Source,
+    sym: &Symbols,
+    (e, el): (&Expr, &Expr),
+    sl: &Spanned<String>,
+    fl: &str,
+    (i, j): (usize, usize),
+) -> R<()> {
+    for p in 0..3 {
+        let probe: Vec<f64> = (0..sym.total_slots())
+            .map(|k| 0.3 + 0.1 * k as f64 + 0.37 * (p * (k % 3)) as f64)
+            .collect();
+        let (x, y) = (e.value(&probe), el.value(&probe));
+        let close = (x - y).abs() <= 1e-12 * x.abs().max(1.0); // false for NaN
+        if !close {
+            return Err(src.error(
+                sl.span(),
+                fl,
+                format!("the mass matrix must be symmetric: differs from entry [{i}][{j}]"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// `potential`: an expression of t and the coordinates.
+fn potential(src: &Source, m: &ModelFile, sym: &mut Symbols, n: usize) -> R<Option<Expr>> {
     let potential = match &m.potential {
         Some(s) => {
             let e = sym.compile(src, s, "model.potential")?;
@@ -823,6 +695,16 @@ fn lagrangian(
         }
         None => None,
     };
+    Ok(potential)
+}
+
+/// `forces` of a lagrangian model: per coordinate, an expression of t, q and v.
+fn lagrangian_forces(
+    src: &Source,
+    m: &ModelFile,
+    sym: &mut Symbols,
+    names: &[String],
+) -> R<Vec<(usize, Expr)>> {
     let mut forces = vec![];
     for (name, s) in &m.forces {
         let field = format!("model.forces.{name}");
@@ -849,14 +731,12 @@ fn lagrangian(
         }
         forces.push((i, e));
     }
-    let model = LagrangianModel::new(names, sym.layout.clone(), mass, potential, forces);
-    Ok((model, sym))
+    Ok(forces)
 }
 
 /// Notes of an imported robot file and its [`RobotFile`] (None for a `tree` model).
 type ImportInfo = (Vec<String>, Option<super::RobotFile>);
 
-#[allow(clippy::too_many_lines)] // over 100 lines before the lint: to split, not to grow
 fn tree_scene(
     src: &Source,
     m: &ModelFile,
@@ -871,6 +751,28 @@ fn tree_scene(
     };
     let joint_names: Vec<&str> = joint_names.iter().map(|s| s.as_str()).collect();
     let joint_set: std::collections::HashSet<&str> = joint_names.iter().copied().collect();
+    let tree = Arc::new(build_tree(src, m, specs)?);
+    let mut sites = link_sites_of(&tree, &link_sites, &joint_set, &mut hints);
+    scene_sites(src, m, &tree, &joint_set, &mut sites)?;
+    let closures = super::closures::load(src, m, &tree, &joint_names, &mut sites)?;
+    let q_names = tree.q_names().to_vec();
+    let v_names = tree.v_names().to_vec();
+    let mut sym = symbols(
+        &q_names,
+        &v_names,
+        params,
+        Signals::new(tree.clone(), sites),
+    );
+    sym.hints = hints;
+    let point_forces = point_forces(src, m, &tree, &mut sym)?;
+    let coordinate_forces = coordinate_forces(src, m, &v_names, &mut sym)?;
+    let model = TreeSceneModel::new(tree, sym.layout.clone(), point_forces, coordinate_forces);
+    Ok((model, sym, notes, closures))
+}
+
+/// The kinematic tree of the bodies (sorted parents first) in the model's fields, within the
+/// limit of coordinates.
+fn build_tree(src: &Source, m: &ModelFile, specs: Vec<BodySpec>) -> R<tree::Model> {
     let fields = Fields {
         gravity: m.gravity.unwrap_or([0.0; 3]),
         attractors: m
@@ -883,80 +785,7 @@ fn tree_scene(
             .collect(),
     };
     let specs = parents_first(specs);
-    let tree = tree::Model::new(&specs, fields).map_err(|e| {
-        let (body, msg) = match &e {
-            ModelError::Body { body, .. } | ModelError::Joint { body, .. } => {
-                (Some(body.clone()), e.to_string())
-            }
-            _ => (None, e.to_string()),
-        };
-        let mut idx = body
-            .as_ref()
-            .and_then(|b| m.bodies.iter().position(|x| &x.get_ref().name == b));
-        if msg.contains("duplicate body name") {
-            // the second body of that name is the duplicate
-            idx = body.as_ref().and_then(|b| {
-                let mut same = m
-                    .bodies
-                    .iter()
-                    .enumerate()
-                    .filter(|x| &x.1.get_ref().name == b);
-                same.nth(1).map(|x| x.0)
-            });
-        }
-        // Bodies are sorted parents first here, so an unplaced parent is missing or in a cycle.
-        let msg = match idx.map(|i| &m.bodies[i].get_ref().parent) {
-            Some(parent) if msg.contains("unknown parent") => {
-                if m.bodies.iter().any(|b| &b.get_ref().name == parent) {
-                    format!(
-                        "the parents of body '{}' form a cycle through '{parent}'",
-                        m.bodies[idx.unwrap_or(0)].get_ref().name
-                    )
-                } else {
-                    format!(
-                        "body '{}': unknown parent '{parent}'",
-                        m.bodies[idx.unwrap_or(0)].get_ref().name
-                    )
-                }
-            }
-            _ => msg,
-        };
-        let joint = match &e {
-            ModelError::Joint { joint, .. } => idx.and_then(|i| {
-                let js = &m.bodies[i].get_ref().joints;
-                js.iter()
-                    .position(|j| &j.get_ref().name == joint)
-                    .map(|k| (i, k, js[k].span()))
-            }),
-            _ => None,
-        };
-        // a name or parent on a line of its own: the caret on its value
-        let key = |i: usize, key: &str| src.key_value_span(m.bodies[i].span().start, key);
-        match idx {
-            _ if joint.is_some() => {
-                let (i, k, span) = joint.expect("some");
-                src.error(span, &format!("model.bodies[{i}].joints[{k}]"), msg)
-            }
-            // Inertia problems point at the inertia itself.
-            Some(i) if msg.contains("inertia") && m.bodies[i].get_ref().inertia.is_some() => {
-                let span = m.bodies[i].get_ref().inertia.as_ref().unwrap().span();
-                src.error(span, &format!("model.bodies[{i}].inertia"), msg)
-            }
-            Some(i) if msg.contains("parent") && key(i, "parent").is_some() => src.error(
-                key(i, "parent").expect("some"),
-                &format!("model.bodies[{i}].parent"),
-                msg,
-            ),
-            Some(i) if msg.contains("duplicate body name") && key(i, "name").is_some() => src
-                .error(
-                    key(i, "name").expect("some"),
-                    &format!("model.bodies[{i}].name"),
-                    msg,
-                ),
-            Some(i) => src.error(m.bodies[i].span(), &format!("model.bodies[{i}]"), msg),
-            None => src.error(m.kind.span(), "model", msg),
-        }
-    })?;
+    let tree = tree::Model::new(&specs, fields).map_err(|e| located_model_error(src, m, e))?;
     if tree.nv() > crate::input::MAX_COORDINATES {
         let limit = crate::input::MAX_COORDINATES;
         let message = format!(
@@ -984,7 +813,93 @@ fn tree_scene(
             (None, None) => src.error(m.kind.span(), "model", message),
         });
     }
-    let tree = Arc::new(tree);
+    Ok(tree)
+}
+
+/// A [`ModelError`] of the tree located in the scene: at the joint, the inertia, the parent or
+/// name of the body it names, else the body, else the model.
+fn located_model_error(src: &Source, m: &ModelFile, e: ModelError) -> SceneError {
+    let (body, msg) = match &e {
+        ModelError::Body { body, .. } | ModelError::Joint { body, .. } => {
+            (Some(body.clone()), e.to_string())
+        }
+        _ => (None, e.to_string()),
+    };
+    let mut idx = body
+        .as_ref()
+        .and_then(|b| m.bodies.iter().position(|x| &x.get_ref().name == b));
+    if msg.contains("duplicate body name") {
+        // the second body of that name is the duplicate
+        idx = body.as_ref().and_then(|b| {
+            let mut same = m
+                .bodies
+                .iter()
+                .enumerate()
+                .filter(|x| &x.1.get_ref().name == b);
+            same.nth(1).map(|x| x.0)
+        });
+    }
+    // Bodies are sorted parents first here, so an unplaced parent is missing or in a cycle.
+    let msg = match idx.map(|i| &m.bodies[i].get_ref().parent) {
+        Some(parent) if msg.contains("unknown parent") => {
+            if m.bodies.iter().any(|b| &b.get_ref().name == parent) {
+                format!(
+                    "the parents of body '{}' form a cycle through '{parent}'",
+                    m.bodies[idx.unwrap_or(0)].get_ref().name
+                )
+            } else {
+                format!(
+                    "body '{}': unknown parent '{parent}'",
+                    m.bodies[idx.unwrap_or(0)].get_ref().name
+                )
+            }
+        }
+        _ => msg,
+    };
+    let joint = match &e {
+        ModelError::Joint { joint, .. } => idx.and_then(|i| {
+            let js = &m.bodies[i].get_ref().joints;
+            js.iter()
+                .position(|j| &j.get_ref().name == joint)
+                .map(|k| (i, k, js[k].span()))
+        }),
+        _ => None,
+    };
+    // a name or parent on a line of its own: the caret on its value
+    let key = |i: usize, key: &str| src.key_value_span(m.bodies[i].span().start, key);
+    match idx {
+        _ if joint.is_some() => {
+            let (i, k, span) = joint.expect("some");
+            src.error(span, &format!("model.bodies[{i}].joints[{k}]"), msg)
+        }
+        // Inertia problems point at the inertia itself.
+        Some(i) if msg.contains("inertia") && m.bodies[i].get_ref().inertia.is_some() => {
+            let span = m.bodies[i].get_ref().inertia.as_ref().unwrap().span();
+            src.error(span, &format!("model.bodies[{i}].inertia"), msg)
+        }
+        Some(i) if msg.contains("parent") && key(i, "parent").is_some() => src.error(
+            key(i, "parent").expect("some"),
+            &format!("model.bodies[{i}].parent"),
+            msg,
+        ),
+        Some(i) if msg.contains("duplicate body name") && key(i, "name").is_some() => src.error(
+            key(i, "name").expect("some"),
+            &format!("model.bodies[{i}].name"),
+            msg,
+        ),
+        Some(i) => src.error(m.bodies[i].span(), &format!("model.bodies[{i}]"), msg),
+        None => src.error(m.kind.span(), "model", msg),
+    }
+}
+
+/// The sites of an imported robot's links and frames; a link named like a joint is no site
+/// (`hints` says why).
+fn link_sites_of(
+    tree: &tree::Model,
+    link_sites: &[String],
+    joint_set: &std::collections::HashSet<&str>,
+    hints: &mut Vec<(String, String)>,
+) -> Vec<Site> {
     // Imported robots: every link and frame is a site at its origin (its orientation signals are
     // the body's own), unless a joint has its name.
     for n in link_sites.iter().filter(|n| joint_set.contains(n.as_str())) {
@@ -996,7 +911,7 @@ fn tree_scene(
             ),
         ));
     }
-    let mut sites: Vec<Site> = link_sites
+    link_sites
         .iter()
         .filter(|n| !joint_set.contains(n.as_str()))
         .map(|n| Site {
@@ -1004,7 +919,17 @@ fn tree_scene(
             body: tree.body_id(n).expect("imported body"),
             pos: [0.0; 3],
         })
-        .collect();
+        .collect()
+}
+
+/// `[[model.sites]]` appended to `sites`: on a known body, an identifier, unique, not a joint's.
+fn scene_sites(
+    src: &Source,
+    m: &ModelFile,
+    tree: &tree::Model,
+    joint_set: &std::collections::HashSet<&str>,
+    sites: &mut Vec<Site>,
+) -> R<()> {
     for (si, s) in m.sites.iter().enumerate() {
         let sf = s.get_ref();
         let body = tree.body_id(&sf.body).ok_or_else(|| {
@@ -1042,16 +967,16 @@ fn tree_scene(
             pos: sf.pos,
         });
     }
-    let closures = super::closures::load(src, m, &tree, &joint_names, &mut sites)?;
-    let q_names = tree.q_names().to_vec();
-    let v_names = tree.v_names().to_vec();
-    let mut sym = symbols(
-        &q_names,
-        &v_names,
-        params,
-        Signals::new(tree.clone(), sites),
-    );
-    sym.hints = hints;
+    Ok(())
+}
+
+/// `[[model.point_forces]]`: a force (expressions of t, q and v) at a point of a body.
+fn point_forces(
+    src: &Source,
+    m: &ModelFile,
+    tree: &tree::Model,
+    sym: &mut Symbols,
+) -> R<Vec<PointForce>> {
     #[allow(clippy::single_range_in_vec_init)] // a list of allowed slot ranges, here one
     let state = [sym.layout.t..sym.layout.a];
     let mut point_forces = vec![];
@@ -1084,6 +1009,18 @@ fn tree_scene(
             force: [a, b, c],
         });
     }
+    Ok(point_forces)
+}
+
+/// `forces` of a tree model: per velocity coordinate, an expression of t, q and v.
+fn coordinate_forces(
+    src: &Source,
+    m: &ModelFile,
+    v_names: &[String],
+    sym: &mut Symbols,
+) -> R<Vec<(usize, Expr)>> {
+    #[allow(clippy::single_range_in_vec_init)] // a list of allowed slot ranges, here one
+    let state = [sym.layout.t..sym.layout.a];
     let mut coordinate_forces = vec![];
     for (name, s) in &m.forces {
         let field = format!("model.forces.{name}");
@@ -1108,8 +1045,7 @@ fn tree_scene(
         }
         coordinate_forces.push((i, e));
     }
-    let model = TreeSceneModel::new(tree, sym.layout.clone(), point_forces, coordinate_forces);
-    Ok((model, sym, notes, closures))
+    Ok(coordinate_forces)
 }
 
 /// Bodies, joint names, link and frame names (sites), notes and robot file of a `urdf` or `mjcf`
@@ -1124,9 +1060,7 @@ type Imported = (
 
 /// The bodies of a `urdf` or `mjcf` model: the file's links or bodies ([`crate::import::urdf`],
 /// [`crate::import::mjcf`]) plus `frames` as massless welded bodies.
-#[allow(clippy::too_many_lines)] // over 100 lines before the lint: to split, not to grow
 fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Imported> {
-    use crate::import::{self, mjcf, urdf};
     let kind = m.kind.get_ref().as_str();
     let present: Vec<&str> = [
         ("coordinates", !m.coordinates.is_empty()),
@@ -1156,6 +1090,47 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
             format!("a `{kind}` model needs `file` (a path relative to the scene, or package://PKG/...)"),
         ));
     };
+    let (path, text) = read_robot(src, file)?;
+    let root = root_joint(src, m, kind)?;
+    let locked: Vec<String> = m
+        .locked_joints
+        .iter()
+        .map(|l| l.get_ref().clone())
+        .collect();
+    let usrc_path = path.clone();
+    let usrc = Source { file: path, text };
+    let robot = import_robot(src, m, kind, &usrc, root, &locked)?;
+    let mut specs = robot.bodies;
+    let mut sites: Vec<String> = specs
+        .iter()
+        .map(|b| b.name.clone())
+        .filter(|n| is_identifier(n))
+        .collect();
+    frames(src, m, &robot.joints, &mut specs, &mut sites)?;
+    let hints = locked_hints(src, m, &robot.locked);
+    for j in &robot.joints {
+        if params.iter().any(|p| &p.0 == j) {
+            return Err(src.error(
+                file.span(),
+                "model.file",
+                format!("joint `{j}` of the file has the name of a parameter"),
+            ));
+        }
+    }
+    let unmodelled = declared(src, m, &robot.unmodelled)?;
+    let info = super::RobotFile {
+        kind: kind.to_string(),
+        path: std::path::absolute(&usrc_path).unwrap_or(usrc_path),
+        locked: robot.locked,
+        ranges: robot.ranges,
+        unmodelled,
+    };
+    Ok((specs, robot.joints, sites, (robot.notes, Some(info)), hints))
+}
+
+/// The robot file of `file` (resolved beside the scene or in a package), read as text.
+fn read_robot(src: &Source, file: &Spanned<String>) -> R<(std::path::PathBuf, String)> {
+    use crate::import;
     let dir = src.file.parent().unwrap_or(std::path::Path::new("."));
     let path = import::resolve(file.get_ref(), dir)
         .map_err(|e| src.error(file.span(), "model.file", e))?;
@@ -1169,6 +1144,12 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
             )
         })
         .and_then(|b| crate::input::text(b).map_err(|e| robot_not_text(&path, e)))?;
+    Ok((path, text))
+}
+
+/// `root_joint` of a `urdf` model (fixed by default); an `mjcf` model takes none.
+fn root_joint(src: &Source, m: &ModelFile, kind: &str) -> R<crate::import::urdf::RootJoint> {
+    use crate::import::urdf;
     let root = match m.root_joint.as_ref().map(|r| r.get_ref().as_str()) {
         Some(_) if kind == "mjcf" => {
             return Err(src.error(
@@ -1187,17 +1168,24 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
             ))
         }
     };
-    let locked: Vec<String> = m
-        .locked_joints
-        .iter()
-        .map(|l| l.get_ref().clone())
-        .collect();
-    let usrc_path = path.clone();
-    let usrc = Source { file: path, text };
+    Ok(root)
+}
+
+/// The robot of the file `usrc` (URDF or MJCF) with its `locked` joints welded; a locked joint the
+/// file lacks is located in the scene.
+fn import_robot(
+    src: &Source,
+    m: &ModelFile,
+    kind: &str,
+    usrc: &Source,
+    root: crate::import::urdf::RootJoint,
+    locked: &[String],
+) -> R<crate::import::urdf::Robot> {
+    use crate::import::{mjcf, urdf};
     let robot = if kind == "mjcf" {
-        mjcf::import(&usrc, &locked)
+        mjcf::import(usrc, locked)
     } else {
-        urdf::import(&usrc, root, &locked)
+        urdf::import(usrc, root, locked)
     }
     .map_err(|mut e| {
         // a locked joint the file lacks is the scene's mistake: locate it there
@@ -1210,16 +1198,21 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
         }
         e
     })?;
-    let mut specs = robot.bodies;
-    let mut sites: Vec<String> = specs
-        .iter()
-        .map(|b| b.name.clone())
-        .filter(|n| is_identifier(n))
-        .collect();
+    Ok(robot)
+}
+
+/// `[[model.frames]]`: massless bodies welded to a link (or the world), appended to `specs` and,
+/// as sites, to `sites`; each named by an identifier no link or joint has.
+fn frames(
+    src: &Source,
+    m: &ModelFile,
+    joints: &[String],
+    specs: &mut Vec<BodySpec>,
+    sites: &mut Vec<String>,
+) -> R<()> {
     let mut body_names: std::collections::HashSet<String> =
         specs.iter().map(|b| b.name.clone()).collect();
-    let joint_set: std::collections::HashSet<&str> =
-        robot.joints.iter().map(String::as_str).collect();
+    let joint_set: std::collections::HashSet<&str> = joints.iter().map(String::as_str).collect();
     for (fi, f) in m.frames.iter().enumerate() {
         let ff = f.get_ref();
         let field = format!("model.frames[{fi}]");
@@ -1276,8 +1269,12 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
         );
         sites.push(ff.name.clone());
     }
-    let hints = robot
-        .locked
+    Ok(())
+}
+
+/// Why a locked joint's name is no symbol: welded at its q, by which `locked_joints` entry.
+fn locked_hints(src: &Source, m: &ModelFile, locked: &[(String, f64)]) -> Vec<(String, String)> {
+    locked
         .iter()
         .map(|(j, q)| {
             let k = m.locked_joints.iter().position(|l| l.get_ref() == j);
@@ -1290,25 +1287,7 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
                 format!("`{j}` is a locked joint, welded at q = {q}{at}: it is no coordinate"),
             )
         })
-        .collect();
-    for j in &robot.joints {
-        if params.iter().any(|p| &p.0 == j) {
-            return Err(src.error(
-                file.span(),
-                "model.file",
-                format!("joint `{j}` of the file has the name of a parameter"),
-            ));
-        }
-    }
-    let unmodelled = declared(src, m, &robot.unmodelled)?;
-    let info = super::RobotFile {
-        kind: kind.to_string(),
-        path: std::path::absolute(&usrc_path).unwrap_or(usrc_path),
-        locked: robot.locked,
-        ranges: robot.ranges,
-        unmodelled,
-    };
-    Ok((specs, robot.joints, sites, (robot.notes, Some(info)), hints))
+        .collect()
 }
 
 /// `[model] ignore` checked against the closed vocabulary and the file's records: each key a
@@ -1372,12 +1351,57 @@ fn robot_not_text(path: &std::path::Path, e: crate::input::NotText) -> SceneErro
 }
 
 /// The bodies of a `tree` model as written in `[[model.bodies]]`, and its joint names.
-#[allow(clippy::too_many_lines)] // over 100 lines before the lint: to split, not to grow
 fn tree_specs(
     src: &Source,
     m: &ModelFile,
     params: &[(String, f64)],
 ) -> R<(Vec<BodySpec>, Vec<String>)> {
+    tree_keys(src, m)?;
+    let mut specs = vec![];
+    let mut joint_names: Vec<String> = vec![];
+    let mut joint_set = std::collections::HashSet::new();
+    for (bi, b) in m.bodies.iter().enumerate() {
+        let bf = b.get_ref();
+        let field = format!("model.bodies[{bi}]");
+        let mass = *bf.mass.get_ref();
+        if !(mass >= 0.0) || !mass.is_finite() {
+            return Err(src.error(
+                bf.mass.span(),
+                &format!("{field}.mass"),
+                format!("mass must be positive (or 0 for a massless link), got {mass}"),
+            ));
+        }
+        for (ji, j) in bf.joints.iter().enumerate() {
+            let n = j.get_ref().name.as_str();
+            let jfield = format!("{field}.joints[{ji}].name");
+            if !is_identifier(n) || n == "t" || n == "pi" || params.iter().any(|p| p.0 == n) {
+                return Err(src.error(
+                    j.span(),
+                    &jfield,
+                    format!("`{n}` is not a valid joint name (an identifier, not `t`, `pi` or a parameter)"),
+                ));
+            }
+            if !joint_set.insert(n.to_string()) {
+                return Err(src.error(
+                    j.span(),
+                    &jfield,
+                    format!("joint name `{n}` is used twice"),
+                ));
+            }
+            joint_names.push(n.to_string());
+        }
+        let mut spec = body_spec(src, b, &field, mass)?;
+        for (ji, j) in bf.joints.iter().enumerate() {
+            spec = spec.joint(joint_spec(src, j, &format!("{field}.joints[{ji}]"))?);
+        }
+        specs.push(spec);
+    }
+    Ok((specs, joint_names))
+}
+
+/// A tree model takes none of the robot file or lagrangian keys, and 1 to
+/// [`crate::input::MAX_BODIES`] bodies.
+fn tree_keys(src: &Source, m: &ModelFile) -> R<()> {
     if let Some(f) = &m.file {
         return Err(src.error(
             f.span(),
@@ -1433,150 +1457,124 @@ fn tree_specs(
             ),
         ));
     }
-    let mut specs = vec![];
-    let mut joint_names: Vec<String> = vec![];
-    let mut joint_set = std::collections::HashSet::new();
-    for (bi, b) in m.bodies.iter().enumerate() {
-        let bf = b.get_ref();
-        let field = format!("model.bodies[{bi}]");
-        let mass = *bf.mass.get_ref();
-        if !(mass >= 0.0) || !mass.is_finite() {
-            return Err(src.error(
-                bf.mass.span(),
-                &format!("{field}.mass"),
-                format!("mass must be positive (or 0 for a massless link), got {mass}"),
-            ));
-        }
-        for (ji, j) in bf.joints.iter().enumerate() {
-            let n = j.get_ref().name.as_str();
-            let jfield = format!("{field}.joints[{ji}].name");
-            if !is_identifier(n) || n == "t" || n == "pi" || params.iter().any(|p| p.0 == n) {
-                return Err(src.error(
-                    j.span(),
-                    &jfield,
-                    format!("`{n}` is not a valid joint name (an identifier, not `t`, `pi` or a parameter)"),
-                ));
-            }
-            if !joint_set.insert(n.to_string()) {
-                return Err(src.error(
-                    j.span(),
-                    &jfield,
-                    format!("joint name `{n}` is used twice"),
-                ));
-            }
-            joint_names.push(n.to_string());
-        }
-        let inertia = match &bf.inertia {
-            None => [[0.0; 3]; 3],
-            Some(i) => {
-                let v = i.get_ref();
-                match v.len() {
-                    3 => [[v[0], 0.0, 0.0], [0.0, v[1], 0.0], [0.0, 0.0, v[2]]],
-                    6 => [[v[0], v[3], v[4]], [v[3], v[1], v[5]], [v[4], v[5], v[2]]],
-                    k => {
-                        return Err(src.error(i.span(), &format!("{field}.inertia"), format!("give 3 principal moments or 6 entries [ixx, iyy, izz, ixy, ixz, iyz], not {k}")))
-                    }
-                }
-            }
-        };
-        if mass == 0.0 && inertia != [[0.0; 3]; 3] {
-            let span = bf.inertia.as_ref().map_or(b.span(), |i| i.span());
-            return Err(src.error(
-                span,
-                &format!("{field}.inertia"),
-                "a body of mass 0 is a massless link and takes no inertia: give a positive `mass` or remove `inertia`",
-            ));
-        }
-        let mut spec = if mass == 0.0 && inertia == [[0.0; 3]; 3] {
-            BodySpec::massless(&bf.name, &bf.parent)
-        } else {
-            BodySpec::new(&bf.name, &bf.parent, mass, bf.com, inertia)
-        };
-        // Placement, checked here so that a bad value is located at itself (not at the body).
-        let pos = bf.pos.as_ref().map_or([0.0; 3], |p| *p.get_ref());
-        let quat = bf
-            .quat
-            .as_ref()
-            .map_or([1.0, 0.0, 0.0, 0.0], |q| *q.get_ref());
-        if let Some(p) = bf
-            .pos
-            .as_ref()
-            .filter(|p| !p.get_ref().iter().all(|x| x.is_finite()))
-        {
-            return Err(src.error(p.span(), &format!("{field}.pos"), "placement is not finite"));
-        }
-        if let Some(q) = &bf.quat {
-            let n = quat.iter().map(|x| x * x).sum::<f64>().sqrt();
-            if !n.is_finite() {
-                return Err(src.error(
-                    q.span(),
-                    &format!("{field}.quat"),
-                    "placement is not finite",
-                ));
-            }
-            if n < 1e-9 {
-                return Err(src.error(
-                    q.span(),
-                    &format!("{field}.quat"),
-                    "placement quaternion is zero: give a unit quaternion (w, x, y, z)",
-                ));
-            }
-        }
-        spec = spec.at(pos).rotated(quat).with_gravcomp(bf.gravcomp);
-        for (ji, j) in bf.joints.iter().enumerate() {
-            let jf = j.get_ref();
-            let jfield = format!("{field}.joints[{ji}]");
-            let kind = jf.kind.get_ref().as_str();
-            let axis = || match &jf.axis {
-                None => Err(src.error(
-                    j.span(),
-                    &format!("{jfield}.axis"),
-                    format!("a {kind} joint needs an axis"),
-                )),
-                Some(a) => {
-                    let v = *a.get_ref();
-                    let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
-                    if n.is_finite() && n >= 1e-12 {
-                        Ok(v)
-                    } else {
-                        Err(src.error(
-                            a.span(),
-                            &format!("{jfield}.axis"),
-                            format!("axis {v:?} is zero or not finite"),
-                        ))
-                    }
-                }
-            };
-            let mut js = match kind {
-                "hinge" => JointSpec::hinge(&jf.name, axis()?),
-                "slide" => JointSpec::slide(&jf.name, axis()?),
-                "ball" => JointSpec::ball(&jf.name),
-                "free" => JointSpec::free(&jf.name),
-                other => {
-                    return Err(src.error(
-                        jf.kind.span(),
-                        &format!("{jfield}.type"),
-                        format!(
-                            "unknown joint type `{other}`: expected hinge, slide, ball or free"
-                        ),
-                    ))
-                }
-            };
-            js = js.with_anchor(jf.anchor);
-            if jf.stiffness != 0.0 {
-                js = js.with_spring(jf.stiffness, jf.spring_ref);
-            }
-            if jf.damping != 0.0 {
-                js = js.with_damping(jf.damping);
-            }
-            if jf.armature != 0.0 {
-                js = js.with_armature(jf.armature);
-            }
-            spec = spec.joint(js);
-        }
-        specs.push(spec);
+    Ok(())
+}
+
+/// Body `b` (of a checked `mass`) with its inertia and placement, without its joints.
+fn body_spec(src: &Source, b: &Spanned<BodyFile>, field: &str, mass: f64) -> R<BodySpec> {
+    let bf = b.get_ref();
+    let inertia = body_inertia(src, bf, field)?;
+    if mass == 0.0 && inertia != [[0.0; 3]; 3] {
+        let span = bf.inertia.as_ref().map_or(b.span(), |i| i.span());
+        return Err(src.error(
+            span,
+            &format!("{field}.inertia"),
+            "a body of mass 0 is a massless link and takes no inertia: give a positive `mass` or remove `inertia`",
+        ));
     }
-    Ok((specs, joint_names))
+    let spec = if mass == 0.0 && inertia == [[0.0; 3]; 3] {
+        BodySpec::massless(&bf.name, &bf.parent)
+    } else {
+        BodySpec::new(&bf.name, &bf.parent, mass, bf.com, inertia)
+    };
+    // Placement, checked here so that a bad value is located at itself (not at the body).
+    let pos = bf.pos.as_ref().map_or([0.0; 3], |p| *p.get_ref());
+    let quat = bf
+        .quat
+        .as_ref()
+        .map_or([1.0, 0.0, 0.0, 0.0], |q| *q.get_ref());
+    if let Some(p) = bf
+        .pos
+        .as_ref()
+        .filter(|p| !p.get_ref().iter().all(|x| x.is_finite()))
+    {
+        return Err(src.error(p.span(), &format!("{field}.pos"), "placement is not finite"));
+    }
+    if let Some(q) = &bf.quat {
+        let n = quat.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if !n.is_finite() {
+            return Err(src.error(
+                q.span(),
+                &format!("{field}.quat"),
+                "placement is not finite",
+            ));
+        }
+        if n < 1e-9 {
+            return Err(src.error(
+                q.span(),
+                &format!("{field}.quat"),
+                "placement quaternion is zero: give a unit quaternion (w, x, y, z)",
+            ));
+        }
+    }
+    Ok(spec.at(pos).rotated(quat).with_gravcomp(bf.gravcomp))
+}
+
+/// A body's inertia tensor: 3 principal moments or 6 entries (none: zero).
+fn body_inertia(src: &Source, bf: &BodyFile, field: &str) -> R<[[f64; 3]; 3]> {
+    Ok(match &bf.inertia {
+        None => [[0.0; 3]; 3],
+        Some(i) => {
+            let v = i.get_ref();
+            match v.len() {
+                3 => [[v[0], 0.0, 0.0], [0.0, v[1], 0.0], [0.0, 0.0, v[2]]],
+                6 => [[v[0], v[3], v[4]], [v[3], v[1], v[5]], [v[4], v[5], v[2]]],
+                k => {
+                    return Err(src.error(i.span(), &format!("{field}.inertia"), format!("give 3 principal moments or 6 entries [ixx, iyy, izz, ixy, ixz, iyz], not {k}")))
+                }
+            }
+        }
+    })
+}
+
+/// Joint `j` of a body, reported under `jfield`.
+fn joint_spec(src: &Source, j: &Spanned<JointFile>, jfield: &str) -> R<JointSpec> {
+    let jf = j.get_ref();
+    let kind = jf.kind.get_ref().as_str();
+    let axis = || match &jf.axis {
+        None => Err(src.error(
+            j.span(),
+            &format!("{jfield}.axis"),
+            format!("a {kind} joint needs an axis"),
+        )),
+        Some(a) => {
+            let v = *a.get_ref();
+            let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if n.is_finite() && n >= 1e-12 {
+                Ok(v)
+            } else {
+                Err(src.error(
+                    a.span(),
+                    &format!("{jfield}.axis"),
+                    format!("axis {v:?} is zero or not finite"),
+                ))
+            }
+        }
+    };
+    let mut js = match kind {
+        "hinge" => JointSpec::hinge(&jf.name, axis()?),
+        "slide" => JointSpec::slide(&jf.name, axis()?),
+        "ball" => JointSpec::ball(&jf.name),
+        "free" => JointSpec::free(&jf.name),
+        other => {
+            return Err(src.error(
+                jf.kind.span(),
+                &format!("{jfield}.type"),
+                format!("unknown joint type `{other}`: expected hinge, slide, ball or free"),
+            ))
+        }
+    };
+    js = js.with_anchor(jf.anchor);
+    if jf.stiffness != 0.0 {
+        js = js.with_spring(jf.stiffness, jf.spring_ref);
+    }
+    if jf.damping != 0.0 {
+        js = js.with_damping(jf.damping);
+    }
+    if jf.armature != 0.0 {
+        js = js.with_armature(jf.armature);
+    }
+    Ok(js)
 }
 
 /// Constraint rows: the system's own constraints, then the programme.

@@ -9,6 +9,7 @@
 //!
 //! Every error names the file, line, column and field ([`SceneError`]).
 
+mod actuators;
 pub mod chain;
 pub mod closures;
 mod error;
