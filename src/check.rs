@@ -238,18 +238,26 @@ pub const METRICS: [Metric; 13] = [
     },
 ];
 
-/// Entries of `[tolerances]` that are options of the check rather than budgets: (name, meaning).
+/// Options of the check that are not budgets, in the scene's `[checks]` table: (name, meaning).
 pub const OPTIONS: [(&str, &str); 1] = [(
     "replay_step",
     "fixed RK4 step of the open-loop replay (s); else a convergence check picks it",
 )];
 
 /// Entries of `[tolerances]` the check no longer reads, refused with the reason: (name, why).
-pub const RETIRED: [(&str, &str); 1] = [(
-    "replay_horizon",
-    "the segmented replay covers the whole span (segments restart from the solver's state; their \
-     length follows from the dynamics' growth measured in the simulator); remove the entry",
-)];
+pub const RETIRED: [(&str, &str); 2] = [
+    (
+        "replay_horizon",
+        "the segmented replay covers the whole span (segments restart from the solver's state; \
+         their length follows from the dynamics' growth measured in the simulator); remove the \
+         entry",
+    ),
+    (
+        "replay_step",
+        "it is an option of the check, not a budget: move it to the `[checks]` table \
+         (`[checks] replay_step = { value = ..., reason = \"...\" }`)",
+    ),
+];
 
 /// The metric of this name.
 pub fn metric(name: &str) -> Option<&'static Metric> {
@@ -327,12 +335,9 @@ impl Metric {
     }
 }
 
-/// Every name a scene's `[tolerances]` may hold: the budgets' [`Metric::table_keys`] and the
-/// [`OPTIONS`].
+/// Every name a scene's `[tolerances]` may hold: the budgets' [`Metric::table_keys`].
 pub fn tolerance_keys() -> Vec<String> {
-    let mut keys: Vec<String> = METRICS.iter().flat_map(|m| m.table_keys()).collect();
-    keys.extend(OPTIONS.iter().map(|(n, _)| n.to_string()));
-    keys
+    METRICS.iter().flat_map(|m| m.table_keys()).collect()
 }
 
 pub use crate::located::{did_you_mean, nearest};

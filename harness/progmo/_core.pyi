@@ -243,6 +243,9 @@ class Scene:
     @property
     def tolerances(self) -> dict[str, tuple[float, str]]: ...
     @property
+    def replay_step(self) -> tuple[float, str] | None:
+        """`[checks] replay_step` as (value, reason); None: a convergence check picks the step."""
+    @property
     def parameters(self) -> list[tuple[str, float]]: ...
     @property
     def t0(self) -> float: ...
@@ -354,7 +357,7 @@ REFERENCE_ATOL: float
 SIMULATORS: list[str]
 #: The checker of scenes no simulator document describes.
 SOLVER_ONLY: str
-#: `[tolerances]` entries that are options of the check, not budgets (replay_step).
+#: Options of the check that are not budgets, in a scene's `[checks]` table (replay_step).
 CHECK_OPTIONS: list[str]
 #: The numeric keys of `[solver]` (what a sweep may vary there).
 SOLVER_NUMBERS: list[str]

@@ -138,7 +138,7 @@ def budgets_for(tolerances: dict[str, tuple[float, str]], settings: dict[str, An
 class CheckOptions:
     """How a check runs. Defaults are what the nightly job uses."""
 
-    #: Replay step; None: the scene's tolerance table `replay_step`, else chosen by a convergence
+    #: Replay step; None: the scene's `[checks] replay_step`, else chosen by a convergence
     #: check (halving until the replay residual stops improving).
     step: float | None = None
     #: Replay horizon; None: the scene's whole time span.
@@ -433,8 +433,9 @@ def _reference(c: _Check) -> None:
     if c.options.step:
         h, why = c.options.step, "given by the options"
         c.ref = _solve_reference(c, h)
-    elif "replay_step" in c.tol:
-        h, why = c.tol["replay_step"][0], f"scene tolerance replay_step: {c.tol['replay_step'][1]}"
+    elif c.scene.replay_step is not None:
+        h, reason = c.scene.replay_step
+        why = f"scene's [checks] replay_step: {reason}"
         c.ref = _solve_reference(c, h)
     else:
         # halve from 1e-2 while the residual still improves like a 4th-order method (>= 8x per

@@ -102,7 +102,7 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument("--baselines", metavar="DIR", default=None,
                    help="baseline folder (default: the bundled references/baselines)")
     c.add_argument("--step", type=float, default=None, metavar="H",
-                   help="replay step (default: the scene's replay_step tolerance, else a convergence check)")
+                   help="replay step (default: the scene's [checks] replay_step, else a convergence check)")
     c.add_argument("--horizon", type=float, default=None, metavar="T",
                    help="replay horizon in seconds (default: the scene's whole time span)")
     c.add_argument("--samples", type=int, default=8, metavar="N",

@@ -392,11 +392,11 @@ def sample_text(scene_text: str, scene_path: str, spec: Spec, i: int, values: di
         doc["time"]["t1"] = t0 + spec.horizon  # type: ignore[index]
     for key, setting in (("replay_step", spec.step),):
         if setting is not None:
-            if "tolerances" not in doc:
-                doc["tolerances"] = tomlkit.table()
+            if "checks" not in doc:
+                doc["checks"] = tomlkit.table()
             t = tomlkit.inline_table()
             t.update({"value": setting, "reason": f"set by the sweep {Path(spec.path).name}"})
-            doc["tolerances"][key] = t  # type: ignore[index]
+            doc["checks"][key] = t  # type: ignore[index]
     head = (f"# Sample {i} of the sweep {spec.path} (seed {spec.seed}) of {scene_path}:\n"
             + "".join(f"#   {k} = {values[k]!r}\n" for k in values)
             + "# Rerun: progmo check THIS_FILE\n")
@@ -776,7 +776,7 @@ def main(argv: list[str] | None = None) -> int:
     _say(f"progmo sweep: {len(samples)} sample(s) ({sum(1 for s in samples if s.refused)} refused) x "
          f"{len(spec.simulators)} simulator(s): {total} check(s), {total - len(tasks)} already done, "
          f"{len(tasks)} to run on the {ns.executor} executor")
-    options = CheckOptions()  # the replay step is in each sample's [tolerances], the horizon its [time] t1
+    options = CheckOptions()  # the replay step is in each sample's [checks], the horizon its [time] t1
     jobs = ns.jobs if ns.jobs is not None else default_jobs()
     t0 = time.perf_counter()
     done, interrupted, usage = _run_samples(ns, tasks, options, jobs, by_path, records, results_path, total)

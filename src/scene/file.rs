@@ -163,8 +163,8 @@ pub struct SceneFile {
     #[schemars(with = "schema::SolverTable")]
     pub solver: SolverFile,
     /// Check tolerances by name, each with a reason: the budgets of the check's metrics
-    /// (programme_residual is required for catalog scenes) and its replay options; an unknown
-    /// name is refused.
+    /// (programme_residual is required for catalog scenes); an unknown name is refused. The
+    /// check's options (`replay_step`) live in `[checks]`.
     #[serde(default)]
     #[schemars(with = "BTreeMap<String, ToleranceFile>", transform = schema::tolerance_names)]
     pub tolerances: BTreeMap<String, Spanned<ToleranceFile>>,
@@ -283,6 +283,11 @@ pub struct ChecksFile {
     #[serde(default)]
     #[schemars(with = "BTreeMap<String, String>", transform = schema::simulator_names)]
     pub not_checked: BTreeMap<String, Spanned<String>>,
+    /// Fixed RK4 step of the open-loop replay (s), with the reason for it; absent: a
+    /// convergence check picks the step (halving until the residual stops improving 16x).
+    #[serde(default)]
+    #[schemars(with = "Option<ToleranceFile>")]
+    pub replay_step: Option<Spanned<ToleranceFile>>,
 }
 
 /// One row of a full mass matrix as written: expressions with their places.

@@ -123,6 +123,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
     crate::with_problem!(&system, p => check_acceleration_rows(&src, p, &spans, n_system)?);
     let view = super::view::view(&src, &file, &params, &system)?;
     let tolerances = tolerances(&src, &file)?;
+    let replay_step = replay_step(&src, &file)?;
     let expected_not_checked = expected_not_checked(&src, &file)?;
     let references = {
         let (q_names, v_names) =
@@ -139,6 +140,7 @@ pub(super) fn load(src: Source) -> R<Scene> {
         system,
         settings,
         tolerances,
+        replay_step,
         expected_not_checked,
         references,
         source: src,
@@ -1919,7 +1921,6 @@ fn tolerances(src: &Source, file: &SceneFile) -> R<Vec<Tolerance>> {
     let mut out = vec![];
     let known = check::tolerance_keys();
     for (name, t) in &file.tolerances {
-        let tf = t.get_ref();
         let field = format!("tolerances.{name}");
         if let Some((_, why)) = check::RETIRED.iter().find(|(r, _)| r == name) {
             return Err(src.error(
@@ -1935,33 +1936,43 @@ fn tolerances(src: &Source, file: &SceneFile) -> R<Vec<Tolerance>> {
                 format!(
                     "unknown tolerance `{name}`{}: the check reads its metrics' budgets (the \
                      metric's name, or with `_mujoco`, `_pinocchio`, `_solver_only` for a checker \
-                     that judges it) and the options {} (FORMAT.md, \"Tolerances\")",
+                     that judges it) (FORMAT.md, \"Tolerances\")",
                     check::did_you_mean(name, known.iter().map(|k| k.as_str())),
-                    check::OPTIONS
-                        .iter()
-                        .map(|(o, _)| format!("`{o}`"))
-                        .collect::<Vec<_>>()
-                        .join(", ")
                 ),
             ));
         }
-        if !(tf.value > 0.0) || !tf.value.is_finite() {
-            return Err(src.error(
-                t.span(),
-                &field,
-                format!("value must be positive, got {}", tf.value),
-            ));
-        }
-        if tf.reason.trim().is_empty() {
-            return Err(src.error(t.span(), &field, "every tolerance needs a one-line reason"));
-        }
-        out.push(Tolerance {
-            name: name.clone(),
-            value: tf.value,
-            reason: tf.reason.clone(),
-        });
+        out.push(tolerance(src, name, &field, t)?);
     }
     Ok(out)
+}
+
+/// One `{ value, reason }` entry: a positive finite value and a non-empty reason.
+fn tolerance(src: &Source, name: &str, field: &str, t: &Spanned<ToleranceFile>) -> R<Tolerance> {
+    let tf = t.get_ref();
+    if !(tf.value > 0.0) || !tf.value.is_finite() {
+        return Err(src.error(
+            t.span(),
+            field,
+            format!("value must be positive, got {}", tf.value),
+        ));
+    }
+    if tf.reason.trim().is_empty() {
+        return Err(src.error(t.span(), field, "every tolerance needs a one-line reason"));
+    }
+    Ok(Tolerance {
+        name: name.to_string(),
+        value: tf.value,
+        reason: tf.reason.clone(),
+    })
+}
+
+/// `[checks] replay_step`: the check's fixed replay step, with its reason.
+fn replay_step(src: &Source, file: &SceneFile) -> R<Option<Tolerance>> {
+    file.checks
+        .replay_step
+        .as_ref()
+        .map(|t| tolerance(src, "replay_step", "checks.replay_step", t))
+        .transpose()
 }
 
 /// A(q0) must be symmetric positive definite.

@@ -83,6 +83,9 @@ pub struct Scene {
     pub settings: Settings,
     /// Check tolerances with their reasons.
     pub tolerances: Vec<Tolerance>,
+    /// `[checks] replay_step`: the check's fixed replay step with its reason (else a convergence
+    /// check picks it).
+    pub replay_step: Option<Tolerance>,
     /// `[checks] not_checked`: (simulator, reason) pairs the check expects not to run.
     pub expected_not_checked: Vec<(String, String)>,
     /// `[[reference]]`: values of independent origin at given times, one per quantity.

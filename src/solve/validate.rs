@@ -69,7 +69,7 @@ impl SettingsField {
         let name = self.name();
         match (self, super::setting(name)) {
             (SettingsField::T0, _) => "time.t0".into(),
-            (SettingsField::ReplayStep, _) => "tolerances.replay_step".into(),
+            (SettingsField::ReplayStep, _) => "checks.replay_step".into(),
             (_, Some(s)) => format!("{}.{name}", s.table),
             _ => format!("settings.{name}"),
         }

@@ -207,9 +207,11 @@ v = { base = [0.3, 0.1, 0.0, 0.5, -0.2, 1.0] }
 [time]
 t1 = 1.0
 output_dt = 0.01
+[checks]
+replay_step = { value = 1e-3, reason = "test" }
+
 [tolerances]
 programme_residual = { value = 1e-10, reason = "projection" }
-replay_step = { value = 1e-3, reason = "test" }
 parity_mass = { value = 1e-12, reason = "test" }
 parity_bias = { value = 1e-12, reason = "test" }
 instant_u = { value = 1e-10, reason = "test" }
@@ -264,9 +266,11 @@ v = { q1 = 0.0, q2 = 0.1 }
 t1 = 2.0
 output_dt = 0.01
 
+[checks]
+replay_step = { value = 1e-3, reason = "test" }
+
 [tolerances]
 programme_residual = { value = 1e-10, reason = "test" }
-replay_step = { value = 1e-3, reason = "test" }
 parity_mass = { value = 1e-12, reason = "test" }
 parity_bias = { value = 1e-12, reason = "test" }
 instant_u = { value = 1e-10, reason = "test" }
@@ -310,9 +314,11 @@ v = { ball = [0.1, 0.0, 0.1] }
 t1 = 2.0
 output_dt = 0.01
 
+[checks]
+replay_step = { value = 1e-3, reason = "test" }
+
 [tolerances]
 programme_residual = { value = 1e-10, reason = "test" }
-replay_step = { value = 1e-3, reason = "test" }
 parity_mass = { value = 1e-12, reason = "test" }
 parity_bias = { value = 1e-12, reason = "test" }
 instant_u = { value = 1e-10, reason = "test" }

@@ -126,8 +126,10 @@ v = { x = 0.8, y = 0.6 }
 [time]
 t1 = 1.0
 output_dt = 0.01
-[tolerances]
+[checks]
 replay_step = { value = 1e-3, reason = "test" }
+
+[tolerances]
 """
 
 
@@ -210,8 +212,10 @@ v = { tha = "Omega", thb = "Omega" }
 [time]
 t1 = 1.0
 output_dt = 0.01
-[tolerances]
+[checks]
 replay_step = { value = 1e-3, reason = "test" }
+
+[tolerances]
 replay_residual_mujoco = { value = 1e-5, reason = "test: soft weld" }
 replay_deviation_mujoco = { value = 1e-3, reason = "test: soft weld" }
 reaction_closure_mujoco = { value = 1e-3, reason = "test: soft weld" }

@@ -224,3 +224,37 @@ def test_a_closed_standard_output_is_no_traceback(tmp_path, args):
     for f in (tmp_path / "o").iterdir():  # no result file took descriptor 1
         text = f.read_bytes()
         assert b"report: " not in text and b"success, t = " not in text, f
+
+
+SWEEP_SPEC = """scene = "double_pendulum"
+samples = 6
+seed = 3
+simulators = ["mujoco"]
+horizon = 0.5
+[vary]
+"parameters.amp" = { uniform = [0.3, 0.7] }
+"""
+
+
+def test_sweep_interrupted_keeps_finished_checks_and_resumes(tmp_path):
+    """Ctrl-C in a sweep: exit 130, every finished check kept as a whole line of results.jsonl, the
+    report of what was done written; the same command then runs only what is missing."""
+    spec, out = tmp_path / "s.toml", tmp_path / "o"
+    spec.write_text(SWEEP_SPEC)
+    results = out / "results.jsonl"
+    cmd = command("sweep", "--spec", str(spec), "-o", str(out), "-j", "1", "--no-plots")
+    p = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    interrupt_when(p, lambda: results.is_file() and results.read_text().count("\n") >= 1, deadline=300)
+    _, err = p.communicate(timeout=300)
+    no_traceback(err)
+    assert p.returncode == 130, err
+    kept = results.read_text().splitlines()
+    assert 1 <= len(kept) < 6, kept
+    assert all(json.loads(line)["simulator"] == "mujoco" for line in kept)
+    agg = json.loads((out / "sweep.json").read_text())
+    assert agg["counts"], agg
+    r = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert f"{len(kept)} already done, {6 - len(kept)} to run" in r.stderr, r.stderr
+    samples = sorted(json.loads(line)["sample"] for line in results.read_text().splitlines())
+    assert samples == list(range(6)), samples

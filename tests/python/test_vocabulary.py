@@ -72,7 +72,10 @@ def test_every_name_the_harness_reads_is_in_the_loaders_vocabulary():
         assert {name, f"{name}_mujoco", f"{name}_pinocchio"} <= keys, m
     for m in SOLVER_ONLY_BUDGETED:
         assert f"{TABLE_NAME.get(m, m)}_solver_only" in keys
-    assert "replay_step" in keys and "replay_horizon" not in keys and set(_core.CHECK_OPTIONS) <= keys
+    # the check's options are not budgets: they live in [checks] (Scene.replay_step), not here
+    assert "replay_step" not in keys and "replay_horizon" not in keys
+    assert _core.CHECK_OPTIONS == ["replay_step"] and not set(_core.CHECK_OPTIONS) & keys
+    assert all(hasattr(_core.Scene, o) for o in _core.CHECK_OPTIONS)
     assert "parity_mass_solver_only" not in keys and "formulation_deviation_mujoco" not in keys
 
 
@@ -91,11 +94,8 @@ def test_a_misspelt_name_is_refused_through_the_binding(tmp_path, entry, phrase)
     """The Python door gets the loader's located error (file:line:column, field, suggestion)."""
     text = (SCENES / "double_pendulum.toml").read_text()
     table, line_text = entry.splitlines()
-    assert "\n[checks]" not in text and text.count(f"\n{table}\n") == (table == "[tolerances]")
-    if table == "[tolerances]":  # the misspelt entry first in the scene's own table
-        text = text.replace(f"\n{table}\n", f"\n{table}\n{line_text}\n")
-    else:
-        text += f"\n{table}\n{line_text}\n"
+    assert text.count(f"\n{table}\n") == 1  # the scene has both tables ([checks]: its replay_step)
+    text = text.replace(f"\n{table}\n", f"\n{table}\n{line_text}\n")  # the misspelt entry first
     p = tmp_path / "s.toml"
     p.write_text(text)
     line = text.splitlines().index(line_text) + 1

@@ -706,6 +706,15 @@ impl PyScene {
         self.scene.expected_not_checked.clone()
     }
 
+    /// `[checks] replay_step` as (value, reason); None: a convergence check picks the step.
+    #[getter]
+    fn replay_step(&self) -> Option<(f64, String)> {
+        self.scene
+            .replay_step
+            .as_ref()
+            .map(|t| (t.value, t.reason.clone()))
+    }
+
     /// `[[reference]]` of the scene, one dict per value: t, quantity ("q", "v" or "u"), name, index
     /// (into q or v), value, source, field (where it is written).
     #[getter]
