@@ -292,6 +292,11 @@ class DrakeBackend:
             if cls is BallRpyJoint:
                 self._notes.append("spherical root joint as Drake's BallRpyJoint (roll-pitch-yaw, singular "
                                    "at pitch +-pi/2): Drake 1.5x has no quaternion ball joint")
+        elif not any(c.get("conversion") == "body_frame" for c in report["v_map"]):
+            # a fixed base: weld the root link (Drake would make it a floating body; Pinocchio and
+            # MuJoCo fix it to the world)
+            for root in _root_links(urdf):
+                plant.WeldFrames(plant.world_frame(), plant.GetBodyByName(root, inst).body_frame())
         for a in report.get("armature", []):
             j = plant.GetJointByName(a["joint"])
             if a["nv"] != 1:
@@ -450,7 +455,7 @@ class DrakeBackend:
     def inverse_force(self, t, q, v, a) -> np.ndarray:
         """Drake's inverse dynamics (``CalcInverseDynamics`` with its gravity and the file's joint
         damping) minus the scene's other forces, in our coordinates."""
-        from pydrake.multibody.plant import MultibodyForces
+        from pydrake.multibody.tree import MultibodyForces
 
         cm, plant = self.cm, self.plant
         qs, vs = cm.q_to_sim(q), cm.v_to_sim(q, v)
@@ -459,7 +464,7 @@ class DrakeBackend:
         forces = MultibodyForces(plant)
         plant.CalcForceElementsContribution(self.ctx, forces)
         tau = plant.CalcInverseDynamics(self.ctx, cm.a_to_sim(q, v, a), forces)
-        tau = tau + self.damping * vs - f - self._points_generalized(pts)
+        tau = tau - f - self._points_generalized(pts)  # (the force elements include joint damping)
         return cm.f_from_sim(q, tau)
 
     def unmodelled(self) -> list[dict]:
@@ -550,11 +555,16 @@ def _JointIndex(i: int) -> Any:
     return JointIndex(i)
 
 
-def _root_link(urdf: str) -> str:
+def _root_links(urdf: str) -> list[str]:
+    """Links no joint attaches (besides ``world``)."""
     root = ET.fromstring(urdf)
     children = {c.get("link") for j in root.iter("joint") if (c := j.find("child")) is not None}
     links = [link.get("name") for link in root.iter("link") if link.get("name") != "world"]
-    free = [n for n in links if n not in children]
+    return [str(n) for n in links if n not in children]
+
+
+def _root_link(urdf: str) -> str:
+    free = _root_links(urdf)
     if len(free) != 1:
         raise ValueError(f"URDF has {len(free)} root links ({', '.join(map(str, free))}); expected one")
     return str(free[0])
