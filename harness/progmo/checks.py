@@ -383,9 +383,7 @@ def _budgets(c: _Check) -> None:
 
 
 def _solve_reference(c: _Check, h: float):
-    """The solver's motion at every RK4 stage time of step h (output_dt = h/2); for a back-end
-    with ``stage_div`` (Drake: 90) solved at output_dt = h / stage_div, its forces kept on that grid
-    (``Reference.fine``) so that every stage of its scheme reads an exact sample."""
+    """The solver's motion at every RK4 stage time of step h (output_dt = h/2)."""
     from ._core import SettingsError
     from .simulators.replay import Reference
 
@@ -399,40 +397,28 @@ def _solve_reference(c: _Check, h: float):
     t0s = _time.perf_counter()
     scene = c.scene
     st = scene.settings
-    # a back-end whose stages are not at multiples of h/2 (Drake's RK5) reads u on a finer grid
-    div = int(getattr(c.backend, "stage_div", 2) or 2)
-    sol = scene.solve(output_dt=h / div, t1=scene.t0 + n * h,
+    sol = scene.solve(output_dt=h / 2, t1=scene.t0 + n * h,
                       rtol=min(st["rtol"], REF_RTOL), atol=min(st["atol"], REF_ATOL))
     c.res.warnings = [w["message"] for w in sol.warnings]
     if not sol.success:
         raise _Stop("error", f"the reference solve stopped ({sol.code}): {sol.message}")
-    tf = np.asarray(sol.t)
-    if len(tf) != div * n + 1 or np.abs(tf - (scene.t0 + h / div * np.arange(div * n + 1))).max() > 1e-9:
+    t = np.asarray(sol.t)
+    if len(t) != 2 * n + 1 or np.abs(t - (scene.t0 + 0.5 * h * np.arange(2 * n + 1))).max() > 1e-9:
         raise _Stop("error", f"solver output grid does not match the stages of h = {h:g} "
-                             f"({len(tf)} outputs for {div * n + 1} stage times)")
-    half = slice(None, None, div // 2)  # the RK4 stage times t0 + k h/2
-    t = tf[half]
-    u_fine = np.asarray(sol.u)
-    u_model = u_fine[half]
+                             f"({len(t)} outputs for {2 * n + 1} stage times)")
+    u_model = np.array(sol.u)
     u = u_model
     if c.corrupt_u is not None:
-        u_fine = np.array([c.corrupt_u(tk, uk) for tk, uk in zip(tf, u_fine)])
-        u = u_fine[half]
-    lam_fine = np.asarray(sol.lambda_)
-    lam = lam_fine[half]
-    ref = Reference(t, np.asarray(sol.q)[half], np.asarray(sol.v)[half], np.asarray(sol.a)[half], u,
-                    np.asarray(sol.residuals)[half], h, n, scene.t0, _time.perf_counter() - t0s,
-                    lam, np.asarray(sol.residual_rates)[half])
-    fine: dict[str, np.ndarray] = {"u": u_fine}
+        u = np.array([c.corrupt_u(tk, uk) for tk, uk in zip(t, u_model)])
+    lam = np.asarray(sol.lambda_)
+    ref = Reference(t, np.asarray(sol.q), np.asarray(sol.v), np.asarray(sol.a), u,
+                    np.asarray(sol.residuals), h, n, scene.t0, _time.perf_counter() - t0s,
+                    lam, np.asarray(sol.residual_rates))
     if scene.actuation_varies:  # H(t, q): the replay applies H at the simulator's state
         ref.actuation = lambda tk, qk: np.asarray(scene.actuation_map_at(tk, qk))
-        fine["tau"], fine["u_model"] = np.asarray(sol.tau), np.asarray(sol.u)
-        ref.tau, ref.u_model = fine["tau"][half], u_model
+        ref.tau, ref.u_model = np.asarray(sol.tau), u_model
     if c.supplied:  # rows the simulator does not hold: their reactions, from this solve
-        fine["supplied"] = supplied_reactions(scene, c.supplied, tf, np.asarray(sol.q), np.asarray(sol.v), lam_fine)
-        ref.supplied = fine["supplied"][half]
-    if div > 2:
-        ref.fine, ref.fine_div = fine, div
+        ref.supplied = supplied_reactions(scene, c.supplied, t, ref.q, ref.v, lam)
     return ref
 
 
@@ -496,7 +482,7 @@ def _reference(c: _Check) -> None:
                 break
         why = "convergence check, error by step " + ", ".join(seq)
     c.res.notes.append(f"replay step h = {h:g} ({why}); {getattr(c.backend, 'scheme', 'RK4')} with u at every stage "
-                       f"(solver output_dt = h/{c.ref.fine_div or 2}, solve {c.ref.solve_seconds:.2f} s)")
+                       f"(solver output_dt = h/2, solve {c.ref.solve_seconds:.2f} s)")
     c.res.info["replay_step"] = h
     c.res.metrics["solver_residual"] = _max_abs(c.ref.residual)
     for w in c.res.warnings:

@@ -1,5 +1,5 @@
-"""The Drake back-end (issue 32): forces and conventions reach Drake, its replay is 5th order only
-because u is sampled at its own stage times, and the negative controls fail in Drake as in the other
+"""The Drake back-end (issue 32): forces and conventions reach Drake, its RK4 replay on Drake's
+derivatives is 4th order because u is read at every stage time, and the negative controls fail in Drake as in the other
 two simulators (a withheld force, a 1 % mass error, Drake's MJCF reading of mjcf_arm). Skipped, and
 said, where Drake is not installed."""
 
@@ -16,12 +16,13 @@ from progmo import checks  # noqa: E402
 from progmo.checks import CheckOptions, _run, run_check  # noqa: E402
 from progmo.simulators import Unsupported  # noqa: E402
 from progmo.simulators import drake_sim  # noqa: E402
+from progmo.simulators.replay import Reference  # noqa: E402
 from progmo.simulators.robot_file import RobotFile  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 SCENES = ROOT / "references" / "scenes"
 POINT = str(ROOT / "tests" / "scenes" / "point_forces.toml")
-#: RK5 at h = 5e-3 replays point_forces to ~1e-11; output_dt h/90 keeps the solve short
+#: a short replay of point_forces at h = 5e-3
 SHORT = CheckOptions(horizon=0.5, step=5e-3)
 
 
@@ -30,7 +31,7 @@ def test_point_and_coordinate_forces_reach_drake():
     assert r.status == "pass", (r.reason, r.metrics)
     assert r.metrics["parity_bias"] < 1e-13 and r.metrics["instant_u"] < 1e-12, r.metrics
     assert r.metrics["replay_residual"] < 1e-9 and r.metrics["replay_deviation"] < 1e-9, r.metrics
-    assert any("h/90" in n for n in r.notes), r.notes
+    assert any("RK4 in fixed steps on its CalcTimeDerivatives" in n for n in r.notes), r.notes
 
 
 @pytest.mark.parametrize("kind", ["point_force", "coordinate_force"])
@@ -60,14 +61,20 @@ def _deviation(h: float) -> float:
     return r.metrics["replay_deviation"]
 
 
-def test_replay_is_fifth_order_with_u_at_the_stage_times(monkeypatch):
-    """Error against step: halving h divides it by about 32 (order 5). Negative control: u read
-    on the h/2 grid only (linear interpolation at c = 1/5, 3/10, 4/5, 8/9) caps it at order 2."""
+def test_replay_is_fourth_order_with_u_at_every_stage(monkeypatch):
+    """Error against step: halving h divides it by about 16 (RK4 on Drake's derivatives, u read at
+    every stage time). Negative control: u held at each step's start (a zero-order hold, what a
+    replay that ignores the stages does) caps it at order 1."""
     e1, e2 = _deviation(2e-2), _deviation(1e-2)
-    assert np.log2(e1 / e2) > 4.5, (e1, e2)
-    monkeypatch.setattr(drake_sim.DrakeBackend, "stage_div", 2)
+    assert np.log2(e1 / e2) > 3.6, (e1, e2)
+    orig = Reference.force_at
+
+    def held(self, time, q):
+        return orig(self, self.t0 + np.floor((time - self.t0) / self.h + 1e-9) * self.h, q)
+
+    monkeypatch.setattr(Reference, "force_at", held)
     c1, c2 = _deviation(2e-2), _deviation(1e-2)
-    assert np.log2(c1 / c2) < 2.5 and c2 > 100 * e2, (c1, c2, e2)
+    assert np.log2(c1 / c2) < 1.5 and c2 > 100 * e2, (c1, c2, e2)
 
 
 @pytest.mark.parametrize("name", ["rolling_disk", "example_3_1_free"])

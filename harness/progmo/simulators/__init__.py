@@ -1,6 +1,6 @@
 """Simulator back-ends of the checks: MuJoCo 4.0 (``mujoco_sim``), Pinocchio 4.1
 (``pinocchio_sim``) and Drake 1.51 (``drake_sim``, optional: ``pip install 'progmo[drake]'``; its
-replay is Drake's fixed-step RK5, measured 5th order with u at its stage times), with the shared
+replay is RK4 on Drake's own time derivatives, u at every stage), with the shared
 coordinate maps and metrics in ``replay``.
 
 Every back-end implements :class:`Backend`, built from a scene's export (document + report) and the

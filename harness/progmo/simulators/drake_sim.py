@@ -1,5 +1,5 @@
 """Drake back-end (PyPI ``drake``, ``pip install 'progmo[drake]'``): a continuous
-``MultibodyPlant`` read from URDF, replayed by Drake's own fixed-step integrator.
+``MultibodyPlant`` read from URDF, replayed by RK4 on Drake's own time derivatives.
 
 * **Model.** The scene's URDF export, or for a ``kind = "urdf"`` scene the user's own file (a
   copy without ``<visual>``/``<collision>``; locked joints turned into fixed joints at the value the
@@ -19,12 +19,14 @@
   forces with Drake's own Jacobians (``CalcJacobianTranslationalVelocity``); M, bias and gravity
   are ``CalcMassMatrix``, ``CalcBiasTerm``, ``CalcGravityGeneralizedForces``; joint damping of the
   user's file is Drake's own reading (``Joint.default_damping_vector``), applied by Drake itself.
-* **Integrator.** ``RungeKutta5Integrator`` (Dormand-Prince; ``ResetIntegratorFromFlags(..,
-  "runge_kutta5", ..)``) in fixed-step mode, one ``Simulator.AdvanceTo(t0 + k h)`` per step. Its stages are at
-  c = 0, 1/5, 3/10, 4/5, 8/9, 1 (and 1 again for the error estimate): the check solves the
-  reference at output_dt = h / :data:`STAGE_DIV` so that every stage reads an exact sample of u
-  (interpolating u between samples would cap the replay at 2nd order). Measured order: 5
-  (``tests/python/test_drake.py``, docs/guide.md).
+* **Integrator.** Classical RK4 in fixed steps on Drake's own time derivatives
+  (``Diagram.CalcTimeDerivatives`` of the plant with the force system: the plant's state
+  derivative, quaternion rates included, with u and every scene force evaluated at the stage's
+  time and state), so its stages fall on the reference's h/2 grid like Pinocchio's and MuJoCo's
+  and every stage reads an exact sample of u. Drake's own ``RungeKutta5Integrator`` was tried
+  first: its stages (c = 1/5, 3/10, 4/5, 8/9) are off that grid, and solving the reference at
+  h/90 to feed them exactly cost 45x the samples (overhead_crane 455 s; xarm7_elbow_height past
+  the solve's memory bound). Measured order: 4 (``tests/python/test_drake.py``, docs/guide.md).
 * **Coordinates** (:class:`DrakeMap`): Drake's quaternion floating joint has q = (qw, qx, qy, qz,
   x, y, z) and v = (world angular, world linear velocity); ours (w, x, y, z) with body-frame angular
   and world-frame linear velocity: v_drake = P v with R on the angular rows, d(R w)/dt = R dw/dt
@@ -49,10 +51,6 @@ from .robot_file import FILE_FORCES, RobotFile
 
 NAME = "drake"
 ACC_LIMIT = 1e8
-#: Drake's RK5 stage fractions (Dormand-Prince; the 7th stage repeats c = 1)
-STAGES = (0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0)
-#: the reference's output_dt is h / STAGE_DIV: every stage time (and h/2) is on that grid
-STAGE_DIV = 90
 SUPPORTED = ("attractor", "spring", "damper", "gravcomp", "point_force", "coordinate_force",
              "supplied_reaction")
 
@@ -227,9 +225,7 @@ class DrakeMap:
 # --- the back-end --------------------------------------------------------------------------------
 class DrakeBackend:
     name = NAME
-    #: the check solves the reference at output_dt = h / stage_div (every RK5 stage on that grid)
-    stage_div = STAGE_DIV
-    scheme = "Drake RungeKutta5Integrator (fixed step)"
+    scheme = "RK4 on Drake's CalcTimeDerivatives (fixed step)"
 
     def __init__(self, doc: str, report: dict, scene=None, withhold: tuple[str, ...] = (),
                  robot: RobotFile | None = None):
@@ -267,7 +263,6 @@ class DrakeBackend:
         self.expr = ExpressionForces(scene, report, withhold)
         self._harness_forces(urdf, report, withhold)
         self._ref: Reference | None = None
-        self._simulator: Any = None
         self._dia: Any = None
 
     # -- construction
@@ -346,8 +341,8 @@ class DrakeBackend:
         self.coms = coms
 
     def notes(self) -> list[str]:
-        return [f"Drake {version()}, continuous MultibodyPlant, RungeKutta5Integrator in fixed steps (stages "
-                "c = 0, 1/5, 3/10, 4/5, 8/9, 1; u and every scene force at each stage from Drake's state)"
+        return [f"Drake {version()}, continuous MultibodyPlant, RK4 in fixed steps on its CalcTimeDerivatives "
+                "(u and every scene force at each stage from Drake's state)"
                 + (f"; root joint {self.report['root_joint']['python']}" if self.report.get("root_joint") else "")
                 ] + self._notes
 
@@ -483,7 +478,7 @@ class DrakeBackend:
 
     # -- replay
     def _diagram(self) -> tuple[Any, Any, Any]:
-        """(diagram, its context, the integrator): the plant fed by the force system. Built once."""
+        """(diagram, its context, a derivatives buffer): the plant fed by the force system. Built once."""
         if self._dia is None:
             self._dia = _make_diagram(self)
         return self._dia
@@ -510,37 +505,41 @@ class DrakeBackend:
             self._ref = None
 
     def _steps(self, ref, Q, V, A, qs, vs, start, times) -> Replay:
-        diagram, dctx, integ = self._diagram()
+        """Classical RK4 (fixed step h) on Drake's x' = f(t, x): every stage sets the diagram's
+        time and the plant's state, so the force system evaluates u and the scene's forces there."""
+        diagram, dctx, derivs = self._diagram()
         plant = self.plant
         pctx = plant.GetMyMutableContextFromRoot(dctx)
         h, t0 = ref.h, ref.t0
         n = len(times) - 1
-        dctx.SetTime(t0 + start * h)
-        plant.SetPositions(pctx, qs)
-        plant.SetVelocities(pctx, vs)
-        integ.set_fixed_step_mode(True)
-        integ.set_maximum_step_size(h)
-        sim = self._simulator
-        sim.Initialize()
-        derivs = diagram.AllocateTimeDerivatives()
         nq = plant.num_positions()
+
+        def f(t: float, x: np.ndarray) -> np.ndarray:
+            dctx.SetTime(t)
+            plant.SetPositionsAndVelocities(pctx, x)
+            diagram.CalcTimeDerivatives(dctx, derivs)
+            return np.asarray(derivs.get_vector().CopyToVector())
+
+        x = np.concatenate([qs, vs])
         for j in range(n + 1):
             tk = t0 + (start + j) * h
-            qs, vs = plant.GetPositions(pctx), plant.GetVelocities(pctx)
-            if not (np.all(np.isfinite(qs)) and np.all(np.isfinite(vs))):
+            if not np.all(np.isfinite(x)):
                 raise BlowUp(tk, "non-finite state")
-            diagram.CalcTimeDerivatives(dctx, derivs)
-            a = derivs.get_vector().CopyToVector()[nq:]
+            k1 = f(tk, x)
+            a = k1[nq:]
             if not np.all(np.abs(a) < ACC_LIMIT):
                 big = float(np.abs(a).max()) if np.all(np.isfinite(a)) else float("inf")
                 raise BlowUp(tk, f"|ddq| = {big:.3g} > {ACC_LIMIT:g} (or non-finite)", big, ACC_LIMIT)
-            qo = self.cm.q_from_sim(qs)
-            Q[j], V[j] = qo, self.cm.v_from_sim(qo, vs)
+            qo = self.cm.q_from_sim(x[:nq])
+            Q[j], V[j] = qo, self.cm.v_from_sim(qo, x[nq:])
             A[j] = self.cm.a_from_sim(qo, V[j], a)
             self._stored = j + 1
             if j == n:
                 break
-            sim.AdvanceTo(t0 + (start + j + 1) * h)  # one fixed step (the time then exact)
+            k2 = f(tk + 0.5 * h, x + 0.5 * h * k1)
+            k3 = f(tk + 0.5 * h, x + 0.5 * h * k2)
+            k4 = f(tk + h, x + h * k3)
+            x = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
         return Replay(times, Q, V, A, [], 1)
 
 
@@ -571,11 +570,10 @@ def _root_link(urdf: str) -> str:
 
 
 def _make_diagram(be: DrakeBackend) -> tuple[Any, Any, Any]:
-    """The plant with a force system on its applied-force inputs (module doc), and a fixed-step
-    RK5 integrator on the diagram's context."""
+    """The plant with a force system on its applied-force inputs (module doc), the diagram's
+    context and a derivatives buffer for the RK4 replay."""
     from pydrake.common.value import AbstractValue
     from pydrake.multibody.plant import ExternallyAppliedSpatialForce
-    from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
     from pydrake.systems.framework import LeafSystem
 
     plant: Any = be.plant
@@ -619,11 +617,7 @@ def _make_diagram(be: DrakeBackend) -> tuple[Any, Any, Any]:
     if plant.num_actuators():
         plant.get_actuation_input_port().FixValue(plant.GetMyMutableContextFromRoot(dctx),
                                                   np.zeros(plant.num_actuators()))
-    sim = Simulator(diagram, dctx)
-    ResetIntegratorFromFlags(sim, "runge_kutta5", 1e-3)  # (the step is set per replay)
-    be._simulator = sim  # keeps the integrator's owner alive
-    return diagram, sim.get_mutable_context(), sim.get_mutable_integrator()
-
+    return diagram, dctx, diagram.AllocateTimeDerivatives()
 
 def mjcf_parity(path: str, report: dict, q: np.ndarray) -> np.ndarray:
     """Drake's mass matrix of an MJCF file read by Drake's own MJCF parser, in our coordinates

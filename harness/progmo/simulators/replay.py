@@ -167,21 +167,9 @@ class Reference:
     #: out (export report ``supplied_reaction``) at every stage time, from this solve: applied with
     #: u at the stage time (open loop)
     supplied: np.ndarray | None = None
-    #: the forces (keys "u", "tau", "u_model", "supplied" as above) at every multiple of
-    #: h / fine_div, for a simulator whose stages are not at multiples of h/2 (Drake's RK5:
-    #: c = 1/5, 3/10, 4/5, 8/9, fine_div 90): read first, so such a stage gets an exact sample
-    fine: dict[str, np.ndarray] | None = None
-    fine_div: int = 0
 
-    def _at(self, x: np.ndarray | None, time: float, key: str = "") -> np.ndarray:
-        """x at a stage time (exact grid value, of the fine grid when there is one; linear
-        interpolation off the grids)."""
-        if self.fine is not None and key in self.fine:
-            s = (time - self.t0) / (self.h / self.fine_div)
-            k = int(round(s))
-            if abs(s - k) < 1e-6 and 0 <= k < len(self.fine[key]):
-                return self.fine[key][k]
-        assert x is not None
+    def _at(self, x: np.ndarray, time: float) -> np.ndarray:
+        """x at a stage time (exact grid value; linear interpolation off the grid)."""
         s = (time - self.t0) / (0.5 * self.h)
         k = int(round(s))
         if abs(s - k) < 1e-6 and 0 <= k < len(self.t):
@@ -192,7 +180,7 @@ class Reference:
 
     def u_at(self, time: float) -> np.ndarray:
         """u at a stage time (exact grid value; linear interpolation off the grid)."""
-        return self._at(self.u, time, "u")
+        return self._at(self.u, time)
 
     def force_at(self, time: float, q: np.ndarray) -> np.ndarray:
         """The generalized force to apply at a stage time and the simulator's state q (ours): u(t),
@@ -200,11 +188,11 @@ class Reference:
         if self.actuation is None or self.tau is None:
             f = self.u_at(time)
         else:
-            f = self.actuation(time, q) @ self._at(self.tau, time, "tau")
+            f = self.actuation(time, q) @ self._at(self.tau, time)
             if self.u_model is not None:
-                f = f + self._at(self.u, time, "u") - self._at(self.u_model, time, "u_model")
+                f = f + self._at(self.u, time) - self._at(self.u_model, time)
         if self.supplied is not None:
-            f = f + self._at(self.supplied, time, "supplied")
+            f = f + self._at(self.supplied, time)
         return f
 
 
