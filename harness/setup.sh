@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Prepares everything the harness needs on a fresh machine, idempotently:
-#   .venv with numpy, scipy, MuJoCo, Pinocchio, matplotlib, mcap, pytest (the ranges of
+#   .venv with numpy, scipy, MuJoCo, Pinocchio, Drake, matplotlib, mcap, pytest (the ranges of
 #   pyproject.toml, at the locked versions of harness/constraints.txt) and the Rust core built
 #   into it as the package progmo (maturin develop, release);
 #   Eigen's headers for the C++ anchor of `progmo bench` (apt-get install libeigen3-dev when
@@ -18,13 +18,15 @@ stamp=.venv/.progmo-deps
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ harness/constraints.txt -nt "$stamp" ]; then
   echo "setup: installing Python dependencies (first run: about a minute)" >&2
   .venv/bin/python -m pip install -q --upgrade pip
-  # One list of requirements: pyproject.toml (build-system, dependencies, the `test` extra).
+  # One list of requirements: pyproject.toml (build-system, dependencies, the `test` and `drake`
+  # extras: the nightly check runs all three simulators).
   mapfile -t reqs < <(.venv/bin/python - <<'PY'
 import tomllib
 with open("pyproject.toml", "rb") as f:
     d = tomllib.load(f)
 print("\n".join(d["build-system"]["requires"] + d["project"]["dependencies"]
-                + d["project"]["optional-dependencies"]["test"]))
+                + d["project"]["optional-dependencies"]["test"]
+                + d["project"]["optional-dependencies"]["drake"]))
 PY
 )
   .venv/bin/python -m pip install -q -c harness/constraints.txt "${reqs[@]}"

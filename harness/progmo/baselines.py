@@ -108,16 +108,20 @@ def compare(result: CheckResult, baseline: dict[str, Any] | None) -> list[Compar
 
 #: Versions a baseline records and a check compares (a different one is said in the report).
 VERSIONED = ("progmo", "mujoco", "pinocchio")
+#: a simulator added later is compared only in its own baselines (older ones never recorded it)
+VERSIONED_OWN = ("drake",)
 
 
-def version_differences(baseline: dict[str, Any] | None, provenance: dict[str, Any]) -> list[str]:
+def version_differences(baseline: dict[str, Any] | None, provenance: dict[str, Any],
+                        simulator: str = "") -> list[str]:
     """``"mujoco 3.9.0 (now 4.0.0)"`` for every versioned package the baseline was accepted with
-    that differs from this run's (a baseline without the record says so)."""
+    that differs from this run's (a baseline without the record says so); ``simulator``'s own
+    package too when it is in :data:`VERSIONED_OWN` (Drake)."""
     if baseline is None:
         return []
     acc = baseline.get("accepted") or {}
     out = []
-    for k in VERSIONED:
+    for k in VERSIONED + tuple(k for k in VERSIONED_OWN if k == simulator):
         if k not in acc:
             out.append(f"{k} not recorded (now {provenance.get(k, '?')})")
         elif str(acc[k]) != str(provenance.get(k)):

@@ -78,7 +78,7 @@ def parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
     c = sub.add_parser(
         "check",
-        help="replay the control forces of scenes open-loop in MuJoCo and Pinocchio; write a report",
+        help="replay the control forces of scenes open-loop in MuJoCo, Pinocchio and Drake; write a report",
         description="Check scenes in simulators, in parallel: each (scene, simulator) pair proves that "
         "the control forces u computed by progmo keep the simulated motion on the programme. Compares "
         "metrics with their budgets (scene [tolerances]) and accepted baselines; writes the report.",
@@ -90,7 +90,8 @@ def parser() -> argparse.ArgumentParser:
                    help="scene files (TOML), folders of them, or names of bundled scenes "
                    "(default: every bundled scene)")
     c.add_argument("-s", "--simulator", action="append", choices=CHECKERS, metavar="NAME",
-                   help=f"simulator to check in, repeatable: {', '.join(SIMULATORS)} (default: both), or "
+                   help=f"simulator to check in, repeatable: {', '.join(SIMULATORS)} (default: every one "
+                   "installed; one not installed is named in the report), or "
                    "solver_only (a second formulation and the scene's [[reference]] values; every "
                    "lagrangian scene is checked this way, whatever the simulators)")
     c.add_argument("-j", "--jobs", type=int, default=None, metavar="N",
@@ -197,13 +198,31 @@ class _CheckRun:
     other_versions: dict[str, list[str]] = field(default_factory=dict)
 
 
+def default_simulators(asked: list[str] | None) -> tuple[list[str], list[str]]:
+    """(the simulators to check in, notes): those asked for (``--simulator``), else every simulator
+    whose package imports; one that does not is left out of the default set with a note naming it
+    and how to install it (asked for explicitly, its checks are errors saying the same)."""
+    from .checks import SIMULATORS, available
+
+    if asked:
+        return list(dict.fromkeys(asked)), []
+    sims, notes = [], []
+    for m in SIMULATORS:
+        why = available(m)
+        if why is None:
+            sims.append(m)
+        else:
+            notes.append(f"{m} NOT CHECKED: its package is not installed ({why}); the other simulators ran")
+    return sims, notes
+
+
 def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
-    from .checks import SIMULATORS, CheckOptions
+    from .checks import CheckOptions
     from .results import SOLVER_ONLY
 
     t_start = time.perf_counter()
     root = repo_root()
-    sims = list(dict.fromkeys(ns.simulator or SIMULATORS))
+    sims, missing = default_simulators(ns.simulator)
     jobs = ns.jobs if ns.jobs is not None else default_jobs()
     problem = CheckOptions(step=ns.step, horizon=ns.horizon, samples=ns.samples).problem()
     if problem is None and jobs < 1:
@@ -220,6 +239,9 @@ def cmd_check(ns: argparse.Namespace, argv: list[str]) -> int:
     base_dir = Path(ns.baselines) if ns.baselines else data.baselines_dir()
 
     c = _CheckRun(ns, root, out, base_dir, sims)
+    for note in missing:  # a simulator left out of the default set says so (report and stderr)
+        _say(f"progmo check: {note}")
+        c.notes.append(note)
     _plan_checks(c)
     columns = sims + [SOLVER_ONLY] if SOLVER_ONLY not in sims and any(m == SOLVER_ONLY for _, m in c.planned) else sims
 
@@ -322,7 +344,7 @@ def _take_result(c: _CheckRun, run: rp.Run, task: Task, r: CheckResult, n_total:
     try:
         baseline = bl.load(c.base_dir, r.scene, r.simulator)
         run.comparisons[(r.scene, r.simulator)] = rp.comparisons_as_dicts(bl.compare(r, baseline))
-        for d in bl.version_differences(baseline, run.provenance):
+        for d in bl.version_differences(baseline, run.provenance, r.simulator):
             c.other_versions.setdefault(d, []).append(f"{r.scene}/{r.simulator}")
     except ValueError as e:
         c.notes.append(str(e))
@@ -385,7 +407,8 @@ def _check_outcome(c: _CheckRun, run: rp.Run, paths: dict[str, Path] | None) -> 
 
 def _accept(run: rp.Run, base_dir: Path, prov: dict) -> None:
     """Write baselines of every passing result; print what changed."""
-    keep = {k: prov[k] for k in ("date", "git_revision", "progmo", "mujoco", "pinocchio", "numpy", "python", "platform")}
+    keep = {k: prov[k] for k in ("date", "git_revision", "progmo", "mujoco", "pinocchio", "drake", "numpy", "python",
+                                 "platform")}
     for r in run.results:
         if r.status != "pass":
             if r.status in ("fail", "error"):

@@ -37,7 +37,7 @@ def record(run: "Run") -> dict[str, Any]:
             "verdict": run.verdict(r),
             "metrics": {k: (v if v is not None and math.isfinite(v) else None) for k, v in r.metrics.items()},
         }
-    keep = ("date", "git_revision", "progmo", "mujoco", "pinocchio")
+    keep = ("date", "git_revision", "progmo", "mujoco", "pinocchio", "drake")
     return {"format": FORMAT, **{k: p.get(k) for k in keep}, "cells": cells}
 
 

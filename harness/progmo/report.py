@@ -67,6 +67,7 @@ def provenance(root: Path, command: str) -> dict[str, Any]:
         "progmo": progmo,
         "mujoco": _version("mujoco"),
         "pinocchio": _version("pin"),
+        "drake": _version("drake"),
         "numpy": _version("numpy"),
         "matplotlib": _version("matplotlib"),
         "python": platform.python_version(),
@@ -438,7 +439,7 @@ def _html_provenance(run: Run, h: list[str]) -> None:
     a(f"<pre id='rerun'><code>{_e(p.get('command', ''))}</code></pre>")
     a("<table>")
     labels = [("date", "date"), ("git_revision", "git revision"), ("progmo", "progmo"), ("mujoco", "MuJoCo"),
-              ("pinocchio", "Pinocchio"), ("numpy", "numpy"), ("matplotlib", "matplotlib"), ("python", "Python"),
+              ("pinocchio", "Pinocchio"), ("drake", "Drake"), ("numpy", "numpy"), ("matplotlib", "matplotlib"), ("python", "Python"),
               ("platform", "platform"), ("cpu_count", "host CPUs"), ("jobs", "parallel jobs"),
               ("wall_seconds", "wall time [s]"), ("baselines", "baselines")]
     for k, name in labels:
@@ -565,7 +566,7 @@ def render_markdown(run: Run) -> str:
         lines += ["", "## Needs attention", ""]
         lines += [f"- **{_md(s)} / {_md(m)}**: {v}: {_md(why)}" for s, m, v, why in att]
     lines += ["", "## Rerun", "", "```", str(p.get("command", "")), "```", "", "## Provenance", ""]
-    for k in ("date", "git_revision", "progmo", "mujoco", "pinocchio", "numpy", "python", "platform", "cpu_count", "jobs"):
+    for k in ("date", "git_revision", "progmo", "mujoco", "pinocchio", "drake", "numpy", "python", "platform", "cpu_count", "jobs"):
         if k in p:
             lines.append(f"- {k}: `{_md(p[k])}`")
     return "\n".join(lines) + "\n"

@@ -1,5 +1,7 @@
-"""Simulator back-ends of the checks: MuJoCo 4.0 (``mujoco_sim``) and Pinocchio 4.1
-(``pinocchio_sim``), with the shared coordinate maps and metrics in ``replay``.
+"""Simulator back-ends of the checks: MuJoCo 4.0 (``mujoco_sim``), Pinocchio 4.1
+(``pinocchio_sim``) and Drake 1.51 (``drake_sim``, optional: ``pip install 'progmo[drake]'``; its
+replay is RK4 on Drake's own time derivatives, u at every stage), with the shared
+coordinate maps and metrics in ``replay``.
 
 Every back-end implements :class:`Backend`, built from a scene's export (document + report) and the
 scene itself (to evaluate its expression forces at the simulator's own states):
