@@ -18,7 +18,7 @@ pub const REFERENCE_RTOL: f64 = 1e-12;
 pub const REFERENCE_ATOL: f64 = 1e-14;
 
 /// Simulators of the cross-simulator check (keys of `[checks] not_checked`).
-pub const SIMULATORS: [&str; 2] = ["mujoco", "pinocchio"];
+pub const SIMULATORS: [&str; 3] = ["mujoco", "pinocchio", "drake"];
 /// The checker of a scene no simulator document describes: a second formulation and the scene's
 /// reference values instead of a replay.
 pub const SOLVER_ONLY: &str = "solver_only";

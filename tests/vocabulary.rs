@@ -71,7 +71,7 @@ fn a_misspelt_name_finds_its_metric_and_a_far_one_none() {
         did_you_mean("mujocco", SIMULATORS.iter().copied()),
         " (did you mean `mujoco`?)"
     );
-    assert_eq!(did_you_mean("drake", SIMULATORS.iter().copied()), "");
+    assert_eq!(did_you_mean("gazebo", SIMULATORS.iter().copied()), "");
 }
 
 #[test]

@@ -74,11 +74,8 @@ import numpy as np
 from . import _core, attribution
 from .results import SOLVER_ONLY, Breach, Budget, CheckResult, Series, judge
 
-#: the simulators of the cross-simulator check (``progmo::check::SIMULATORS``). Drake (issue 32) is
-#: added here until the core's list carries it (a one-line change of src/check.rs with its schema
-#: regenerated, left to the merge): until then a scene's ``[tolerances]`` and ``[checks]
-#: not_checked`` cannot name drake, and drake is judged by the default budgets.
-SIMULATORS: tuple[str, ...] = tuple(dict.fromkeys((*_core.SIMULATORS, "drake")))
+#: the simulators of the cross-simulator check (``progmo::check::SIMULATORS``)
+SIMULATORS: tuple[str, ...] = tuple(_core.SIMULATORS)
 #: everything ``run_check`` can check in: the simulators and the solver-only check
 CHECKERS = (*SIMULATORS, SOLVER_ONLY)
 

@@ -1,4 +1,4 @@
-"""``progmo debug SCENE [--simulator mujoco|pinocchio|both] [--out DIR]``: run the check with full
+"""``progmo debug SCENE [--simulator mujoco|pinocchio|drake|all] [--out DIR]``: run the check with full
 recording and write what a person needs to see where a replay leaves the programme:
 
 * ``DIR/<scene>.mcap`` (JSON messages, jsonschema schemas; open in Foxglove with the layout
@@ -212,7 +212,8 @@ def _parser() -> argparse.ArgumentParser:
     """The command line of `progmo debug`."""
     p = cliutil.parser("progmo debug", description=__doc__ or "")
     p.add_argument("scene", help="scene file (.toml) or name of a bundled scene")
-    p.add_argument("--simulator", choices=[*SIMULATORS, "both"], default="both")
+    p.add_argument("--simulator", choices=[*SIMULATORS, "all"], default="all",
+                   help="the simulator to record (default: all, every installed one)")
     p.add_argument("--out", default="debug-out", help="output directory (default: debug-out)")
     p.add_argument("--step", type=float, default=None, help="replay step (default: the scene's)")
     p.add_argument("--horizon", type=float, default=None, help="replay horizon in s")
@@ -229,7 +230,9 @@ def main(argv: list[str] | None = None) -> int:
     refused = _refusal(a)
     if refused is not None:
         return refused
-    sims = list(SIMULATORS) if a.simulator == "both" else [a.simulator]
+    from .cli import default_simulators
+
+    sims = default_simulators(None)[0] if a.simulator == "all" else [a.simulator]
     try:
         os.makedirs(a.out, exist_ok=True)
     except OSError as e:

@@ -278,7 +278,7 @@ pub struct ShapeFile {
 #[serde(deny_unknown_fields)]
 #[schemars(rename = "checks")]
 pub struct ChecksFile {
-    /// Simulators the scene is declared not to be checked in (mujoco, pinocchio), each with the
+    /// Simulators the scene is declared not to be checked in (mujoco, pinocchio, drake), each with the
     /// reason: an expected not_checked does not fail a run (an unexpected one does).
     #[serde(default)]
     #[schemars(with = "BTreeMap<String, String>", transform = schema::simulator_names)]

@@ -1935,7 +1935,7 @@ fn tolerances(src: &Source, file: &SceneFile) -> R<Vec<Tolerance>> {
                 &field,
                 format!(
                     "unknown tolerance `{name}`{}: the check reads its metrics' budgets (the \
-                     metric's name, or with `_mujoco`, `_pinocchio`, `_solver_only` for a checker \
+                     metric's name, or with `_mujoco`, `_pinocchio`, `_drake`, `_solver_only` for a checker \
                      that judges it) (FORMAT.md, \"Tolerances\")",
                     check::did_you_mean(name, known.iter().map(|k| k.as_str())),
                 ),

@@ -8,6 +8,7 @@ import pytest
 from mcap.reader import make_reader
 
 from progmo import debug
+from progmo.cli import default_simulators
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 SCENE = str(ROOT / "references" / "scenes" / "double_pendulum.toml")
@@ -25,14 +26,14 @@ def read(path):
 
 
 def test_clean_run_writes_mcap_and_csv(tmp_path, capsys):
-    rc = debug.main([SCENE, "--simulator", "both", "--out", str(tmp_path), "--horizon", "1"])
+    rc = debug.main([SCENE, "--simulator", "all", "--out", str(tmp_path), "--horizon", "1"])
     out = capsys.readouterr().out
     assert rc == 0, out
     assert "no tolerance breach" in out
     topics, msgs = read(tmp_path / "double_pendulum.mcap")
     for t in ("/progmo/state", "/progmo/control", "/progmo/residual"):
         assert t in topics and len(msgs[t]) == 1001
-    for sim in ("mujoco", "pinocchio"):
+    for sim in default_simulators(None)[0]:  # every installed simulator (harness/setup.sh: all three)
         for t in ("state", "residual", "deviation"):
             assert len(msgs[f"/{sim}/{t}"]) == 1001
         tf = topics[f"/{sim}/tf"]
@@ -107,7 +108,7 @@ def test_one_recording_layout_for_solve_and_debug(tmp_path, capsys):
 
     scene = progmo.load("double_pendulum")
     scene.solve(output_dt=0.01).write_mcap(tmp_path / "solve.mcap")
-    assert debug.main([SCENE, "--simulator", "both", "--out", str(tmp_path / "d"), "--horizon", "0.5"]) == 0
+    assert debug.main([SCENE, "--simulator", "all", "--out", str(tmp_path / "d"), "--horizon", "0.5"]) == 0
     solve_topics, solve_msgs = read(tmp_path / "solve.mcap")
     debug_topics, debug_msgs = read(tmp_path / "d" / "double_pendulum.mcap")
     for t in ("/progmo/state", "/progmo/control", "/progmo/residual", "/progmo/tf", "/progmo/scene"):

@@ -495,16 +495,18 @@ class DrakeBackend:
         times = ref.t[::2][start: stop + 1]
         self._ref = ref
         self._stored = 0
+        frames: list = []
         try:
-            return self._steps(ref, Q, V, A, cm.q_to_sim(q0), cm.v_to_sim(q0, v0), start, times)
+            return self._steps(ref, frame_every, Q, V, A, frames, cm.q_to_sim(q0), cm.v_to_sim(q0, v0),
+                               start, times)
         except BlowUp as e:
             j = self._stored
-            e.partial = Replay(times[:j], Q[:j], V[:j], A[:j], [], frame_every)
+            e.partial = Replay(times[:j], Q[:j], V[:j], A[:j], frames, frame_every)
             raise
         finally:
             self._ref = None
 
-    def _steps(self, ref, Q, V, A, qs, vs, start, times) -> Replay:
+    def _steps(self, ref, frame_every, Q, V, A, frames, qs, vs, start, times) -> Replay:
         """Classical RK4 (fixed step h) on Drake's x' = f(t, x): every stage sets the diagram's
         time and the plant's state, so the force system evaluates u and the scene's forces there."""
         diagram, dctx, derivs = self._diagram()
@@ -534,13 +536,25 @@ class DrakeBackend:
             Q[j], V[j] = qo, self.cm.v_from_sim(qo, x[nq:])
             A[j] = self.cm.a_from_sim(qo, V[j], a)
             self._stored = j + 1
+            if frame_every and (start + j) % frame_every == 0:  # f(tk, x) has set the plant's state
+                frames.append((tk, self._body_poses(pctx)))
             if j == n:
                 break
             k2 = f(tk + 0.5 * h, x + 0.5 * h * k1)
             k3 = f(tk + 0.5 * h, x + 0.5 * h * k2)
             k4 = f(tk + h, x + h * k3)
             x = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        return Replay(times, Q, V, A, [], 1)
+        return Replay(times, Q, V, A, frames, frame_every)
+
+    def _body_poses(self, ctx: Any) -> list:
+        """(name, world position, quaternion w x y z) of every body of the robot at ``ctx``."""
+        plant, out = self.plant, []
+        for i in plant.GetBodyIndices(self._inst):
+            body = plant.get_body(i)
+            X = plant.EvalBodyPoseInWorld(ctx, body)
+            qt = X.rotation().ToQuaternion()
+            out.append((body.name(), np.array(X.translation()), np.array([qt.w(), qt.x(), qt.y(), qt.z()])))
+        return out
 
 
 def _f64(x: Any) -> Any:
