@@ -40,6 +40,7 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import pathlib
 import re
@@ -165,9 +166,7 @@ class DrakeMap:
         self._sv = np.array([a for a, _ in self.scalar_v], int), np.array([b for _, b in self.scalar_v], int)
 
     def q_to_sim(self, q: np.ndarray) -> np.ndarray:
-        from pydrake.common.eigen_geometry import Quaternion
-        from pydrake.math import RollPitchYaw
-
+        Quaternion, RollPitchYaw = _rotation_types()
         qs = np.zeros(self.sim_nq)
         qs[self._sq[1]] = q[self._sq[0]]
         for kind, qi, _, iq, _ in self.groups:
@@ -181,8 +180,7 @@ class DrakeMap:
         return qs
 
     def q_from_sim(self, qs: np.ndarray) -> np.ndarray:
-        from pydrake.math import RollPitchYaw
-
+        _, RollPitchYaw = _rotation_types()
         q = np.zeros(self.nq)
         q[self._sq[0]] = qs[self._sq[1]]
         for kind, qi, _, iq, _ in self.groups:
@@ -393,9 +391,7 @@ class DrakeBackend:
 
     def _spatial(self, ctx: Any, pts: list) -> list:
         """The point forces as Drake's ExternallyAppliedSpatialForce (body frame point, world force)."""
-        from pydrake.multibody.math import SpatialForce
-        from pydrake.multibody.plant import ExternallyAppliedSpatialForce
-
+        SpatialForce, ExternallyAppliedSpatialForce = _spatial_types()
         out = []
         for b, pw, fw in pts:
             body = self.plant.GetBodyByName(b, self._inst)
@@ -585,6 +581,25 @@ def _parser_log() -> Iterator[dict[str, int]]:
         log.propagate = propagate
 
 
+@functools.cache
+def _rotation_types() -> tuple[Any, Any]:
+    """(Quaternion, RollPitchYaw), imported once (as :func:`_spatial_types`)."""
+    from pydrake.common.eigen_geometry import Quaternion
+    from pydrake.math import RollPitchYaw
+
+    return Quaternion, RollPitchYaw
+
+
+@functools.cache
+def _spatial_types() -> tuple[Any, Any]:
+    """(SpatialForce, ExternallyAppliedSpatialForce), imported once (pydrake's lazy module lookup
+    costs microseconds a call, and the replay needs them at every stage)."""
+    from pydrake.multibody.math import SpatialForce
+    from pydrake.multibody.plant import ExternallyAppliedSpatialForce
+
+    return SpatialForce, ExternallyAppliedSpatialForce
+
+
 def _f64(x: Any) -> Any:
     """A float array (typed Any: pydrake's stubs spell ndarray[float64] unsatisfiably)."""
     return np.asarray(x, float)
@@ -647,6 +662,9 @@ def _make_diagram(be: DrakeBackend) -> tuple[Any, Any, Any]:
 
         def _spatial(self, ctx, out):
             f, pts, x = at(ctx, self)
+            if not pts:  # no point force at this stage: no pose to evaluate
+                out.set_value([])
+                return
             be._set(be.ctx, x[:nq], x[nq:])
             out.set_value(be._spatial(be.ctx, pts))
 
