@@ -57,8 +57,10 @@ def test_replay_double_pendulum(full, sim):
 def test_replay_heavy_top(full, sim):
     r = full[("heavy_top", sim)]
     assert r.status == "pass", (r.reason, r.breaches)
-    assert r.metrics["replay_residual"] < 5e-8  # RK4 error of an 8 rad/s spin at h = 1e-3
-    assert r.metrics["replay_deviation"] < 5e-8
+    assert r.info["replay_step"] == 5e-4
+    # RK4 error of an 8 rad/s spin at h = 5e-4: measured 3.4e-10 (5.5e-9 at 1e-3, 16x per halving)
+    assert r.metrics["replay_residual"] < 5e-9
+    assert r.metrics["replay_deviation"] < 5e-9
 
 
 def test_mujoco_and_pinocchio_agree(full):
