@@ -209,9 +209,17 @@ class DrakeMap:
         return P
 
     def v_to_sim(self, q, v):
+        if not self.groups:  # one-dof joints only: P is a permutation
+            out = np.empty(self.nv)
+            out[self._sv[1]] = v[self._sv[0]]
+            return out
         return self.P(q) @ v
 
     def v_from_sim(self, q, vs):
+        if not self.groups:
+            out = np.empty(self.nv)
+            out[self._sv[0]] = vs[self._sv[1]]
+            return out
         return self.P(q).T @ vs  # P orthogonal
 
     f_to_sim = v_to_sim  # P^-T = P
