@@ -169,8 +169,8 @@ def rerun_command(argv: list[str], cwd: Path, root: Path) -> str:
     return "\n".join(lines)
 
 
-def _save_atomic(results: list[CheckResult], path: Path) -> None:
-    save(results, str(path))  # through results.json.partial: whole or WriteFailed (exit 3)
+def _save_atomic(results: list[CheckResult], path: Path, encoded: dict[int, str] | None = None) -> None:
+    save(results, str(path), encoded)  # through results.json.partial: whole or WriteFailed (exit 3)
 
 
 def _say(msg: str) -> None:
@@ -196,6 +196,8 @@ class _CheckRun:
     done: int = 0
     interrupted: bool = False
     other_versions: dict[str, list[str]] = field(default_factory=dict)
+    #: each taken result's results.json text, so the save after every check encodes only the new one
+    encoded: dict[int, str] = field(default_factory=dict)
 
 
 def default_simulators(asked: list[str] | None) -> tuple[list[str], list[str]]:
@@ -349,7 +351,7 @@ def _take_result(c: _CheckRun, run: rp.Run, task: Task, r: CheckResult, n_total:
     except ValueError as e:
         c.notes.append(str(e))
         c.usage_problem = True
-    _save_atomic(c.results, c.out / "results.json")
+    _save_atomic(c.results, c.out / "results.json", c.encoded)  # taken results stay as they are
     _say(_progress(c.done, n_total, r, run))
 
 

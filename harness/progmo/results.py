@@ -29,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import textwrap
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -167,13 +168,28 @@ def _clean(x: Any) -> Any:
     return x
 
 
-def save(results: list[CheckResult], path: str) -> None:
-    """Whole under ``path``, or ``path.partial`` and :class:`progmo._files.WriteFailed`."""
+def save(results: list[CheckResult], path: str, encoded: dict[int, str] | None = None) -> None:
+    """Whole under ``path``, or ``path.partial`` and :class:`progmo._files.WriteFailed`. The text is
+    ``json.dump(..., indent=1)``'s; ``encoded`` keeps each result's text by ``id`` between saves of
+    a growing list (a run saves after every check: without it the run is quadratic in its checks),
+    so a result must not change once it is in ``encoded``."""
     from ._files import staged
 
+    def text(r: CheckResult) -> str:
+        if encoded is None:
+            return _encode(r)
+        if id(r) not in encoded:
+            encoded[id(r)] = _encode(r)
+        return encoded[id(r)]
+
+    body = ",\n".join(text(r) for r in results)
     with staged(path, "w") as f:
-        json.dump([r.to_json() for r in results], f, indent=1)
-        f.write("\n")
+        f.write(f"[\n{body}\n]\n" if results else "[]\n")
+
+
+def _encode(r: CheckResult) -> str:
+    """One result as an element of ``json.dump(list, indent=1)``: its lines one space in."""
+    return textwrap.indent(json.dumps(r.to_json(), indent=1), " ")
 
 
 def load(path: str) -> list[CheckResult]:

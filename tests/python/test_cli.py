@@ -227,3 +227,19 @@ def test_module_entry_point_and_help():
         p = subprocess.run([sys.executable, "-m", "progmo.cli", *args], capture_output=True, text=True, timeout=60)
         assert p.returncode == 0, p.stderr
     assert "exit codes" in p.stdout and "--accept" in p.stdout and "--jobs" in p.stdout
+
+
+def test_results_json_saved_incrementally_is_json_dumps_text(tmp_path):
+    """The save after every check reuses each result's text: the file stays byte for byte what
+    json.dump(indent=1) writes, for an empty, a one-element and a growing list (NaN as null)."""
+    from progmo import results
+
+    rs = [fake_checks.run_check(str(SCENES / f"{s}.toml"), m) for s in TWO for m in ("mujoco", "pinocchio")]
+    rs[0].metrics["replay_residual"] = float("nan")
+    encoded: dict[int, str] = {}
+    for k in range(len(rs) + 1):
+        a, b = tmp_path / f"a{k}.json", tmp_path / f"b{k}.json"
+        results.save(rs[:k], str(a), encoded)
+        b.write_text(json.dumps([r.to_json() for r in rs[:k]], indent=1) + "\n")
+        assert a.read_bytes() == b.read_bytes(), k
+    assert len(encoded) == len(rs)

@@ -85,8 +85,8 @@ def test_check_schedules_lagrangian_scenes_solver_only_and_reports_it(tmp_path):
     cell (its simulator cells read "-" and do not count), the tree one both simulators; the summary
     line names the scene checked solver-only; exit 0."""
     out = tmp_path / "out"
-    p = cli("check", str(CRANK), "double_pendulum", "--horizon", "0.1", "--no-plots", "-j", "1",
-            "-o", str(out), "--json")
+    p = cli("check", str(CRANK), "double_pendulum", "-s", "mujoco", "-s", "pinocchio", "--horizon", "0.1",
+            "--no-plots", "-j", "1", "-o", str(out), "--json")
     assert p.returncode == 0, p.stdout + p.stderr
     doc = json.loads(p.stdout)
     cells = sorted((r["scene"], r["simulator"], r["verdict"]) for r in doc["results"])

@@ -101,7 +101,7 @@ def test_a_killed_ray_worker_loses_and_duplicates_nothing(tmp_path, cluster):
     outs = {}
     for ex in ("ray", "local"):
         c = subprocess.run([sys.executable, "-m", "progmo.cli", "check", "double_pendulum", "heavy_top",
-                            "--horizon", "0.2", "--no-plots", "--json", "-o", str(tmp_path / f"check-{ex}"),
+                            "-s", "mujoco", "-s", "pinocchio", "--horizon", "0.2", "--no-plots", "--json", "-o", str(tmp_path / f"check-{ex}"),
                             "--executor", ex, "--address", address], cwd=ROOT, env=env, capture_output=True,
                            text=True, timeout=600)
         assert c.returncode == 0, c.stderr[-3000:]
