@@ -300,3 +300,136 @@ fn links_are_bounded_and_read_in_linear_time() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A two-link arm on the world whose second link `b` has the given `<inertial>` body; `j1` turns
+/// `a`, `j2` turns `b`. The file is written beside the test robots (unique per `tag`).
+fn arm(tag: &str, inertial_b: &str) -> PathBuf {
+    let text = format!(
+        r#"<robot name="arm">
+  <link name="a">
+    <inertial><origin xyz="0.5 0 0"/><mass value="1"/><inertia ixx="0.01" iyy="0.1" izz="0.1"/></inertial>
+  </link>
+  <link name="b">
+    {inertial_b}
+  </link>
+  <joint name="j1" type="revolute"><parent link="world_anchor"/><child link="a"/><axis xyz="0 0 1"/></joint>
+  <link name="world_anchor"/>
+  <joint name="j2" type="revolute"><parent link="a"/><child link="b"/><origin xyz="1 0 0"/><axis xyz="0 1 0"/></joint>
+</robot>
+"#
+    );
+    let dir = std::env::temp_dir().join(format!("progmo_urdf_inertia_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let f = dir.join(format!("{tag}.urdf"));
+    std::fs::write(&f, text).unwrap();
+    f
+}
+
+/// The minimal scene of robot file `f`, loaded from a scene file beside it.
+fn load_beside(f: &Path) -> Result<Scene, progmo::scene::SceneError> {
+    Scene::from_text(&f.with_file_name("scene.toml"), &scene_text(f, "", ""))
+}
+
+/// The mass matrix of a loaded tree scene at its initial configuration.
+fn mass_matrix(s: &Scene) -> nalgebra::DMatrix<f64> {
+    use progmo::model::Model;
+    let SceneSystem::Tree(p) = &s.system else {
+        panic!("a tree system")
+    };
+    let n = p.model.nv();
+    let mut a = nalgebra::DMatrix::zeros(n, n);
+    p.model
+        .mass_matrix(&mut p.model.workspace::<f64>(), &p.q0, &mut a);
+    a
+}
+
+/// Point masses (zero inertia, as Talos, iCub and Baxter write them) and a thin rod with an exact
+/// zero moment import without a note; A stays positive definite (the link's mass moves with j2
+/// away from its axis).
+#[test]
+fn semi_definite_inertias_import() {
+    for (tag, inertial) in [
+        (
+            "point",
+            r#"<inertial><origin xyz="0 0 0.3"/><mass value="2"/><inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial>"#,
+        ),
+        (
+            "bare",
+            r#"<inertial><origin xyz="0 0 0.3"/><mass value="2"/></inertial>"#,
+        ),
+        (
+            "rod",
+            r#"<inertial><origin xyz="0 0 0.3"/><mass value="2"/><inertia ixx="0.00012" iyy="0.00012" izz="0"/></inertial>"#,
+        ),
+    ] {
+        let s = load_beside(&arm(tag, inertial)).unwrap_or_else(|e| panic!("{tag}: {e}"));
+        assert!(s.import_notes.is_empty(), "{tag}: {:?}", s.import_notes);
+        let a = mass_matrix(&s);
+        // j2 row: the point mass 2 kg at 0.3 m from the j2 axis (plus the rod's 0.00012)
+        let want = 2.0 * 0.09 + if tag == "rod" { 0.00012 } else { 0.0 };
+        assert!((a[(1, 1)] - want).abs() < 1e-12, "{tag}: {a}");
+    }
+}
+
+/// ANYmal's `ixx = ixy = ... = 1e-6` (rank one: eigenvalues 3e-6, about -2e-22 and 0) on a link
+/// welded to a moving one loads: the round-off eigenvalue is clipped with a note naming the link,
+/// and the triangle inequality holds for the rigid body they form. The same tensor on a link that
+/// moves by itself is no rigid body's: refused, naming it.
+#[test]
+fn round_off_eigenvalues_are_clipped_with_a_note() {
+    let ones = r#"<inertial><mass value="0.001"/><inertia ixx="1e-6" ixy="1e-6" ixz="1e-6" iyy="1e-6" iyz="1e-6" izz="1e-6"/></inertial>"#;
+    let b = r#"<inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01"/></inertial>"#;
+    let f = arm("ones", b);
+    let text = std::fs::read_to_string(&f).unwrap().replace(
+        "</robot>",
+        &format!("<link name=\"flange\">{ones}</link><joint name=\"weld\" type=\"fixed\"><parent link=\"b\"/><child link=\"flange\"/></joint></robot>"),
+    );
+    std::fs::write(&f, text).unwrap();
+    let s = load_beside(&f).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.import_notes.len(), 1, "{:?}", s.import_notes);
+    let n = &s.import_notes[0];
+    assert!(n.starts_with("link `flange`: inertia eigenvalue -"), "{n}");
+    assert!(n.ends_with("(round-off) clipped to zero"), "{n}");
+    let e = match load_beside(&arm("ones_b", ones)) {
+        Err(e) => e,
+        Ok(_) => panic!("a moving rank-one inertia"),
+    };
+    assert!(
+        e.message.contains("'b'") && e.message.contains("triangle inequality"),
+        "{e}"
+    );
+}
+
+/// A truly negative eigenvalue (-1e-3) is refused, located at the `<inertia>` element.
+#[test]
+fn a_negative_eigenvalue_is_refused_at_its_element() {
+    let inertial = r#"<inertial><mass value="1"/>
+    <inertia ixx="0.1" iyy="0.1" izz="-1e-3"/></inertial>"#;
+    let f = arm("negative", inertial);
+    let Err(e) = load_beside(&f) else {
+        panic!("a negative moment")
+    };
+    assert_eq!(e.file, f);
+    assert_eq!((e.line, e.column), (7, 5), "{e}");
+    assert_eq!(e.field, "link[b].inertial.inertia");
+    assert!(
+        e.message
+            .contains("positive semi-definite: eigenvalue -1e-3"),
+        "{e}"
+    );
+}
+
+/// A massless link at the end of the chain leaves A singular: the load names its joint.
+#[test]
+fn a_singular_mass_matrix_names_the_massless_joint() {
+    let f = arm("massless", "");
+    let Err(e) = load_beside(&f) else {
+        panic!("j2 moves no mass")
+    };
+    assert_eq!(e.field, "model", "{e}");
+    assert!(
+        e.message.contains("singular") && e.message.contains("rank 1 of 2"),
+        "{e}"
+    );
+    assert!(e.message.contains("the rows of `j2` are zero"), "{e}");
+}

@@ -111,8 +111,16 @@ fn origin(src: &Source, n: Node) -> R<([f64; 3], [f64; 3])> {
     }
 }
 
-/// The body of a link: massless without `<inertial>` or with mass 0 and zero inertia.
-fn link_body(src: &Source, link: Node, name: &str, parent: &str) -> R<BodySpec> {
+/// The body of a link: massless without `<inertial>` or with mass 0 and zero inertia. A link with
+/// mass needs a positive semi-definite inertia; round-off negative eigenvalues are clipped to zero
+/// (a note in `notes` names the link).
+fn link_body(
+    src: &Source,
+    link: Node,
+    name: &str,
+    parent: &str,
+    notes: &mut Vec<String>,
+) -> R<BodySpec> {
     let Some(inertial) = child(link, "inertial") else {
         return Ok(BodySpec::massless(name, parent));
     };
@@ -147,19 +155,44 @@ fn link_body(src: &Source, link: Node, name: &str, parent: &str) -> R<BodySpec> 
     }
     let at = inertia_node.unwrap_or(inertial);
     let local = nalgebra::Matrix3::new(i[0], i[3], i[4], i[3], i[1], i[5], i[4], i[5], i[2]);
-    if local.cholesky().is_none() {
-        return Err(err(
-            src,
-            at,
-            &format!("{what}.inertia"),
-            "the inertia tensor of a link with mass must be positive definite",
+    let local =
+        semi_definite(&local, mass).map_err(|m| err(src, at, &format!("{what}.inertia"), m))?;
+    if let Some(lo) = local.1 {
+        notes.push(format!(
+            "link `{name}`: inertia eigenvalue {lo:e} (round-off) clipped to zero"
         ));
     }
     let (com, rpy) = origin(src, inertial)?;
     // Inertia about the CoM in the link frame: R I R^T with R the inertial origin's rotation.
     let r = rpy_matrix(rpy);
-    let inertia = super::rotate_inertia(&r, &local);
+    let inertia = super::rotate_inertia(&r, &local.0);
     Ok(BodySpec::new(name, parent, mass, com, inertia))
+}
+
+/// A tensor with eigenvalues `>= -INERTIA_RTOL * max(largest, mass * 1 m^2)` with its negative
+/// eigenvalues set to zero, and the smallest eigenvalue when it was clipped. The floor
+/// `1e-12 * mass * 1 m^2` is the moment at a radius of gyration of 1 um, below any geometry a
+/// URDF states (iCub writes `ixx="-5.42101e-20"` for a point mass of 0.526 kg).
+type Clipped = (nalgebra::Matrix3<f64>, Option<f64>);
+
+fn semi_definite(i: &nalgebra::Matrix3<f64>, mass: f64) -> Result<Clipped, String> {
+    if i.iter().all(|x| *x == 0.0) {
+        return Ok((*i, None));
+    }
+    let e = i.symmetric_eigen();
+    let (lo, hi) = (e.eigenvalues.min(), e.eigenvalues.max());
+    let tol = crate::tree::INERTIA_RTOL * hi.max(mass);
+    if lo < -tol {
+        return Err(format!(
+            "the inertia tensor of a link with mass must be positive semi-definite: eigenvalue {lo:e} (largest {hi:e}; the round-off allowed is {tol:e})"
+        ));
+    }
+    if lo >= 0.0 {
+        return Ok((*i, None));
+    }
+    let d = nalgebra::Matrix3::from_diagonal(&e.eigenvalues.map(|x| x.max(0.0)));
+    let m = e.eigenvectors * d * e.eigenvectors.transpose();
+    Ok((0.5 * (m + m.transpose()), Some(lo)))
 }
 
 /// The kinematic loop above link `start` (every link on the way up has a parent joint), located
@@ -225,8 +258,8 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
     let (links, link_order) = read_links(src, robot)?;
     let graph = read_joints(src, robot, &links)?;
     let root = find_root(src, robot, &links, &link_order, &graph.parent_joint)?;
-    let notes = vec![];
     let mut w = Walk {
+        notes: vec![],
         src,
         locked,
         used_locked: vec![false; locked.len()],
@@ -244,7 +277,7 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
     // The root: a link named `world` without inertia is the world frame itself.
     let root_is_world = root == WORLD && child(links[root], "inertial").is_none();
     if !root_is_world {
-        let mut b = link_body(src, links[root], root, WORLD)?;
+        let mut b = link_body(src, links[root], root, WORLD, &mut w.notes)?;
         if root_joint == RootJoint::Free {
             b = b.joint(JointSpec::free(ROOT_JOINT_NAME));
             w.joints.push(ROOT_JOINT_NAME.to_string());
@@ -292,7 +325,7 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
     Ok(Robot {
         bodies: w.bodies,
         joints: w.joints,
-        notes,
+        notes: w.notes,
         unmodelled: w.rec.out,
         ranges: w.ranges,
         locked: w.locked_values,
@@ -472,6 +505,7 @@ struct Walk<'s, 'l> {
     rec: Recorder<'s>,
     ranges: Vec<JointRange>,
     locked_values: Vec<(String, f64)>,
+    notes: Vec<String>,
 }
 
 impl Walk<'_, '_> {
@@ -481,7 +515,7 @@ impl Walk<'_, '_> {
         let name = j.attribute("name").unwrap_or("");
         let what = format!("joint[{name}]");
         let (xyz, rpy) = origin(src, j)?;
-        let mut b = link_body(src, link, c, parent)?
+        let mut b = link_body(src, link, c, parent, &mut self.notes)?
             .at(xyz)
             .rotated(rpy_quat(rpy));
         let kind = j

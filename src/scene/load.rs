@@ -1995,13 +1995,57 @@ fn check_mass<M: Model, C: Constraints>(
             (None, Some(d)) => (d.span(), "model.mass_diagonal"),
             _ => (file.model.span(), "model"),
         };
-        return Err(src.error(
-            span,
-            field,
-            "the mass matrix is not positive definite (or not finite) at the initial configuration",
-        ));
+        let msg = singular_mass(&a, &p.model.v_names()).unwrap_or_else(|| {
+            "the mass matrix is not positive definite (or not finite) at the initial configuration"
+                .to_string()
+        });
+        return Err(src.error(span, field, msg));
     }
     Ok(())
+}
+
+/// Why A(q0) (symmetric, not positive definite) is singular: its rank and the coordinates whose
+/// rows are zero, else those its null space moves; `None` when A is indefinite or not finite.
+/// Zero is relative: within [`tree::INERTIA_RTOL`] of the largest eigenvalue.
+fn singular_mass(a: &nalgebra::DMatrix<f64>, names: &[String]) -> Option<String> {
+    if a.iter().any(|x| !x.is_finite()) {
+        return None;
+    }
+    let n = a.nrows();
+    let e = nalgebra::SymmetricEigen::new(0.5 * (a + a.transpose()));
+    let hi = e.eigenvalues.max().max(0.0);
+    let tol = tree::INERTIA_RTOL * hi;
+    if e.eigenvalues.min() < -tol {
+        return None;
+    }
+    let null: Vec<usize> = (0..n).filter(|&k| e.eigenvalues[k] <= tol).collect();
+    let list = |ks: &[usize]| {
+        ks.iter()
+            .map(|&k| format!("`{}`", names[k]))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let zero_rows: Vec<usize> = (0..n)
+        .filter(|&i| a.row(i).iter().all(|x| x.abs() <= tol))
+        .collect();
+    let rank = format!(
+        "the mass matrix is singular at the initial configuration (rank {} of {n}): the motion is not determined",
+        n - null.len()
+    );
+    if !zero_rows.is_empty() {
+        return Some(format!(
+            "{rank}: the rows of {} are zero (no mass moves with them, e.g. a massless link at the end of a chain; give it mass or lock the joint)",
+            list(&zero_rows)
+        ));
+    }
+    // the coordinates a null vector moves (components above 1/10 of the unit vector)
+    let moved: Vec<usize> = (0..n)
+        .filter(|&i| null.iter().any(|&k| e.eigenvectors[(i, k)].abs() > 0.1))
+        .collect();
+    Some(format!(
+        "{rank}: a combination of {} moves no mass",
+        list(&moved)
+    ))
 }
 
 /// The forces G, Q and the rows must be finite at the initial state: a value that overflows there

@@ -66,7 +66,8 @@ pub use kinematics::{
 };
 pub(crate) use model::JointKind;
 pub use model::{
-    Attractor, Body, BodySpec, Fields, Joint, JointSpec, JointType, Model, ModelError, WORLD,
+    Attractor, Body, BodySpec, Fields, Joint, JointSpec, JointType, Model, ModelError,
+    INERTIA_RTOL, WORLD,
 };
 
 #[cfg(test)]

@@ -126,9 +126,9 @@ impl JointSpec {
 
 /// Specification of one body.
 ///
-/// Mass properties: `mass > 0` with `inertia` (about the CoM, body frame) either exactly zero (a
-/// point mass at `com`) or symmetric positive definite with principal moments satisfying the
-/// triangle inequality; or `massless = true` with `mass == 0` and zero inertia (coordinate bodies).
+/// Mass properties: `mass > 0` with `inertia` (about the CoM, body frame) symmetric positive
+/// semi-definite (exactly zero: a point mass at `com`); each rigid body (a body with joints, or the
+/// world, with what is welded to it) has principal moments satisfying the triangle inequality; or `massless = true` with `mass == 0` and zero inertia (coordinate bodies).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct BodySpec {
     pub name: String,
@@ -419,7 +419,7 @@ fn mass_properties(name: &str, s: &BodySpec) -> Result<(Matrix3<f64>, Vector3<f6
                 ),
             ));
         }
-        check_inertia(&inertia).map_err(|m| berr(name, m))?;
+        check_inertia(&inertia, s.mass).map_err(|m| berr(name, m))?;
     }
     Ok((inertia, com))
 }
@@ -708,6 +708,7 @@ impl Model {
         for s in specs {
             m.add_body(s)?;
         }
+        check_rigid_bodies(&m.bodies, &m.links, &m.body_link)?;
         let (dof_parent, dof_link) = dof_tree(&m.links, &m.joints, m.nv);
         Ok(Model {
             bodies: m.bodies,
@@ -781,25 +782,81 @@ impl Model {
     }
 }
 
-/// Inertia about the CoM: zero (point mass) or symmetric positive definite with principal moments
-/// satisfying the triangle inequality (A + B >= C for every permutation).
-fn check_inertia(i: &Matrix3<f64>) -> Result<(), String> {
+/// Tolerance of the inertia checks: moments within `INERTIA_RTOL * max(largest moment, mass * 1
+/// m^2)` of zero are round-off (a symmetric eigen-solver errs by a few eps of the norm; the mass
+/// term, a radius of gyration of 1 um, covers files that write 1e-20 for a point mass's zero).
+pub const INERTIA_RTOL: f64 = 1e-12;
+
+/// Inertia about the CoM: symmetric positive semi-definite (zero moments, e.g. a point mass or a
+/// thin rod, are accepted; negative eigenvalues within [`INERTIA_RTOL`] are round-off).
+fn check_inertia(i: &Matrix3<f64>, mass: f64) -> Result<(), String> {
     if i.iter().all(|x| *x == 0.0) {
         return Ok(());
     }
     let scale = i.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-    let tol = 1e-12 * scale;
+    let tol = INERTIA_RTOL * scale;
     if (i - i.transpose()).iter().any(|x| x.abs() > tol) {
         return Err("inertia is not symmetric".into());
     }
-    if i.cholesky().is_none() {
-        return Err("inertia is not positive definite (use exactly zero for a point mass)".into());
-    }
     let e = i.symmetric_eigenvalues();
-    let (a, b, c) = (e[0], e[1], e[2]);
-    if a + b < c - tol || b + c < a - tol || a + c < b - tol {
+    let (lo, hi) = (e.min(), e.max());
+    if lo < -INERTIA_RTOL * hi.max(mass) {
         return Err(format!(
-            "principal moments ({a}, {b}, {c}) violate the triangle inequality"
+            "inertia is not positive definite nor semi-definite (smallest eigenvalue {lo:e}, largest {hi:e})"
+        ));
+    }
+    Ok(())
+}
+
+/// The principal moments of every rigid body (a body with joints, or the world, with the bodies
+/// welded to it: a welded link is part of its parent's rigid body, its own inertia need not be
+/// physical) satisfy the triangle inequality (A + B >= C for every permutation).
+fn check_rigid_bodies(
+    bodies: &[Body],
+    links: &[Link],
+    body_link: &[usize],
+) -> Result<(), ModelError> {
+    let mut comp: Vec<Inertia<f64>> = body_link
+        .iter()
+        .map(|&l| links[l].inertia.unwrap_or_else(Inertia::zero))
+        .collect();
+    let mut world = Inertia::zero();
+    for b in (0..bodies.len()).rev() {
+        if !bodies[b].joints.is_empty() {
+            continue;
+        }
+        let moved = comp[b].transform_to_parent(&links[body_link[b]].place);
+        match bodies[b].parent {
+            Some(p) => comp[p] = comp[p].add(&moved),
+            None => world = world.add(&moved),
+        }
+    }
+    let first_welded = bodies
+        .iter()
+        .position(|b| b.parent.is_none() && b.joints.is_empty());
+    let moving = (0..bodies.len()).filter(|&b| !bodies[b].joints.is_empty());
+    for (b, c) in moving
+        .map(|b| (b, comp[b]))
+        .chain(first_welded.map(|b| (b, world)))
+    {
+        triangle(&c).map_err(|m| berr(&bodies[b].name, m))?;
+    }
+    Ok(())
+}
+
+/// The triangle inequality on the principal moments about the CoM of `c` (massless: none).
+fn triangle(c: &Inertia<f64>) -> Result<(), String> {
+    if c.m <= 0.0 {
+        return Ok(());
+    }
+    let cx = super::spatial::skew(&(c.h / c.m));
+    let ic = c.ibar + cx * cx * c.m;
+    let e = (0.5 * (ic + ic.transpose())).symmetric_eigenvalues();
+    let (a, b, cc) = (e[0], e[1], e[2]);
+    let tol = INERTIA_RTOL * e.amax().max(c.m);
+    if a + b < cc - tol || b + cc < a - tol || a + cc < b - tol {
+        return Err(format!(
+            "principal moments ({a}, {b}, {cc}) of the rigid body (with the bodies welded to it) violate the triangle inequality"
         ));
     }
     Ok(())

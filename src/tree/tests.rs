@@ -678,7 +678,7 @@ fn validation_errors() {
         [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]],
     )]);
     assert!(
-        e.contains("'npd'") && e.contains("positive definite"),
+        e.contains("'npd'") && e.contains("not positive definite nor semi-definite"),
         "{e}"
     );
     let e = err(vec![BodySpec::new(
