@@ -62,11 +62,14 @@ max(1, |x_ref|)). It is a verdict of its own, shown as such in the report, never
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import hashlib
 import importlib
 import math
 import time as _time
 from dataclasses import dataclass, field
+from collections.abc import Iterator
 from typing import Any, Callable
 
 import numpy as np
@@ -232,6 +235,8 @@ class _Check:
     worst_joint: dict[str, str] = field(default_factory=dict)
     #: system rows whose reactions progmo supplies (export report ``supplied_reaction``)
     supplied: list[str] = field(default_factory=list)
+    #: a reference solve of this check came from an earlier check of the same file (``shared_solves``)
+    shared_solve: bool = False
 
 
 class _Stop(Exception):
@@ -379,6 +384,45 @@ def _budgets(c: _Check) -> None:
         c.res.notes.append(f"replay horizon {c.horizon:g} s of {full:g} s (given by the options)")
 
 
+#: reference solves shared by the checks of one scene file (``shared_solves``); None outside
+_SHARED: dict[tuple, tuple[Any, float]] | None = None
+
+
+@contextlib.contextmanager
+def shared_solves() -> Iterator[None]:
+    """Within the block, checks of the same scene file share their reference solves: a solve is a
+    pure function of the scene file and its settings, so the simulators of one scene solve once
+    (``parallel`` runs a scene's checks in one worker inside this block). The memo lives only
+    for the block, so a file edited between runs is read afresh."""
+    global _SHARED
+    prev, _SHARED = _SHARED, {}
+    try:
+        yield
+    finally:
+        _SHARED = prev
+
+
+def _shared_solve(c: _Check, **kw: Any) -> tuple[Any, float, bool]:
+    """``c.scene.solve(**kw)``, its seconds, and whether an earlier check of the same file (same
+    bytes, same settings) computed it (:func:`shared_solves`)."""
+    key = None
+    if _SHARED is not None:
+        try:
+            with open(c.path, "rb") as f:
+                key = (c.path, hashlib.sha256(f.read()).hexdigest(), tuple(sorted(kw.items())))
+        except OSError:
+            key = None
+        if key in _SHARED:
+            sol, secs = _SHARED[key]
+            return sol, secs, True
+    t0 = _time.perf_counter()
+    sol = c.scene.solve(**kw)
+    secs = _time.perf_counter() - t0
+    if key is not None and _SHARED is not None:
+        _SHARED[key] = (sol, secs)
+    return sol, secs, False
+
+
 def _solve_reference(c: _Check, h: float):
     """The solver's motion at every RK4 stage time of step h (output_dt = h/2)."""
     from ._core import SettingsError
@@ -391,11 +435,11 @@ def _solve_reference(c: _Check, h: float):
     n = int(round(c.horizon / h))
     if n < 2 or abs(n * h - c.horizon) > 1e-9 * max(1.0, c.horizon):
         raise _Stop("error", f"replay step {h:g} does not divide the replayed span {c.horizon:g} s")
-    t0s = _time.perf_counter()
     scene = c.scene
     st = scene.settings
-    sol = scene.solve(output_dt=h / 2, t1=scene.t0 + n * h,
-                      rtol=min(st["rtol"], REF_RTOL), atol=min(st["atol"], REF_ATOL))
+    sol, secs, shared = _shared_solve(c, output_dt=h / 2, t1=scene.t0 + n * h,
+                                      rtol=min(st["rtol"], REF_RTOL), atol=min(st["atol"], REF_ATOL))
+    c.shared_solve = c.shared_solve or shared
     c.res.warnings = [w["message"] for w in sol.warnings]
     if not sol.success:
         raise _Stop("error", f"the reference solve stopped ({sol.code}): {sol.message}")
@@ -409,7 +453,7 @@ def _solve_reference(c: _Check, h: float):
         u = np.array([c.corrupt_u(tk, uk) for tk, uk in zip(t, u_model)])
     lam = np.asarray(sol.lambda_)
     ref = Reference(t, np.asarray(sol.q), np.asarray(sol.v), np.asarray(sol.a), u,
-                    np.asarray(sol.residuals), h, n, scene.t0, _time.perf_counter() - t0s,
+                    np.asarray(sol.residuals), h, n, scene.t0, secs,
                     lam, np.asarray(sol.residual_rates))
     if scene.actuation_varies:  # H(t, q): the replay applies H at the simulator's state
         ref.actuation = lambda tk, qk: np.asarray(scene.actuation_map_at(tk, qk))
@@ -480,7 +524,8 @@ def _reference(c: _Check) -> None:
                 break
         why = "convergence check, error by step " + ", ".join(seq)
     c.res.notes.append(f"replay step h = {h:g} ({why}); {getattr(c.backend, 'scheme', 'RK4')} with u at every stage "
-                       f"(solver output_dt = h/2, solve {c.ref.solve_seconds:.2f} s)")
+                       f"(solver output_dt = h/2, solve {c.ref.solve_seconds:.2f} s"
+                       f"{', shared with an earlier check of this scene file' if c.shared_solve else ''})")
     c.res.info["replay_step"] = h
     c.res.metrics["solver_residual"] = _max_abs(c.ref.residual)
     for w in c.res.warnings:

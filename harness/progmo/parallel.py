@@ -10,15 +10,18 @@ by naming a fake module in the spec (works with the process pool).
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import multiprocessing
 import os
+import queue
 import time
 import traceback
 from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
+from typing import Any
 
 from .results import STATUSES, CheckResult
 
@@ -77,32 +80,93 @@ def default_jobs() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+def by_scene(tasks: list[Task]) -> list[list[tuple[int, Task]]]:
+    """The tasks grouped by scene file, in order of first appearance, each with its index."""
+    groups: dict[str, list[tuple[int, Task]]] = {}
+    for i, t in enumerate(tasks):
+        groups.setdefault(t.scene_path, []).append((i, t))
+    return list(groups.values())
+
+
+def run_group(group: list[tuple[int, Task]], options, spec: str) -> Iterator[tuple[int, CheckResult]]:
+    """The checks of one scene file in order, sharing their reference solves
+    (:func:`progmo.checks.shared_solves`): its simulators solve the scene once."""
+    from .checks import shared_solves
+
+    with shared_solves():
+        for i, t in group:
+            yield i, run_task(t, options, spec)
+
+
+#: the worker's channel back to the parent: each check's result as it finishes (set by _init_worker)
+_RESULTS: Any = None
+
+
+def _init_worker(results: Any) -> None:
+    global _RESULTS
+    _RESULTS = results
+
+
+def _run_group_in_worker(group: list[tuple[int, Task]], options, spec: str) -> list[tuple[int, CheckResult]]:
+    """Worker body: the group's results, each also sent to the parent as soon as it is known (a
+    scene's first checks are reported, and kept if the run is interrupted, before its last ends)."""
+    out = []
+    for i, r in run_group(group, options, spec):
+        if _RESULTS is not None:
+            _RESULTS.put((i, r))
+        out.append((i, r))
+    return out
+
+
 def run_all(tasks: list[Task], options, jobs: int) -> Iterator[tuple[Task, CheckResult]]:
-    """Yield (task, result) as checks finish. ``jobs <= 1`` runs in this process (in order).
-    Workers are started with ``spawn`` (no forked copies of simulator or Rust state); a worker
-    that dies turns its check into an ``error`` result and the others continue."""
+    """Yield (task, result) as checks finish. The checks of one scene file run in one worker, in
+    order, sharing their reference solves; scenes run in parallel over ``jobs`` workers (``jobs <=
+    1``: in this process, in order). Workers are started with ``spawn`` (no forked copies of
+    simulator or Rust state); a worker that dies turns its checks into ``error`` results (each
+    rerun alone first) and the others continue."""
     spec = runner_spec()
+    groups = by_scene(tasks)
     if jobs <= 1 or len(tasks) <= 1:
-        for t in tasks:
-            yield t, run_task(t, options, spec)
+        for g in groups:
+            for i, r in run_group(g, options, spec):
+                yield tasks[i], r
         return
     ctx = multiprocessing.get_context("spawn")
+    results = ctx.Queue()
     broken: list[Task] = []
-    pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=ctx)
+    seen: set[int] = set()
+
+    def fresh(items) -> Iterator[tuple[Task, CheckResult]]:
+        for i, r in items:
+            if i not in seen:  # a result arrives by the queue and again with its group's future
+                seen.add(i)
+                yield tasks[i], r
+
+    def drained() -> list[tuple[int, CheckResult]]:
+        out = []
+        with contextlib.suppress(queue.Empty):
+            while True:
+                out.append(results.get_nowait())
+        return out
+
+    pool = ProcessPoolExecutor(max_workers=min(jobs, len(groups)), mp_context=ctx,
+                               initializer=_init_worker, initargs=(results,))
     try:
-        pending: dict[Future, Task] = {pool.submit(run_task, t, options, spec): t for t in tasks}
+        pending: dict[Future, list[tuple[int, Task]]] = {
+            pool.submit(_run_group_in_worker, g, options, spec): g for g in groups}
         while pending:
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            done, _ = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
+            yield from fresh(drained())
             for f in done:
-                t = pending.pop(f)
+                g = pending.pop(f)
                 try:
-                    r = f.result()
+                    yield from fresh(f.result())
                 except BrokenProcessPool:
-                    broken.append(t)  # maybe not this check's fault: rerun it alone below
-                    continue
+                    yield from fresh(drained())
+                    # maybe not these checks' fault: rerun each alone below
+                    broken.extend(t for i, t in g if i not in seen)
                 except Exception as e:  # noqa: BLE001
-                    r = error_result(t, f"check raised {last_line(e)}")
-                yield t, r
+                    yield from fresh((i, error_result(t, f"check raised {last_line(e)}")) for i, t in g)
         pool.shutdown(wait=True)
     finally:
         # Interrupted (or the consumer stopped early): do not wait for running checks.

@@ -347,3 +347,37 @@ def test_ball_below_root_not_checked_in_pinocchio(tmp_path):
     assert r.status == "not_checked" and not r.expected and not r.ok()
     assert "URDF" in r.reason and "ball" in r.reason
     assert run_check(str(p), "mujoco").status in ("pass", "fail")  # MuJoCo can represent it
+
+
+def _comparable(r) -> dict:
+    d = r.to_json()
+    d.pop("wall_seconds")
+    d["notes"] = [n.replace(", shared with an earlier check of this scene file", "") for n in d["notes"]]
+    return d
+
+
+def test_checks_of_one_scene_share_the_reference_solve(tmp_path):
+    # parallel.run_group runs a scene's simulators in one worker: the later checks reuse the first
+    # one's reference solve and judge exactly as checks run alone do.
+    from progmo import parallel
+
+    p = str(SCENES / "double_pendulum.toml")
+    sims = ("mujoco", "pinocchio")
+    opts = CheckOptions(horizon=0.5)
+    grouped = [r for _, r in parallel.run_group([(i, parallel.Task(p, "dp", s)) for i, s in enumerate(sims)],
+                                                opts, parallel.DEFAULT_RUNNER)]
+    alone = [run_check(p, s, opts) for s in sims]
+    assert [_comparable(r) for r in grouped] == [_comparable(r) for r in alone]
+    shared = [any("shared with an earlier check" in n for n in r.notes) for r in grouped]
+    assert shared == [False, True]
+    assert not any("shared with" in n for r in alone for n in r.notes)
+    # the memo is keyed on the file's bytes: an edited file is solved afresh within the block
+    f = tmp_path / "dp.toml"
+    text = (SCENES / "double_pendulum.toml").read_text()
+    with checks.shared_solves():
+        f.write_text(text)
+        a = run_check(str(f), "mujoco", opts)
+        f.write_text(text + "\n# edited\n")
+        b = run_check(str(f), "pinocchio", opts)
+    assert a.status == b.status == "pass"
+    assert not any("shared with" in n for r in (a, b) for n in r.notes)
