@@ -260,8 +260,19 @@ class MujocoBackend:
             u = ref.force_at(data.time, qs)
             data.qfrc_applied[:] = cm.f_to_sim(cur_q[0], u) + self.harness() + self.expression(data.time)
 
+        def control_u_only(model, data):
+            # the same force when u is all there is (no attractor, no expression force, one-to-one
+            # dofs): u's entries written into MuJoCo's dofs, the others stay zero (set below)
+            qs = cm.q_from_sim(data.qpos) if ref.actuation is not None else cur_q[0]
+            data.qfrc_applied[sim_dofs] = ref.force_at(data.time, qs)[our_dofs]
+
         self._set(t0 + start * h, q0, v0)
-        mujoco.set_mjcb_control(control)
+        u_only = not cm.frames and not self.expr.active and (self._withhold_attractors or not self.attractors)
+        sim_dofs, our_dofs = cm.same_sim, cm.same_idx
+        if u_only:
+            d.xfrc_applied[:] = 0.0
+            d.qfrc_applied[:] = 0.0
+        mujoco.set_mjcb_control(control_u_only if u_only else control)
         times = ref.t[::2][start: stop + 1]
         try:
             for j in range(n + 1):
@@ -270,9 +281,9 @@ class MujocoBackend:
                 d.time = tk
                 mujoco.mj_forward(m, d)
                 qo = cm.q_from_sim(d.qpos)
-                if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
+                if not (np.isfinite(d.qpos).all() and np.isfinite(d.qvel).all()):
                     raise BlowUp(tk, "non-finite state")
-                if not np.all(np.abs(d.qacc) < ACC_LIMIT):
+                if not (np.abs(d.qacc) < ACC_LIMIT).all():
                     big = float(np.abs(d.qacc).max())
                     raise BlowUp(tk, f"|qacc| = {big:.3g} > {ACC_LIMIT:g}", big, ACC_LIMIT)
                 Q[j] = qo
