@@ -4,7 +4,9 @@ started on this machine for the run).
 
 Both take the same :class:`~progmo.parallel.Task` list and yield ``(task, CheckResult)`` as checks
 finish; results do not depend on the executor (a check is a pure function of its scene file,
-simulator and options), so callers aggregate them in task order. A Ray task is idempotent and
+simulator and options), so callers aggregate them in task order. Both run the checks of one scene
+file together, sharing its reference solve (``parallel.run_group``). A Ray task (one scene file's
+checks) is idempotent and
 retried when its worker dies (``max_retries``); the scene travels with the task as text, so
 workers on other machines need only progmo installed (files a scene refers to must exist at the
 same paths).
@@ -20,7 +22,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from .parallel import Task, error_result, last_line, run_all, run_task, runner_spec
+from .parallel import Task, by_scene, error_result, last_line, run_all, run_group, runner_spec
 from .results import CheckResult
 
 EXECUTORS = ("local", "ray")
@@ -43,25 +45,28 @@ def run(tasks: list[Task], options: Any, *, executor: str = "local", jobs: int =
         raise ExecutorError(f"unknown executor {executor!r} (one of {', '.join(EXECUTORS)})")
 
 
-def _check_remote(path: str, text: str, simulator: str, options: dict[str, Any], spec: str) -> dict:
-    """Body of the Ray task: run one check; the scene file from its path when this worker sees the
-    same file, else from the text shipped with the task."""
+def _check_remote(path: str, text: str, simulators: list[str], options: dict[str, Any], spec: str) -> list[dict]:
+    """Body of the Ray task: the checks of one scene file in its simulators, in order, sharing the
+    reference solve (``parallel.run_group``); the scene file from its path when this worker sees
+    the same file, else from the text shipped with the task."""
     from .checks import CheckOptions
 
     opts = CheckOptions(**options)
-    task = Task(path, Path(path).stem, simulator)
     p = Path(path)
     try:
         same = p.is_file() and p.read_text() == text
     except OSError:
         same = False
+
+    def group(at: str) -> list[dict]:
+        tasks = [(i, Task(at, p.stem, sim)) for i, sim in enumerate(simulators)]
+        return [r.to_json() for _, r in run_group(tasks, opts, spec)]
     if same:
-        return run_task(task, opts, spec).to_json()
+        return group(path)
     with tempfile.TemporaryDirectory(prefix="progmo-ray-") as d:
         local = Path(d) / p.name
         local.write_text(text)
-        r = run_task(Task(str(local), task.scene, simulator), opts, spec)
-        return r.to_json()
+        return group(str(local))
 
 
 def ray_init(address: str | None) -> Any:
@@ -86,26 +91,28 @@ def _ray(tasks: list[Task], options: Any, address: str | None) -> Iterator[tuple
     remote = ray.remote(max_retries=RAY_RETRIES, retry_exceptions=False)(_check_remote)
     opts = dataclasses.asdict(options)
     spec = runner_spec()
-    pending: dict[Any, Task] = {}
-    for t in tasks:
+    pending: dict[Any, list[Task]] = {}
+    for g in by_scene(tasks):
+        group = [t for _, t in g]
         try:
-            text = Path(t.scene_path).read_text()
+            text = Path(group[0].scene_path).read_text()
         except OSError as e:
-            yield t, error_result(t, f"cannot read the scene file: {e}")
+            for t in group:
+                yield t, error_result(t, f"cannot read the scene file: {e}")
             continue
-        pending[remote.remote(t.scene_path, text, t.simulator, opts, spec)] = t
+        pending[remote.remote(group[0].scene_path, text, [t.simulator for t in group], opts, spec)] = group
     try:
         while pending:
             done, _ = ray.wait(list(pending), num_returns=1)
             for ref in done:
-                t = pending.pop(ref)
+                group = pending.pop(ref)
                 t0 = time.perf_counter()
                 try:
-                    r = CheckResult.from_json(ray.get(ref))
+                    rs = [CheckResult.from_json(x) for x in ray.get(ref)]
                 except Exception as e:  # noqa: BLE001 - retries exhausted, or the cluster went away
-                    r = error_result(t, f"the Ray task failed after {RAY_RETRIES} retries: {last_line(e)}",
-                                     time.perf_counter() - t0)
-                yield t, r
+                    rs = [error_result(t, f"the Ray task failed after {RAY_RETRIES} retries: {last_line(e)}",
+                                       time.perf_counter() - t0) for t in group]
+                yield from zip(group, rs)
     finally:
         for ref in pending:  # interrupted: do not leave work queued on the cluster
             try:
