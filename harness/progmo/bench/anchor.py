@@ -58,6 +58,9 @@ NS = (2, 4, 7, 16, 30, 64, 128)
 #: the C++ variants doing the same work as progmo's right-hand side (anchor.cpp)
 SAME = ("same_cat", "same_sep", "same_minv", "same_abaunit")
 VARIANTS = ("aba", "kkt") + SAME
+#: Pinocchio's O(n + m) constrained dynamics on a frame welded to the world, timed when the rows
+#: hold one frame in all six directions (anchor.cpp: the Panda's task); checked against weld_kkt
+WELD = ("weld_cd", "weld_lcaba")
 #: relative disagreement of dv/dt (and u) with progmo that fails the part; where eps cond(A) is
 #: larger (long chains: cond(A) is 1e4 at n = 7, 3e6 at n = 30, 1e9 at n = 128) that bound applies:
 #: progmo's own formulations differ from each other by about that much
@@ -413,6 +416,12 @@ class Timing:
             row[f"ratio_{f}"] = best[f"progmo_{f}"] / row["same_best_s"]
         row["ratio_null_space_kkt"] = best["progmo_null_space"] / best["kkt"]
         row["ratio_auto_kkt"] = best["progmo_auto"] / best["kkt"]
+        welds = [k for k in WELD if k in best]
+        if welds:
+            row["weld_best"] = min(welds, key=lambda k: best[k])
+            row["weld_best_s"] = best[row["weld_best"]]
+            for f in PROGMO:
+                row[f"ratio_{f}_weld"] = best[f"progmo_{f}"] / row["weld_best_s"]
         return row
 
 

@@ -1,4 +1,4 @@
-"""`progmo bench [--quick] [--out DIR] [--only workprecision,scipy,conditioning,scaling,anchor,robot,testset,servo,drift,executors]`
+"""`progmo bench [--quick] [--out DIR] [--only workprecision,scipy,conditioning,scaling,anchor,robot,testset,servo,drift,executors,nightly]`
 
 Speed against error: writes CSV, PNG and index.html to DIR (default out/bench) and prints the key
 numbers. The `progmo` binary forwards `progmo bench ...` to `python -m progmo.bench.main ...`.
@@ -17,6 +17,8 @@ chains, 7 rounds of 5 loops), 7 s with --quick.
   2026-11-24: `--only robot` (bench/robot.py: the Panda of panda_circle beside Pinocchio, issue 13
   item 6) 9 s wall (7 timing rounds, 9 agreement states, 5 whole solves per side); it reuses the
   anchor's binary (built on first use as above).
+  Part `nightly` (bench/nightly.py) runs `progmo check` of the whole catalog once (minutes; one
+  scene with --smoke) for issue 31's nightly target.
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ if TYPE_CHECKING:
     from .targets import Target
 
 PARTS = ("workprecision", "scipy", "conditioning", "scaling", "anchor", "robot", "testset", "servo", "drift",
-         "executors")
+         "executors", "nightly")
 
 # sweep sizes; --quick is the default a test or a shared 2-core machine can afford
 QUICK: dict[str, Any] = dict(servo_tols=[1e-6, 1e-8, 1e-10], scenes=("double_pendulum", "chain_8"), tols=[1e-4, 1e-6, 1e-8, 1e-10], repeats=3,
@@ -56,7 +58,7 @@ FULL: dict[str, Any] = dict(servo_tols=[10.0 ** -k for k in range(4, 12)], scene
 # --smoke: the smallest end-to-end run (tests): one scene, two tolerances, two chain lengths
 SMOKE: dict[str, Any] = dict(servo_tols=[1e-6], scenes=("double_pendulum",), tols=[1e-5, 1e-8], repeats=1, scipy_tols=[1e-5, 1e-8],
              radau_min_tol=1e-8, states=2, scaling_ns=[2, 7], conditioning="smoke", testset_tols=[1e-6], drift_rounds=1,
-             anchor_ns=[2, 7], anchor_rounds=1, anchor_budget=0.002, sweep_samples=2,
+             anchor_ns=[2, 7], anchor_rounds=1, anchor_budget=0.002, sweep_samples=2, nightly_scenes=["double_pendulum"],
              robot=dict(rounds=1, budget_s=0.002, check_states=3, solve_repeats=1, load_repeats=2))
 
 
@@ -120,6 +122,12 @@ class _Bench:
     anchor_why: str = "the anchor part did not run (--only)"
     ts: dict | None = None
     testset_why: str = "the testset part did not run (--only)"
+    robot_rhs: dict | None = None
+    robot_why: str = "the robot part did not run (--only)"
+    servo: dict | None = None
+    servo_why: str = "the servo part did not run (--only)"
+    nightly: dict | None = None
+    nightly_why: str = "the nightly part did not run (--only)"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -410,14 +418,17 @@ def _part_robot(b: _Bench) -> None:
         rb = robot.run(b.out, b.prov, **b.cfg["robot"])
     except (anchor.AnchorFailed, NotImplementedError, FileNotFoundError) as e:
         b.failed.append(f"robot: {e}")
+        b.robot_why = f"the robot part failed: {e}"
         b.sections.append((title, f"<p><b>FAILED</b>:</p><pre>{_html.escape(str(e))}</pre>"))
         b.summary.append(f"robot: FAILED: {e}")
     else:
         inner, lines = _robot_section(rb, page, anchor)
         b.sections.append((title, page.doc(robot.__doc__) + inner))
         b.summary += lines
+        b.robot_rhs = rb["rhs"]
         if "rhs_skipped" in rb:
             b.omissions.append(f"robot: the C++ RHS comparison skipped: {rb['rhs_skipped']}")
+            b.robot_why = f"the C++ RHS comparison skipped: {rb['rhs_skipped']}"
     b.omissions.append("robot: the whole solve is compared with scipy + Pinocchio's Python binding; the C++ anchor "
                        "has no integrator, so there is no C++ whole solve (its per-RHS time x progmo's RHS count is "
                        "shown as the RHS share one would pay).")
@@ -451,6 +462,7 @@ def _part_servo(b: _Bench) -> None:
 
     try:
         res = sv.run(b.out, b.prov, b.cfg["servo_tols"], b.cfg["repeats"])
+        b.servo = res
         trs = [[r["realization"], f"{r['rtol']:.0e}", r["code"], f"{r['error']:.1e}", page.num(r["cpu_s"]),
                 r["rhs_evals"], r["steps"], f"{r['us_per_rhs']:.0f}"] for r in res["rows"]]
         hdr = ["realization", "rtol = atol", "code", "max |q - q_ref|", "CPU (s)", "RHS", "steps", "us per RHS"]
@@ -461,6 +473,7 @@ def _part_servo(b: _Bench) -> None:
                            + "<p>" + "<br>".join(lines) + "</p><p>Data: <a href='servo.csv'>servo.csv</a>.</p>"))
     except Exception as e:  # noqa: BLE001 - a part that fails is reported, the rest stands
         b.failed.append(f"servo: {e}")
+        b.servo_why = f"the servo part failed: {e}"
         b.sections.append(("5b. Servo-constraints", f"<p>FAILED: {e}</p>"))
 
 
@@ -507,11 +520,31 @@ def _part_executors(b: _Bench) -> None:
         b.sections.append(("7. Sweep executors: local pool and Ray", f"<p>FAILED: {e}</p>"))
 
 
+def _part_nightly(b: _Bench) -> None:
+    """Part `nightly`: one `progmo check` of the catalog, timed (issue 31's target)."""
+    from . import nightly as nt, page
+
+    title = "8. The nightly check, timed"
+    try:
+        b.nightly = nt.run(b.out, b.cfg.get("nightly_scenes"))
+    except RuntimeError as e:
+        b.failed.append(f"nightly: {e}")
+        b.nightly_why = f"the nightly part failed: {e}"
+        b.sections.append((title, f"<p><b>FAILED</b>: {_html.escape(str(e))}</p>"))
+        return
+    lines = nt.lines(b.nightly)
+    b.summary += lines
+    if not b.nightly["whole_catalog"]:
+        b.nightly_why = f"this run checked {', '.join(b.cfg['nightly_scenes'])} only (--smoke), not the whole catalog"
+    b.sections.append((title, page.doc(nt.__doc__) + "<p>" + "<br>".join(_html.escape(x) for x in lines)
+                       + "</p><p>Its report: <a href='nightly/report.html'>nightly/report.html</a>.</p>"))
+
+
 # each part's step, run in the order of PARTS
 _PART_RUNS: dict[str, Callable[[_Bench], None]] = dict(
     workprecision=_part_workprecision, scipy=_part_scipy, conditioning=_part_conditioning, scaling=_part_scaling,
     anchor=_part_anchor, robot=_part_robot, testset=_part_testset, servo=_part_servo, drift=_part_drift,
-    executors=_part_executors)
+    executors=_part_executors, nightly=_part_nightly)
 
 
 def _finish(b: _Bench, t_start: float) -> int:
@@ -524,6 +557,12 @@ def _finish(b: _Bench, t_start: float) -> int:
     b.targets += tg.anchor_targets(b.anchor_rows, b.anchor_why)
     b.targets.append(tg.caraxis_target(b.ts["rows"] if b.ts else None, b.testset_why))
     b.targets.append(tg.small_problem_target(b.anchor_rows, b.anchor_why))
+    # issue 31's targets
+    b.targets += tg.robot_targets(b.robot_rhs, b.robot_why)
+    b.targets.append(tg.servo_target(b.servo, b.servo_why))
+    b.targets.append(tg.nightly_target(b.nightly if b.nightly and b.nightly["whole_catalog"] else None,
+                                       b.nightly_why))
+    b.targets.append(tg.ci_target())
 
     elapsed = time.perf_counter() - t_start
     if b.summary or b.targets:
@@ -551,6 +590,8 @@ def _finish(b: _Bench, t_start: float) -> int:
 
 def _robot_section(rb: dict, page, anchor) -> tuple[str, list[str]]:
     """The robot part's HTML (tables) and its key-number lines."""
+    from . import targets as tg
+
     us = lambda x: f"{x * 1e6:.2f}"  # noqa: E731
     name, lines, inner = rb["scene"], [], ""
     r = rb["rhs"]
@@ -569,6 +610,16 @@ def _robot_section(rb: dict, page, anchor) -> tuple[str, list[str]]:
                                    f"{r['agreement']:.1e} ({r['agreement_tol']:.0e}, {r['agreement_states']})"]])
         inner += ("<p>Every same-work variant (us per call):</p>"
                   + page.table(list(anchor.SAME), [[us(r[f"{v}_s"]) for v in anchor.SAME]]))
+        if "weld_best_s" in r:
+            inner += ("<p>Pinocchio's O(n + m) constrained dynamics with the TCP frame welded to the world "
+                      "(CONTACT_6D: the six rows' structure without their time law; agreement with the KKT solve "
+                      "of the frame's Jacobian and drift checked first), us per call, and progmo's default "
+                      "formulation against the faster:</p>"
+                      + page.table([*anchor.WELD, f"progmo {tg.DEFAULT} / best"],
+                                   [[us(r[f"{v}_s"]) for v in anchor.WELD] + [f"{r[f'ratio_{tg.DEFAULT}_weld']:.2f}"]]))
+            lines.append(f"robot {name} RHS: Pinocchio C++ constraintDynamics {us(r['weld_cd_s'])} us, lcaba "
+                         f"{us(r['weld_lcaba_s'])} us (TCP welded); progmo {tg.DEFAULT} / best "
+                         f"{r[f'ratio_{tg.DEFAULT}_weld']:.2f}")
         lines.append(f"robot {name} RHS: progmo null_space {us(r['progmo_null_space_s'])} us, kkt {us(r['progmo_kkt_s'])} us; "
                      f"C++ same work {us(r['same_best_s'])} us ({r['same_best']}), KKT (J, gamma given) {us(r['kkt_s'])} us, "
                      f"ABA {us(r['aba_s'])} us; progmo/C++ same work {r['ratio_null_space']:.2f} (null_space); "

@@ -121,10 +121,10 @@ def agreement(scene, model, proc, states) -> tuple[dict[str, float], float]:
     states; raises anchor.AnchorFailed beyond the tolerance (as anchor.agreement)."""
     import pinocchio as pin
 
-    from .anchor import AGREEMENT, VARIANTS, AnchorFailed, _rel
+    from .anchor import AGREEMENT, VARIANTS, WELD, AnchorFailed, _rel
 
     data = model.createData()
-    worst = {v: 0.0 for v in VARIANTS}
+    worst = {v: 0.0 for v in VARIANTS + WELD}
     tol = AGREEMENT
     for t, q, v in states:
         got = proc.check(t, q, v)
@@ -134,11 +134,15 @@ def agreement(scene, model, proc, states) -> tuple[dict[str, float], float]:
         for var in VARIANTS:
             errs = [_rel(got[("a", var)], a_aba)] if var == "aba" else [_rel(got[(k, var)], ref[k]) for k in ("a", "u")]
             worst[var] = max(worst[var], *errs)
+        # the welded frame (no time law): constraintDynamics and lcaba against the KKT solve of the
+        # frame's own Jacobian and drift (a missing line is infinitely wrong)
+        for var in WELD:
+            worst[var] = max(worst[var], _rel(got.get(("a", var), [np.nan]), got.get(("a", "weld_kkt"), [0.0])))
     bad = {k: e for k, e in worst.items() if not e <= tol}
     if bad:
         raise AnchorFailed(f"{scene.name}: C++ and progmo disagree beyond {tol:.1e} relative: "
                            + ", ".join(f"{k} {e:.1e}" for k, e in bad.items())
-                           + " (dv/dt and u against progmo's kkt; aba against pin.aba)")
+                           + " (dv/dt and u against progmo's kkt; aba against pin.aba; weld_* against weld_kkt)")
     return worst, tol
 
 

@@ -8,8 +8,10 @@ targets of the scipy and drift parts), puts them in a table at the top of the pa
   progmo's default formulation (`auto`: null_space below AUTO_ARTICULATED_NV velocities,
   articulated_body from there on) against the fastest C++ same-work variant, minima of the same
   alternating rounds;
-- RHS at n = 128 <= 60 us, and growth exponent log(t128 / t30) / log(128 / 30) <= 1.2;
-- the IVP Test Set car axis: 8 significant digits (mescd of y(1:10)) in <= 5 ms CPU: the CPU time at
+- growth exponent log(t128 / t30) / log(128 / 30) <= 1.2 (issue 15 also asked RHS at n = 128 <=
+  60 us: replaced by issue 31's ratio below);
+- the IVP Test Set car axis: 8 significant digits (mescd of y(1:10)) in <= 2 ms CPU (issue 31; issue
+  15 asked 5 ms): the CPU time at
   8 digits interpolated in log-log on each method's digits-vs-CPU front (the cheapest run reaching
   8 digits when the front does not bracket 8), best method;
 - no regression of the small-problem cost (n = 2 and 4): the ratio progmo / C++ same work of this
@@ -18,8 +20,16 @@ targets of the scipy and drift parts), puts them in a table at the top of the pa
   than ACCEPTED_SLACK above it. The ratio, not the absolute time, is judged: both
   sides are measured in the same rounds, so machine speed and load largely cancel; the absolute
   times are shown beside it.
-The robot part (issue 13, item 6: the Panda's RHS, whole solve and URDF load beside Pinocchio) is
-reported in the key numbers and its section; the issue sets it no target.
+Issue 31 (speed on real robots and in servo-constraints) adds, each from this run's figures:
+- the Panda of panda_circle (robot part): RHS <= 0.7x Pinocchio's C++ same work, and <= 1.0x the
+  faster of Pinocchio's C++ constraintDynamics / lcaba on the TCP welded (the anchor's weld_*);
+- the n = 128 chain's RHS <= 1.2x C++ ABA alone (anchor part; it replaces issue 15's 60 us);
+- the servo crane's RHS <= 20x its ideal realization (servo part: CPU per RHS, median over tolerances);
+- the car axis at 8 digits in <= 2 ms CPU (issue 15 asked 5 ms);
+- the nightly check of the whole catalog <= 60 s wall on 2 cores (nightly part: `progmo check`
+  timed once, with this machine's core count said);
+- CI on a fresh clone <= 20 min: not measurable inside a benchmark run (it is the fresh-clone
+  `.ci/run`), listed as not measured with where its figure comes from.
 """
 
 from __future__ import annotations
@@ -36,9 +46,12 @@ import numpy as np
 ACCEPTED = Path(__file__).resolve().parent / "accepted.json"
 RATIO_MAX = 0.7
 RATIO_NS = (7, 30)
-N_BIG, T_BIG_MAX = 128, 60e-6
+N_BIG, BIG_ABA_MAX = 128, 1.2  # RHS at n = 128 over C++ ABA alone (issue 31)
 GROWTH_FROM, GROWTH_MAX = 30, 1.2
-DIGITS, DIGITS_CPU_MAX = 8.0, 5e-3
+DIGITS, DIGITS_CPU_MAX = 8.0, 2e-3
+PANDA_SAME_MAX, PANDA_WELD_MAX = 0.7, 1.0
+SERVO_MAX = 20.0
+NIGHTLY_MAX_S, CI_MAX_S = 60.0, 20 * 60.0
 SMALL_NS = (2, 4)
 #: relative rise of the small-problem ratio over the accepted one that counts as a regression: ten
 #: back-to-back runs of one build (2026-11-23, accepted.json's note) put the n = 2 ratio at 1.19-1.40
@@ -110,14 +123,12 @@ def anchor_targets(rows: Sequence[dict] | None, why: str = "") -> list[Target]:
         out.append(Target(name, f"progmo {DEFAULT} {_us(r[key])} / C++ {r['same_best']} "
                                 f"{_us(r['same_best_s'])} = {ratio:.2f}x",
                           "met" if ratio <= RATIO_MAX else f"MISSED by {ratio / RATIO_MAX:.2f}x"))
-    name = f"RHS at n = {N_BIG} <= {T_BIG_MAX * 1e6:.0f} us"
+    name = f"RHS at n = {N_BIG} <= {BIG_ABA_MAX}x Pinocchio's C++ ABA alone"
     big = _at(rows, N_BIG)
     if big is None:
         out.append(not_measured(name, why or f"n = {N_BIG} not in this run's chains"))
     else:
-        t = big[key]
-        out.append(Target(name, f"progmo {DEFAULT} {_us(t)}",
-                          "met" if t <= T_BIG_MAX else f"MISSED by {t / T_BIG_MAX:.2f}x"))
+        out.append(_ratio_target(name, big[key], big["aba_s"], BIG_ABA_MAX, f"progmo {DEFAULT}", "C++ ABA"))
     name = f"growth exponent of the RHS between n = {GROWTH_FROM} and {N_BIG} <= {GROWTH_MAX}"
     lo = _at(rows, GROWTH_FROM)
     if big is None or lo is None:
@@ -131,12 +142,67 @@ def anchor_targets(rows: Sequence[dict] | None, why: str = "") -> list[Target]:
     return out
 
 
+def _ratio_target(name: str, ours: float, theirs: float, limit: float, who: str, anchor: str) -> Target:
+    r = ours / theirs
+    return Target(name, f"{who} {_us(ours)} / {anchor} {_us(theirs)} = {r:.2f}x",
+                  "met" if r <= limit else f"MISSED by {r / limit:.2f}x")
+
+
+def robot_targets(rhs: dict | None, why: str = "") -> list[Target]:
+    """The Panda's RHS against Pinocchio's C++ same work and its O(n + m) constrained dynamics (the
+    robot part's row: anchor.Timing.row plus agreement; None: not measured, `why` says so)."""
+    same = f"Panda (panda_circle, n = 7, 6 rows) RHS <= {PANDA_SAME_MAX}x Pinocchio's C++ same work"
+    weld = (f"Panda RHS <= {PANDA_WELD_MAX}x the faster of Pinocchio's C++ constraintDynamics / lcaba "
+            "(TCP welded)")
+    if rhs is None:
+        return [not_measured(same, why or "the robot part did not run"),
+                not_measured(weld, why or "the robot part did not run")]
+    out = [_ratio_target(same, rhs[f"progmo_{DEFAULT}_s"], rhs["same_best_s"], PANDA_SAME_MAX,
+                         f"progmo {DEFAULT}", f"C++ {rhs['same_best']}")]
+    if "weld_best_s" in rhs:
+        out.append(_ratio_target(weld, rhs[f"progmo_{DEFAULT}_s"], rhs["weld_best_s"], PANDA_WELD_MAX,
+                                 f"progmo {DEFAULT}", f"C++ {rhs['weld_best']}"))
+    else:
+        out.append(not_measured(weld, "the anchor did not time a welded frame (rows without a six-row frame task)"))
+    return out
+
+
+def servo_target(res: dict | None, why: str = "") -> Target:
+    """The overhead crane's servo RHS against its ideal realization (servo part)."""
+    name = f"servo crane (overhead_crane) RHS <= {SERVO_MAX:.0f}x its ideal realization"
+    if res is None or not math.isfinite(res.get("reduction_cost", math.nan)):
+        return not_measured(name, why or "the servo part did not run")
+    r = res["reduction_cost"]
+    per = {x["realization"]: x["us_per_rhs"] for x in res["rows"]}
+    return Target(name, f"CPU per RHS servo / ideal, median over tolerances: {r:.0f}x "
+                        f"(e.g. {per.get('servo', math.nan):.0f} us vs {per.get('ideal', math.nan):.1f} us)",
+                  "met" if r <= SERVO_MAX else f"MISSED by {r / SERVO_MAX:.2f}x")
+
+
+def nightly_target(res: dict | None, why: str = "") -> Target:
+    """The nightly check's wall time (nightly part: one `progmo check` of the catalog)."""
+    name = f"nightly check of the whole catalog <= {NIGHTLY_MAX_S:.0f} s wall on 2 cores"
+    if res is None:
+        return not_measured(name, why or "the nightly part did not run")
+    w = res["wall_s"]
+    measured = (f"{w:.0f} s wall for {res['checks']} checks ({', '.join(res['simulators'])}) with "
+                f"{res['jobs']} jobs on {res['cores']} cores")
+    if res["cores"] != 2:
+        return Target(name, measured, f"not measured: this machine has {res['cores']} cores, not 2")
+    return Target(name, measured, "met" if w <= NIGHTLY_MAX_S else f"MISSED by {w / NIGHTLY_MAX_S:.2f}x")
+
+
+def ci_target() -> Target:
+    return not_measured(f"CI on a fresh clone <= {CI_MAX_S / 60:.0f} min",
+                        "the fresh-clone `bash .ci/run` is timed where CI runs (the session note names the figure)")
+
+
 def growth_exponent(t_lo: float, t_hi: float, n_lo: int, n_hi: int) -> float:
     return math.log(t_hi / t_lo) / math.log(n_hi / n_lo)
 
 
 def caraxis_target(rows: Sequence[dict] | None, why: str = "") -> Target:
-    """8 significant digits in <= 5 ms CPU from the testset part's rows (method, mescd_all, cpu_s)."""
+    """8 significant digits in <= DIGITS_CPU_MAX CPU from the testset part's rows (method, mescd_all, cpu_s)."""
     from .common import time_at_error
 
     name = f"IVP Test Set car axis: {DIGITS:.0f} significant digits in <= {DIGITS_CPU_MAX * 1e3:.0f} ms CPU"

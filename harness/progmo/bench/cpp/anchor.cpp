@@ -27,6 +27,20 @@
 //                 computeMinverse from the ABA factorization (O(n^2)) + dense Schur complement + u
 //   same_abaunit  forwardKinematics(q, v, 0) + aba for the free acceleration + s more ABA passes
 //                 (zero gravity, zero velocity, tau = J_k^T) for M^-1 J^T: O(n s) + Schur + u
+// Only when the rows hold one frame in all six directions (tip rows of axes 0-5 on one frame, the
+// Panda's task), Pinocchio's O(n + m) constrained dynamics on that frame welded to the world
+// (RigidConstraintModel CONTACT_6D, LOCAL, corrector gains 0, so the rows' time laws are left out:
+// the same structure and size of work, the acceleration of the frame held at zero):
+//   weld_kkt      forwardKinematics + joint Jacobians + crba + nonLinearEffects + the frame's LOCAL
+//                 Jacobian and spatial drift + forwardDynamics(tau, J, gamma): the agreement reference
+//   weld_cd       constraintDynamics (sparse constrained Cholesky)
+//   weld_lcaba    lcaba (loop-constrained articulated-body algorithm)
+// both with ProximalSettings(accuracy 1e-12, mu 1e-4, at most 10 iterations): lcaba's accuracy is
+// bounded by its 1/mu conditioning (measured on the Panda against weld_kkt: mu 1e-4 -> 3e-12 in 5
+// iterations, 1e-6 -> 3e-10, 1e-8 -> 7e-8; constraintDynamics 1e-13 with either).
+// Pinocchio 4.1's lcaba adds into data.oa without clearing it first: a second call on the same Data
+// returns a different (wrong) dv/dt (measured: alternately right and 7x off). weld_lcaba clears
+// data.oa before each call, inside the timed work.
 // Rows (model file, after the joints): "row joint K LAW AMP W" (coordinate K) or "row tip JOINT
 // PX PY PZ AXIS LAW AMP W": component AXIS of the frame at P on JOINT, LOCAL_WORLD_ALIGNED (0-2 the
 // origin's world position, 3-5 the world angular velocity: orientation rows held at acceleration
@@ -37,11 +51,13 @@
 
 #include <pinocchio/algorithm/aba.hpp>
 #include <pinocchio/algorithm/compute-all-terms.hpp>
+#include <pinocchio/algorithm/constrained-dynamics.hpp>
 #include <pinocchio/algorithm/contact-dynamics.hpp>
 #include <pinocchio/algorithm/crba.hpp>
 #include <pinocchio/algorithm/frames.hpp>
 #include <pinocchio/algorithm/jacobian.hpp>
 #include <pinocchio/algorithm/kinematics.hpp>
+#include <pinocchio/algorithm/loop-constrained-aba.hpp>
 #include <pinocchio/algorithm/rnea.hpp>
 #include <pinocchio/multibody.hpp>
 
@@ -101,6 +117,16 @@ struct Anchor {
   VectorXd gamma, tau, zero, a, u, lambda, tmp;
   VectorXd damping;  // empty: no joint damping
   Eigen::LLT<MatrixXd> llt;
+  // the welded frame of a six-row frame task (weld_* variants), when the rows hold one
+  bool weld = false;
+  JointIndex weld_joint = 0;
+  SE3 weld_place = SE3::Identity();
+  PINOCCHIO_STD_VECTOR_WITH_EIGEN_ALLOCATOR(RigidConstraintModel) cmodels;
+  PINOCCHIO_STD_VECTOR_WITH_EIGEN_ALLOCATOR(RigidConstraintData) cdatas, cdatas_l;
+  Data data_cd, data_l;
+  ProximalSettings prox{1e-12, 1e-4, 10};
+  MatrixXd Jw;
+  VectorXd gw;
 
   // tau = -damping v: the joint dampers' force, which Pinocchio's aba and forwardDynamics leave
   // out (model.damping is not read by them); progmo's right-hand side evaluates it too.
@@ -204,6 +230,58 @@ struct Anchor {
     lambda.setZero(s);
     tmp.setZero(nv);
     llt = Eigen::LLT<MatrixXd>(s);
+    find_weld();
+  }
+
+  // Six consecutive tip rows of one frame with axes 0-5: that frame can be welded (weld_*).
+  void find_weld() {
+    for (int i = 0; i + 6 <= s && !weld; ++i) {
+      int axes = 0;
+      for (int k = i; k < i + 6; ++k) {
+        const Row &r = rows[k];
+        if (r.tip && r.joint == rows[i].joint && r.placement.isEqual(rows[i].placement)) axes |= 1 << r.axis;
+      }
+      if (axes == 63) {
+        weld = true;
+        weld_joint = rows[i].joint;
+        weld_place = rows[i].placement;
+      }
+    }
+    if (!weld) return;
+    cmodels.push_back(RigidConstraintModel(CONTACT_6D, model, weld_joint, weld_place, LOCAL));
+    cdatas.push_back(RigidConstraintData(cmodels.back()));
+    cdatas_l.push_back(RigidConstraintData(cmodels.back()));
+    data_cd = Data(model);
+    data_l = Data(model);
+    initConstraintDynamics(model, data_cd, cmodels, cdatas);
+    initConstraintDynamics(model, data_l, cmodels, cdatas_l);
+    computeJointMinimalOrdering(model, data_l, cmodels);
+    Jw.setZero(6, nv);
+    gw.setZero(6);
+  }
+
+  // J a + gamma = 0 on the welded frame's LOCAL spatial acceleration (what CONTACT_6D holds).
+  void weld_kkt(const VectorXd &q, const VectorXd &v) {
+    passive(v);
+    forwardKinematics(model, data, q, v, zero);
+    computeJointJacobians(model, data);
+    crba(model, data, q, Convention::WORLD);
+    nonLinearEffects(model, data, q, v);
+    Jw.setZero();
+    getFrameJacobian(model, data, weld_joint, weld_place, LOCAL, Jw);
+    gw = getFrameAcceleration(model, data, weld_joint, weld_place, LOCAL).toVector();
+    a = forwardDynamics(model, data, tau, Jw, gw, 0.0);
+  }
+
+  void weld_cd(const VectorXd &q, const VectorXd &v) {
+    passive(v);
+    a = constraintDynamics(model, data_cd, q, v, tau, cmodels, cdatas, prox);
+  }
+
+  void weld_lcaba(const VectorXd &q, const VectorXd &v) {
+    passive(v);
+    for (Motion &m : data_l.oa) m.setZero();
+    a = lcaba(model, data_l, q, v, tau, cmodels, cdatas_l, prox);
   }
 
   // J and gamma of the rows at (t, q, v) from data.oMi, data.v, data.a (a = 0 drift) and data.J:
@@ -359,6 +437,14 @@ int main(int argc, char **argv) {
       an.same_abaunit(t, q, v);
       print_vec("a", "same_abaunit", an.a);
       print_vec("u", "same_abaunit", an.u);
+      if (an.weld) {
+        an.weld_kkt(q, v);
+        print_vec("a", "weld_kkt", an.a);
+        an.weld_cd(q, v);
+        print_vec("a", "weld_cd", an.a);
+        an.weld_lcaba(q, v);
+        print_vec("a", "weld_lcaba", an.a);
+      }
     } else {
       if (iters < 1) fail("bench needs iters >= 1");
       const double t_aba = time_loop(iters, q, [&](const VectorXd &x) {
@@ -388,6 +474,17 @@ int main(int argc, char **argv) {
       std::printf("time aba %.9e\ntime kkt %.9e\ntime same_cat %.9e\ntime same_sep %.9e\n"
                   "time same_minv %.9e\ntime same_abaunit %.9e\n",
                   t_aba, t_kkt, t_cat, t_sep, t_minv, t_unit);
+      if (an.weld) {
+        const double t_wcd = time_loop(iters, q, [&](const VectorXd &x) {
+          an.weld_cd(x, v);
+          asm volatile("" : : "g"(an.a.data()) : "memory");
+        });
+        const double t_wl = time_loop(iters, q, [&](const VectorXd &x) {
+          an.weld_lcaba(x, v);
+          asm volatile("" : : "g"(an.a.data()) : "memory");
+        });
+        std::printf("time weld_cd %.9e\ntime weld_lcaba %.9e\n", t_wcd, t_wl);
+      }
     }
     std::printf("end\n");
     std::fflush(stdout);
