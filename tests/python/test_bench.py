@@ -62,7 +62,7 @@ def test_bench_runs_end_to_end_and_every_output_names_its_rerun_command(tmp_path
     # nightly target is not judged on them
     night = json.loads((out / "nightly" / "results.json").read_text())
     assert {r["scene"] for r in night} == {"double_pendulum"} and "8. The nightly check, timed" in html
-    assert escape("not measured: this run checked double_pendulum only (--smoke)") in html
+    assert "this run checked double_pendulum only (--smoke), not the whole catalog" in html
     # the car axis against the published reference: digits at rtol 1e-6 (the Rust test measured
     # 4.57 for dop853 and 4.74 for radau5 with the same settings)
     ts = list(csv.DictReader(line for line in open(out / "testset.csv") if not line.startswith("#")))
@@ -343,9 +343,11 @@ def test_robot_part_agrees_with_pinocchio_and_reports_every_figure(tmp_path):
                     solve_repeats=1, load_repeats=1)
     r = res["rhs"]
     assert (res["n"], res["s"]) == (7, 6)
-    assert set(r["agreement_by_variant"]) == set(anchor.VARIANTS) and r["agreement_states"] == 3
+    # the six TCP rows make a welded frame: constraintDynamics and lcaba are checked and timed too
+    assert set(r["agreement_by_variant"]) == set(anchor.VARIANTS + anchor.WELD) and r["agreement_states"] == 3
     assert r["agreement"] <= r["agreement_tol"] == anchor.AGREEMENT, r
-    for k in ("aba_s", "kkt_s", "progmo_null_space_s", "progmo_kkt_s") + tuple(f"{v}_s" for v in anchor.SAME):
+    assert r["weld_best"] in anchor.WELD
+    for k in ("aba_s", "kkt_s", "progmo_null_space_s", "progmo_kkt_s") + tuple(f"{v}_s" for v in anchor.SAME + anchor.WELD):
         assert np.isfinite(r[k]) and r[k] > 0, k
     s = res["solve"]
     # both whole solves reach the scene's tolerance class against the tight reference. Measured
@@ -381,6 +383,23 @@ def test_robot_part_check_fails_on_a_wrong_circle_law(tmp_path):
     assert bad != good
     with anchor.Process(exe, scene, tmp_path, text=bad) as proc, pytest.raises(anchor.AnchorFailed, match="disagree"):
         robot.agreement(scene, model, proc, states)
+    # the welded variants are judged too: lcaba's dv/dt off by 1e-8 relative, or missing, fails
+    with anchor.Process(exe, scene, tmp_path, text=good) as proc:
+        check = proc.check
+
+        def off(t, q, v):
+            got = check(t, q, v)
+            got[("a", "weld_lcaba")] = got[("a", "weld_lcaba")] * (1 + 1e-8)
+            return got
+        proc.check = off  # type: ignore[method-assign]
+        with pytest.raises(anchor.AnchorFailed, match="weld_lcaba"):
+            robot.agreement(scene, model, proc, states)
+
+        def missing(t, q, v):
+            return {k: x for k, x in check(t, q, v).items() if k[1] != "weld_cd"}
+        proc.check = missing  # type: ignore[method-assign]
+        with pytest.raises(anchor.AnchorFailed, match="weld_cd inf"):
+            robot.agreement(scene, model, proc, states)
 
 
 def test_bench_robot_part_on_the_page(tmp_path, monkeypatch):
