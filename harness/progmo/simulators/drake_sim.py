@@ -12,7 +12,8 @@
   joint: roll-pitch-yaw coordinates, singular at pitch +-pi/2, where the replay then blows up
   visibly). Armature -> a joint actuator's rotor inertia (gear ratio 1). Gravity from the report.
 * **Forces.** A ``LeafSystem`` wired to the plant's applied-generalized-force and applied-spatial-
-  force inputs, evaluated by Drake at every integrator stage from the plant's own state and the
+  force inputs (the latter only when the scene has a force at a point), evaluated by Drake at every
+  integrator stage from the plant's own state (bodies' poses from the plant's own context) and the
   stage time: u (``Reference.force_at``, sampled at the stage times, see below), coordinate forces,
   springs and dampers as generalized forces; the scene's point forces, attractors and gravity
   compensation as ``ExternallyAppliedSpatialForce`` on the bodies. ``model_terms`` maps the same
@@ -133,6 +134,9 @@ def user_urdf(robot: RobotFile, locked: dict[str, float]) -> str:
 
 
 # --- coordinates ---------------------------------------------------------------------------------
+_WXYZ = ("qw", "qx", "qy", "qz")
+
+
 class DrakeMap:
     """Our q/v <-> Drake's (module doc). Built from the export report's names (``sim_joint`` and
     the component suffix) and the plant's joints."""
@@ -161,66 +165,72 @@ class DrakeMap:
         self.sim_nq, self.sim_nv = plant.num_positions(), plant.num_velocities()
         if self.sim_nv != self.nv:
             raise ValueError(f"Drake's plant has nv={self.sim_nv}; the report {self.nv}")
-        self.quats = [[qi[k] for k in ("qw", "qx", "qy", "qz")] for _, qi, _, _, _ in self.groups]
+        self.quats = [[qi[k] for k in _WXYZ] for _, qi, _, _, _ in self.groups]
         self._sq = np.array([a for a, _ in self.scalar_q], int), np.array([b for _, b in self.scalar_q], int)
         self._sv = np.array([a for a, _ in self.scalar_v], int), np.array([b for _, b in self.scalar_v], int)
+        # per group, index arrays (the maps run at every replay stage): (ball?, our q wxyz, our q xyz,
+        # our angular v, Drake q start, Drake v start)
+        self._g = [(kind == "ball_rpy", np.array([qi[k] for k in _WXYZ]),
+                    np.array([qi[k] for k in "xyz"] if kind == "quaternion_floating" else [], int),
+                    _span([vi[k] for k in ("wx", "wy", "wz")]), iq, iv)
+                   for kind, qi, vi, iq, iv in self.groups]
+        # P's constant entries: the one-dof joints' permutation, a free joint's linear rows
+        self._P0 = np.zeros((self.nv, self.nv))
+        self._P0[self._sv[1], self._sv[0]] = 1.0
+        for kind, _, vi, _, iv in self.groups:
+            if kind == "quaternion_floating":
+                for a, k in enumerate(("vx", "vy", "vz")):
+                    self._P0[iv + 3 + a, vi[k]] = 1.0
 
     def q_to_sim(self, q: np.ndarray) -> np.ndarray:
         Quaternion, RollPitchYaw = _rotation_types()
         qs = np.zeros(self.sim_nq)
         qs[self._sq[1]] = q[self._sq[0]]
-        for kind, qi, _, iq, _ in self.groups:
-            w = np.array([q[qi[k]] for k in ("qw", "qx", "qy", "qz")])
-            w = w / np.linalg.norm(w)
-            if kind == "ball_rpy":
+        for ball, qw, xyz, _, iq, _ in self._g:
+            w = q[qw]
+            w = w / np.sqrt(w.dot(w))  # (np.linalg.norm's own arithmetic, without its overhead)
+            if ball:
                 qs[iq:iq + 3] = RollPitchYaw(Quaternion(w)).vector()
             else:
                 qs[iq:iq + 4] = w
-                qs[iq + 4:iq + 7] = [q[qi[k]] for k in ("x", "y", "z")]
+                qs[iq + 4:iq + 7] = q[xyz]
         return qs
 
     def q_from_sim(self, qs: np.ndarray) -> np.ndarray:
         _, RollPitchYaw = _rotation_types()
         q = np.zeros(self.nq)
         q[self._sq[0]] = qs[self._sq[1]]
-        for kind, qi, _, iq, _ in self.groups:
-            if kind == "ball_rpy":
+        for ball, qw, xyz, _, iq, _ in self._g:
+            if ball:
                 w = RollPitchYaw(_f64(qs[iq:iq + 3])).ToQuaternion().wxyz()
             else:
-                w = qs[iq:iq + 4] / np.linalg.norm(qs[iq:iq + 4])
-                for a, k in enumerate(("x", "y", "z")):
-                    q[qi[k]] = qs[iq + 4 + a]
-            for a, k in enumerate(("qw", "qx", "qy", "qz")):
-                q[qi[k]] = w[a]
+                w = qs[iq:iq + 4]
+                w = w / np.sqrt(w.dot(w))
+                q[xyz] = qs[iq + 4:iq + 7]
+            q[qw] = w
         return q
 
     def P(self, q: np.ndarray) -> np.ndarray:
         """v_drake = P(q) v: the identity but R (body -> world) on the angular rows."""
-        P = np.zeros((self.nv, self.nv))
-        P[self._sv[1], self._sv[0]] = 1.0
-        for kind, qi, vi, _, iv in self.groups:
-            R = rot_wxyz(*(q[qi[k]] for k in ("qw", "qx", "qy", "qz")))
-            ang = [vi[k] for k in ("wx", "wy", "wz")]
-            for a in range(3):
-                P[iv + a, ang] = R[a]
-            if kind == "quaternion_floating":
-                for a, k in enumerate(("vx", "vy", "vz")):
-                    P[iv + 3 + a, vi[k]] = 1.0
+        P = self._P0.copy()
+        for _, qw, _, ang, _, iv in self._g:
+            P[iv:iv + 3, ang] = rot_wxyz(*q[qw].tolist())
         return P
 
-    def v_to_sim(self, q, v):
+    def v_to_sim(self, q, v, P=None):
+        """``P``: P(q) when the caller has it (one build per replay stage)."""
         if not self.groups:  # one-dof joints only: P is a permutation
             out = np.empty(self.nv)
             out[self._sv[1]] = v[self._sv[0]]
             return out
-        return self.P(q) @ v
+        return (self.P(q) if P is None else P) @ v
 
-    def v_from_sim(self, q, vs):
+    def v_from_sim(self, q, vs, P=None):
         if not self.groups:
             out = np.empty(self.nv)
             out[self._sv[0]] = vs[self._sv[1]]
             return out
-        return self.P(q).T @ vs  # P orthogonal
+        return (self.P(q) if P is None else P).T @ vs  # P orthogonal
 
     f_to_sim = v_to_sim  # P^-T = P
     f_from_sim = v_from_sim
@@ -352,6 +362,8 @@ class DrakeBackend:
                 g = np.array(report["gravity"], float)
                 self.gravcomp.append((hf["body"], -hf["gravcomp"] * hf["mass"] * g))
         self.coms = coms
+        self._bodies: dict[str, tuple[Any, Any]] = {}
+        self._easf: list = []  # the replay's ExternallyAppliedSpatialForce objects, refilled per stage
 
     def notes(self) -> list[str]:
         return [f"Drake {version()}, continuous MultibodyPlant, RK4 in fixed steps on its CalcTimeDerivatives "
@@ -364,13 +376,15 @@ class DrakeBackend:
         self.plant.SetPositions(ctx, qs)
         self.plant.SetVelocities(ctx, vs)
 
-    def _forces(self, t: float, qs: np.ndarray, vs: np.ndarray, ref: Reference | None
+    def _forces(self, t: float, qs: np.ndarray, vs: np.ndarray, ref: Reference | None, ctx: Any
                 ) -> tuple[np.ndarray, list[tuple[str, np.ndarray, np.ndarray]]]:
         """(generalized force in Drake's dofs, [(body, world point, world force)]): u from ``ref``
-        (None: without u), springs, dampers, coordinate forces; point forces, attractors, gravcomp."""
+        (None: without u), springs, dampers, coordinate forces; point forces, attractors, gravcomp.
+        ``ctx``: a plant context holding (qs, vs) (the bodies' poses of attractors and gravcomp)."""
         cm = self.cm
         q = cm.q_from_sim(qs)
-        v = cm.v_from_sim(q, vs)
+        P = cm.P(q) if cm.groups else None  # built once for both maps
+        v = cm.v_from_sim(q, vs, P)
         f = np.zeros(cm.nv)  # ours
         if ref is not None:
             f += ref.force_at(t, q)
@@ -383,33 +397,39 @@ class DrakeBackend:
         if gen is not None:
             f += gen
         pts += epts
-        if self.attractors or self.gravcomp:
-            self._set(self.ctx, qs, vs)
-            for point, mu, bodies in self.attractors:
-                for b, mass in bodies:
-                    com = self._com_world(b)
-                    pts.append((b, com, attractor_force(point, mu, mass, com)))
-            for b, force in self.gravcomp:
-                pts.append((b, self._com_world(b), force))
-        return cm.f_to_sim(q, f), pts
+        for point, mu, bodies in self.attractors:
+            for b, mass in bodies:
+                com = self._com_world(ctx, b)
+                pts.append((b, com, attractor_force(point, mu, mass, com)))
+        for b, force in self.gravcomp:
+            pts.append((b, self._com_world(ctx, b), force))
+        return cm.v_to_sim(q, f, P), pts  # f_to_sim: P^-T = P
 
-    def _com_world(self, body: str) -> np.ndarray:
-        X = self.plant.EvalBodyPoseInWorld(self.ctx, self.plant.GetBodyByName(body, self._inst))
-        return np.asarray(X.multiply(self.coms.get(body, np.zeros(3))))
+    def _body(self, name: str) -> tuple[Any, Any]:
+        """(body, its index) by name, looked up once (the replay asks at every stage)."""
+        got = self._bodies.get(name)
+        if got is None:
+            body = self.plant.GetBodyByName(name, self._inst)
+            got = self._bodies[name] = (body, body.index())
+        return got
+
+    def _com_world(self, ctx: Any, body: str) -> np.ndarray:
+        X = self.plant.EvalBodyPoseInWorld(ctx, self._body(body)[0])
+        return np.asarray(X.multiply(self.coms.get(body, _ORIGIN)))
 
     def _spatial(self, ctx: Any, pts: list) -> list:
-        """The point forces as Drake's ExternallyAppliedSpatialForce (body frame point, world force)."""
+        """The point forces as Drake's ExternallyAppliedSpatialForce (body frame point, world force).
+        The objects are kept and refilled (the output's ``set_value`` copies them into Drake)."""
         SpatialForce, ExternallyAppliedSpatialForce = _spatial_types()
-        out = []
-        for b, pw, fw in pts:
-            body = self.plant.GetBodyByName(b, self._inst)
+        while len(self._easf) < len(pts):
+            self._easf.append(ExternallyAppliedSpatialForce())
+        for e, (b, pw, fw) in zip(self._easf, pts):
+            body, index = self._body(b)
             X = self.plant.EvalBodyPoseInWorld(ctx, body)
-            e = ExternallyAppliedSpatialForce()
-            e.body_index = body.index()
+            e.body_index = index
             e.p_BoBq_B = X.inverse().multiply(np.asarray(pw, float))
-            e.F_Bq_W = SpatialForce(_f64(np.zeros(3)), _f64(fw))
-            out.append(e)
-        return out
+            e.F_Bq_W = SpatialForce(_ORIGIN, _f64(fw))
+        return self._easf[:len(pts)]
 
     def _points_generalized(self, pts: list) -> np.ndarray:
         """J^T f of the point forces by Drake's Jacobians at ``self.ctx``."""
@@ -417,7 +437,7 @@ class DrakeBackend:
 
         plant, out = self.plant, np.zeros(self.cm.nv)
         for b, pw, fw in pts:
-            body = plant.GetBodyByName(b, self._inst)
+            body = self._body(b)[0]
             p_B = plant.EvalBodyPoseInWorld(self.ctx, body).inverse().multiply(np.asarray(pw, float))
             J = plant.CalcJacobianTranslationalVelocity(self.ctx, JacobianWrtVariable.kV, body.body_frame(),
                                                         p_B, plant.world_frame(), plant.world_frame())
@@ -427,8 +447,8 @@ class DrakeBackend:
     def _rhs_sim(self, t: float, qs: np.ndarray, vs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(M, every non-control generalized force) in Drake's dofs."""
         plant = self.plant
-        f, pts = self._forces(t, qs, vs, None)
         self._set(self.ctx, qs, vs)
+        f, pts = self._forces(t, qs, vs, None, self.ctx)
         M = plant.CalcMassMatrix(self.ctx)
         rhs = -plant.CalcBiasTerm(self.ctx) + plant.CalcGravityGeneralizedForces(self.ctx) \
             - self.damping * vs + f + self._points_generalized(pts)
@@ -465,8 +485,8 @@ class DrakeBackend:
 
         cm, plant = self.cm, self.plant
         qs, vs = cm.q_to_sim(q), cm.v_to_sim(q, v)
-        f, pts = self._forces(t, qs, vs, None)
         self._set(self.ctx, qs, vs)
+        f, pts = self._forces(t, qs, vs, None, self.ctx)
         forces = MultibodyForces(plant)
         plant.CalcForceElementsContribution(self.ctx, forces)
         tau = plant.CalcInverseDynamics(self.ctx, cm.a_to_sim(q, v, a), forces)
@@ -499,8 +519,7 @@ class DrakeBackend:
         cm = self.cm
         stop = ref.steps if stop is None else stop
         n = stop - start
-        Q = np.zeros((n + 1, cm.nq))
-        V = np.zeros((n + 1, cm.nv))
+        X = np.zeros((n + 1, cm.sim_nq + cm.nv))  # Drake's states and accelerations, mapped at the end
         A = np.zeros((n + 1, cm.nv))
         q0, v0 = (ref.q[2 * start], ref.v[2 * start]) if x0 is None else x0
         times = ref.t[::2][start: stop + 1]
@@ -508,44 +527,60 @@ class DrakeBackend:
         self._stored = 0
         frames: list = []
         try:
-            return self._steps(ref, frame_every, Q, V, A, frames, cm.q_to_sim(q0), cm.v_to_sim(q0, v0),
-                               start, times)
+            self._steps(ref, frame_every, X, A, frames, cm.q_to_sim(q0), cm.v_to_sim(q0, v0), start, times)
+            return Replay(times, *self._ours(X, A), frames, frame_every)
         except BlowUp as e:
             j = self._stored
-            e.partial = Replay(times[:j], Q[:j], V[:j], A[:j], frames, frame_every)
+            e.partial = Replay(times[:j], *self._ours(X[:j], A[:j]), frames, frame_every)
             raise
         finally:
             self._ref = None
 
-    def _steps(self, ref, frame_every, Q, V, A, frames, qs, vs, start, times) -> Replay:
+    def _ours(self, X: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(q, v, a) in our coordinates of Drake's states ``X`` and accelerations ``A`` (rows)."""
+        cm, nq = self.cm, self.cm.sim_nq
+        if not cm.groups:  # a permutation: every row at once
+            (sq, sq_sim), (sv, sv_sim) = cm._sq, cm._sv
+            Q, V, Ao = np.zeros((len(X), cm.nq)), np.empty((len(X), cm.nv)), np.empty((len(X), cm.nv))
+            Q[:, sq], V[:, sv], Ao[:, sv] = X[:, sq_sim], X[:, nq + sv_sim], A[:, sv_sim]
+            return Q, V, Ao
+        Q, V, Ao = np.zeros((len(X), cm.nq)), np.zeros((len(X), cm.nv)), np.zeros((len(X), cm.nv))
+        for j, (x, a) in enumerate(zip(X, A)):
+            Q[j] = q = cm.q_from_sim(x[:nq])
+            P = cm.P(q)
+            V[j] = cm.v_from_sim(q, x[nq:], P)
+            Ao[j] = cm.v_from_sim(q, a, P)  # a_from_sim: d(R w)/dt = R dw/dt
+        return Q, V, Ao
+
+    def _steps(self, ref, frame_every, X, A, frames, qs, vs, start, times) -> None:
         """Classical RK4 (fixed step h) on Drake's x' = f(t, x): every stage sets the diagram's
-        time and the plant's state, so the force system evaluates u and the scene's forces there."""
+        time and the plant's state, so the force system evaluates u and the scene's forces there.
+        Fills ``X`` (states) and ``A`` (Drake's accelerations) row by row (``self._stored`` rows)."""
         diagram, dctx, derivs = self._diagram()
         plant = self.plant
         pctx = plant.GetMyMutableContextFromRoot(dctx)
         h, t0 = ref.h, ref.t0
         n = len(times) - 1
         nq = plant.num_positions()
+        dvec = derivs.get_vector()
 
         def f(t: float, x: np.ndarray) -> np.ndarray:
             dctx.SetTime(t)
             plant.SetPositionsAndVelocities(pctx, x)
             diagram.CalcTimeDerivatives(dctx, derivs)
-            return np.asarray(derivs.get_vector().CopyToVector())
+            return dvec.CopyToVector()
 
         x = np.concatenate([qs, vs])
         for j in range(n + 1):
             tk = t0 + (start + j) * h
-            if not np.all(np.isfinite(x)):
+            if not np.isfinite(x).all():
                 raise BlowUp(tk, "non-finite state")
             k1 = f(tk, x)
             a = k1[nq:]
-            if not np.all(np.abs(a) < ACC_LIMIT):
-                big = float(np.abs(a).max()) if np.all(np.isfinite(a)) else float("inf")
+            if not (np.abs(a) < ACC_LIMIT).all():
+                big = float(np.abs(a).max()) if np.isfinite(a).all() else float("inf")
                 raise BlowUp(tk, f"|ddq| = {big:.3g} > {ACC_LIMIT:g} (or non-finite)", big, ACC_LIMIT)
-            qo = self.cm.q_from_sim(x[:nq])
-            Q[j], V[j] = qo, self.cm.v_from_sim(qo, x[nq:])
-            A[j] = self.cm.a_from_sim(qo, V[j], a)
+            X[j], A[j] = x, a
             self._stored = j + 1
             if frame_every and (start + j) % frame_every == 0:  # f(tk, x) has set the plant's state
                 frames.append((tk, self._body_poses(pctx)))
@@ -555,7 +590,6 @@ class DrakeBackend:
             k3 = f(tk + 0.5 * h, x + 0.5 * h * k2)
             k4 = f(tk + h, x + h * k3)
             x = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        return Replay(times, Q, V, A, frames, frame_every)
 
     def _body_poses(self, ctx: Any) -> list:
         """(name, world position, quaternion w x y z) of every body of the robot at ``ctx``."""
@@ -608,6 +642,16 @@ def _spatial_types() -> tuple[Any, Any]:
     return SpatialForce, ExternallyAppliedSpatialForce
 
 
+#: a body's origin, and a zero torque (read only)
+_ORIGIN = np.zeros(3)
+_ORIGIN.flags.writeable = False
+
+
+def _span(idx: list[int]) -> Any:
+    """Consecutive indices as a slice (a view, cheaper to assign through), else an index array."""
+    return slice(idx[0], idx[0] + len(idx)) if idx == list(range(idx[0], idx[0] + len(idx))) else np.array(idx)
+
+
 def _f64(x: Any) -> Any:
     """A float array (typed Any: pydrake's stubs spell ndarray[float64] unsatisfiably)."""
     return np.asarray(x, float)
@@ -645,43 +689,49 @@ def _make_diagram(be: DrakeBackend) -> tuple[Any, Any, Any]:
     builder = be._builder
     nx, nv = plant.num_multibody_states(), plant.num_velocities()
     nq = plant.num_positions()
-    cache: dict[str, Any] = {"key": None}
-
-    def at(ctx: Any, feed: Any) -> tuple[np.ndarray, list]:
-        x = feed.get_input_port(0).Eval(ctx)
-        t = ctx.get_time()
-        key = (t, x.tobytes())
-        if cache["key"] != key:
-            assert be._ref is not None
-            f, pts = be._forces(t, x[:nq], x[nq:], be._ref)
-            cache["key"], cache["val"] = key, (f, pts, x)
-        return cache["val"]
+    # the plant's own context in the diagram's (set below): the callbacks read the bodies' poses there,
+    # where Drake has set the stage's state (no second context to set and recompute)
+    plant_ctx: list[Any] = []
+    cache: dict[str, Any] = {"key": None, "ref": None}  # the last stage's forces
+    # no point force, attractor or gravity compensation: the spatial input stays unconnected (empty)
+    points = bool(be.attractors or be.gravcomp or be.expr.points and be.expr.active)
 
     class Feed(LeafSystem):
         def __init__(self) -> None:
             super().__init__()
-            self.DeclareVectorInputPort("x", nx)
+            self._x: Any = self.DeclareVectorInputPort("x", nx)
             self.DeclareVectorOutputPort("tau", nv, self._tau)
-            self.DeclareAbstractOutputPort(
-                "spatial", lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()]), self._spatial)
+            if points:
+                self.DeclareAbstractOutputPort(
+                    "spatial", lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()]), self._spatial)
+
+        def at(self, ctx: Any) -> tuple[np.ndarray, list]:
+            """The stage's forces, computed once for both outputs."""
+            x = self._x.Eval(ctx)
+            t = ctx.get_time()
+            if not points:  # the one output: nothing to share
+                return be._forces(t, x[:nq], x[nq:], be._ref, plant_ctx[0])
+            key = (t, x.tobytes())
+            if cache["key"] != key or cache["ref"] is not be._ref:
+                assert be._ref is not None
+                cache["key"], cache["ref"] = key, be._ref
+                cache["val"] = be._forces(t, x[:nq], x[nq:], be._ref, plant_ctx[0])
+            return cache["val"]
 
         def _tau(self, ctx, out):
-            out.SetFromVector(at(ctx, self)[0])
+            out.SetFromVector(self.at(ctx)[0])
 
         def _spatial(self, ctx, out):
-            f, pts, x = at(ctx, self)
-            if not pts:  # no point force at this stage: no pose to evaluate
-                out.set_value([])
-                return
-            be._set(be.ctx, x[:nq], x[nq:])
-            out.set_value(be._spatial(be.ctx, pts))
+            out.set_value(be._spatial(plant_ctx[0], self.at(ctx)[1]))
 
     feed = builder.AddSystem(Feed())
     builder.Connect(plant.get_state_output_port(), feed.get_input_port(0))
     builder.Connect(feed.get_output_port(0), plant.get_applied_generalized_force_input_port())
-    builder.Connect(feed.get_output_port(1), plant.get_applied_spatial_force_input_port())
+    if points:
+        builder.Connect(feed.get_output_port(1), plant.get_applied_spatial_force_input_port())
     diagram = builder.Build()
     dctx = diagram.CreateDefaultContext()
+    plant_ctx.append(plant.GetMyContextFromRoot(dctx))
     if plant.num_actuators():
         plant.get_actuation_input_port().FixValue(plant.GetMyMutableContextFromRoot(dctx),
                                                   np.zeros(plant.num_actuators()))

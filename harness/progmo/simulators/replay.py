@@ -14,6 +14,7 @@ Conventions (see ``src/export/mod.rs`` and ``shared/notes/simulators.md``):
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -21,7 +22,10 @@ import numpy as np
 
 
 def rot_wxyz(w: float, x: float, y: float, z: float) -> np.ndarray:
-    n = np.sqrt(w * w + x * x + y * y + z * z)
+    # on Python floats (the replays call this at every stage): the same IEEE operations as on
+    # numpy scalars, without their per-operation overhead
+    w, x, y, z = float(w), float(x), float(y), float(z)
+    n = math.sqrt(w * w + x * x + y * y + z * z)
     w, x, y, z = w / n, x / n, y / n, z / n
     return np.array([
         [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
