@@ -333,3 +333,46 @@ fn bodies_nesting_and_elements_are_bounded() {
     assert!(e.message.contains("more than 200000 XML elements"), "{e}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Mass properties from geoms (MuJoCo's compiler; parity with MuJoCo itself in
+/// tests/python/test_mjcf_geom_inertia.py): closed forms of two spheres (2/5 m r^2 each, parallel
+/// axes to the mass-weighted centre), a rotated box (m/12 (b^2 + c^2) with full edges) and a capsule
+/// along a `fromto` (centre at the midpoint, axial moment m_cyl r^2/2 + 2/5 m_sph r^2).
+#[test]
+fn inertia_from_geoms_closed_forms() {
+    let s = load(&scene_text(&robots().join("geoms.xml"), "")).unwrap_or_else(|e| panic!("{e}"));
+    let SceneSystem::Tree(p) = &s.system else {
+        panic!("a tree system")
+    };
+    let tree = p.model.tree();
+    let close = |a: f64, b: f64| assert!((a - b).abs() <= 1e-14 * b.abs(), "{a} vs {b}");
+    let [d, brick, rod] = [0, 1, 2].map(|k| &tree.bodies()[k]);
+    close(d.mass, 4.0);
+    close(d.com.x, 0.25);
+    let sphere = 0.4 * 0.01;
+    close(d.inertia[(0, 0)], 4.0 * sphere);
+    // 1 (0.75)^2 + 3 (0.25)^2 = 0.75 about y and z
+    close(d.inertia[(1, 1)], 4.0 * sphere + 0.75);
+    let m = 500.0 * 0.2 * 0.4 * 0.6;
+    close(brick.mass, m);
+    // turned 90 degrees about z: the 0.4 edge along x, the 0.2 edge along y
+    close(
+        brick.inertia[(0, 0)],
+        m / 12.0 * (0.2f64.powi(2) + 0.6f64.powi(2)),
+    );
+    close(
+        brick.inertia[(1, 1)],
+        m / 12.0 * (0.4f64.powi(2) + 0.6f64.powi(2)),
+    );
+    close(
+        brick.inertia[(2, 2)],
+        m / 12.0 * (0.4f64.powi(2) + 0.2f64.powi(2)),
+    );
+    close(rod.com.z, -0.2);
+    let (r, h) = (0.05, 0.4);
+    let ms = 2.0 * 4.0 * r / (4.0 * r + 3.0 * h);
+    close(
+        rod.inertia[(2, 2)],
+        (2.0 - ms) * r * r / 2.0 + 0.4 * ms * r * r,
+    );
+}

@@ -4,8 +4,9 @@
 //! orientations") place it in its parent; its joints act in sequence after that placement, as in
 //! MuJoCo and in [`crate::tree`]: hinge (axis through `pos`), slide, ball (centre `pos`), free.
 //! Joint attributes may come from `<default>` classes (`class`, a body's `childclass`, nested
-//! defaults inherit). Mass properties only from an explicit `<inertial>` (`pos`, orientation,
-//! `mass`, `diaginertia` or `fullinertia`): inertia from geoms is refused with a located error.
+//! defaults inherit). Mass properties from an explicit `<inertial>` (`pos`, orientation, `mass`,
+//! `diaginertia` or `fullinertia`) or, as MuJoCo's compiler does, from the primitive geoms
+//! ([`super::geom_inertia`]; mesh geoms with mass are refused), then `boundmass`/`boundinertia`.
 //! Modelled with MuJoCo's meaning: joint `damping`, `armature`, `stiffness` with `springref`
 //! (hinge and slide), `ref` (hinge and slide; `ref` and `springref` of hinges in degrees under
 //! `<compiler angle="degree">`, as MuJoCo converts them) and body `gravcomp`. Read and not
@@ -15,6 +16,7 @@
 //! errors): springs on ball and free joints, `springdamper`, and what changes the stated model
 //! (see [`compiler`]). Sites, cameras, lights, sensors and assets are not read (no dynamics).
 
+use super::geom_inertia::{self as gi, GeomMass, MassProps, Shape};
 use super::unmodelled::{JointRange, Recorder, Unmodelled};
 use super::urdf::Robot;
 use crate::located::{SceneError, Source};
@@ -93,6 +95,11 @@ struct Compiler {
     eulerseq: [u8; 3],
     /// `inertiafromgeom`: "auto" (default), "true" or "false".
     from_geom: String,
+    /// `boundmass`, `boundinertia`: lower bounds of every body's mass and principal moments.
+    boundmass: f64,
+    boundinertia: f64,
+    /// `inertiagrouprange`: the geom groups that count for inertia (MuJoCo's default 0 5).
+    groups: [f64; 2],
 }
 
 fn compiler(src: &Source, root: Node) -> R<Compiler> {
@@ -100,6 +107,9 @@ fn compiler(src: &Source, root: Node) -> R<Compiler> {
         degrees: true,
         eulerseq: *b"xyz",
         from_geom: "auto".into(),
+        boundmass: 0.0,
+        boundinertia: 0.0,
+        groups: [0.0, 5.0],
     };
     for n in elements(root).filter(|n| n.has_tag_name("compiler")) {
         if let Some(a) = n.attribute("angle") {
@@ -139,17 +149,7 @@ fn compiler(src: &Source, root: Node) -> R<Compiler> {
             }
             c.from_geom = s.into();
         }
-        // attributes that would change the mass properties the file states
-        for a in ["boundmass", "boundinertia", "settotalmass"] {
-            if let Some(v) = n.attribute(a) {
-                if v.trim()
-                    .parse::<f64>()
-                    .map_or(true, |x| x != 0.0 && !(a == "settotalmass" && x == -1.0))
-                {
-                    return Err(err(src, n, &format!("compiler.{a}"), format!("`{a}=\"{v}\"` (MuJoCo would change the stated mass properties) is not supported")));
-                }
-            }
-        }
+        bounds(src, n, &mut c)?;
         if n.attribute("balanceinertia") == Some("true") {
             return Err(err(src, n, "compiler.balanceinertia", "`balanceinertia=\"true\"` (MuJoCo would change the stated inertias) is not supported"));
         }
@@ -163,6 +163,45 @@ fn compiler(src: &Source, root: Node) -> R<Compiler> {
         }
     }
     Ok(c)
+}
+
+/// `boundmass`, `boundinertia` (>= 0), `inertiagrouprange`; `settotalmass` (a rescaling) is
+/// refused.
+fn bounds(src: &Source, n: Node, c: &mut Compiler) -> R<()> {
+    for a in ["boundmass", "boundinertia"] {
+        if let Some(t) = n.attribute(a) {
+            let v = fixed::<1>(src, n, &format!("compiler.{a}"), a, t)?[0];
+            if v < 0.0 {
+                return Err(err(
+                    src,
+                    n,
+                    &format!("compiler.{a}"),
+                    format!("`{a}` must be >= 0, got {v}"),
+                ));
+            }
+            *(if a == "boundmass" {
+                &mut c.boundmass
+            } else {
+                &mut c.boundinertia
+            }) = v;
+        }
+    }
+    if let Some(t) = n.attribute("inertiagrouprange") {
+        c.groups = fixed::<2>(src, n, "compiler.inertiagrouprange", "inertiagrouprange", t)?;
+    }
+    if let Some(v) = n.attribute("settotalmass") {
+        if v.trim().parse::<f64>().map_or(true, |x| x > 0.0) {
+            return Err(err(
+                src,
+                n,
+                "compiler.settotalmass",
+                format!(
+                    "`settotalmass=\"{v}\"` (MuJoCo would rescale the masses) is not supported"
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 fn quat_of(u: UnitQuaternion<f64>) -> [f64; 4] {
@@ -311,6 +350,17 @@ impl<'a, 'i> Defaults<'a, 'i> {
         self.attr(g, class, attr, |d| d.2)
     }
 
+    /// Geom `g` of class `class` and the `<geom>` defaults of the class chain, nearest first.
+    fn geom_chain(&self, g: Node<'a, 'i>, class: &str) -> Vec<Node<'a, 'i>> {
+        let mut out = vec![g];
+        let mut c = self.classes.get(class);
+        while let Some(d) = c {
+            out.extend(d.2);
+            c = d.0.as_ref().and_then(|p| self.classes.get(p));
+        }
+        out
+    }
+
     fn attr(
         &self,
         e: Node<'a, 'i>,
@@ -341,73 +391,95 @@ fn is_identifier(name: &str) -> bool {
         && name != "pi"
 }
 
-/// The mass properties of a body from its `<inertial>` (massless without one).
-fn inertial(src: &Source, c: &Compiler, body: Node, name: &str, parent: &str) -> R<BodySpec> {
-    let what = format!("body[{name}].inertial");
-    let Some(n) = elements(body).find(|e| e.has_tag_name("inertial")) else {
-        if c.from_geom != "false" {
-            if let Some(g) = elements(body).find(|e| e.has_tag_name("geom")) {
-                return Err(err(src, g, &format!("body[{name}].geom"), format!("body `{name}` has geoms and no <inertial>: inertia from geoms is not supported (give an explicit <inertial>, or <compiler inertiafromgeom=\"false\"/> for a massless body)")));
-            }
-        }
-        return Ok(BodySpec::massless(name, parent));
-    };
-    if c.from_geom == "true" && elements(body).any(|e| e.has_tag_name("geom")) {
-        return Err(err(src, n, &what, "inertiafromgeom=\"true\" replaces this <inertial> by the geoms' inertia: not supported"));
-    }
+/// An `<inertial>` element's mass properties in the body frame (`pos`, orientation, `mass`,
+/// `diaginertia` or `fullinertia`).
+fn explicit_inertial(src: &Source, c: &Compiler, n: Node, what: &str) -> R<MassProps> {
     let mass = match n.attribute("mass") {
-        None => return Err(err(src, n, &what, "an <inertial> needs `mass`")),
+        None => return Err(err(src, n, what, "an <inertial> needs `mass`")),
         Some(t) => fixed::<1>(src, n, &format!("{what}.mass"), "mass", t)?[0],
     };
     let pos = match n.attribute("pos") {
-        None => return Err(err(src, n, &what, "an <inertial> needs `pos`")),
+        None => return Err(err(src, n, what, "an <inertial> needs `pos`")),
         Some(t) => fixed::<3>(src, n, &format!("{what}.pos"), "pos", t)?,
     };
-    let local = match (n.attribute("diaginertia"), n.attribute("fullinertia")) {
+    let inertia = match (n.attribute("diaginertia"), n.attribute("fullinertia")) {
         (Some(t), None) => {
             let d = fixed::<3>(src, n, &format!("{what}.diaginertia"), "diaginertia", t)?;
-            let q = orientation(src, c, n, &what)?;
-            let r = UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
-                .to_rotation_matrix();
+            let r = rotation(orientation(src, c, n, what)?).to_rotation_matrix();
             let i = super::rotate_inertia(r.matrix(), &Matrix3::from_diagonal(&Vector3::from(d)));
-            Matrix3::from_row_slice(&i.concat())
+            Matrix3::from(i) // symmetric: rows or columns alike
         }
         (None, Some(t)) => {
             let i = fixed::<6>(src, n, &format!("{what}.fullinertia"), "fullinertia", t)?;
-            if orientation(src, c, n, &what)? != [1.0, 0.0, 0.0, 0.0] {
+            if orientation(src, c, n, what)? != [1.0, 0.0, 0.0, 0.0] {
                 return Err(err(
                     src,
                     n,
-                    &what,
+                    what,
                     "fullinertia with an orientation: MuJoCo refuses it",
                 ));
             }
             Matrix3::new(i[0], i[3], i[4], i[3], i[1], i[5], i[4], i[5], i[2])
         }
         (Some(_), Some(_)) => {
-            return Err(err(src, n, &what, "both diaginertia and fullinertia given"))
+            return Err(err(src, n, what, "both diaginertia and fullinertia given"))
         }
         (None, None) => {
             return Err(err(
                 src,
                 n,
-                &what,
+                what,
                 "an <inertial> needs `diaginertia` or `fullinertia`",
             ))
         }
     };
-    if mass == 0.0 && local.iter().all(|x| *x == 0.0) {
+    Ok(MassProps {
+        mass,
+        com: Vector3::from(pos),
+        inertia,
+    })
+}
+
+fn rotation(q: [f64; 4]) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
+}
+
+/// MuJoCo's `mjuu_z2quat`: the rotation taking z to `v` about z x v (about x when parallel).
+fn z2quat(v: Vector3<f64>) -> UnitQuaternion<f64> {
+    let v = v.normalize();
+    let axis = Vector3::z().cross(&v);
+    let s = axis.norm();
+    let axis = if s < 1e-10 { Vector3::x() } else { axis / s };
+    UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_unchecked(axis), s.atan2(v.z))
+}
+
+/// `props` checked and made a body: none or zero mass and inertia is a massless body; otherwise
+/// the mass must be positive and the inertia positive definite (errors located at `n`).
+fn body_spec(
+    src: &Source,
+    n: Node,
+    what: &str,
+    (name, parent): (&str, &str),
+    props: Option<MassProps>,
+) -> R<BodySpec> {
+    let Some(p) = props else {
+        return Ok(BodySpec::massless(name, parent));
+    };
+    if p.mass == 0.0 && p.inertia.iter().all(|x| *x == 0.0) {
         return Ok(BodySpec::massless(name, parent));
     }
-    if mass <= 0.0 {
+    if p.mass <= 0.0 {
         return Err(err(
             src,
             n,
             &format!("{what}.mass"),
-            format!("mass must be positive (or 0 with zero inertia: a massless body), got {mass}"),
+            format!(
+                "mass must be positive (or 0 with zero inertia: a massless body), got {}",
+                p.mass
+            ),
         ));
     }
-    if local.cholesky().is_none() {
+    if p.inertia.cholesky().is_none() {
         return Err(err(
             src,
             n,
@@ -415,8 +487,8 @@ fn inertial(src: &Source, c: &Compiler, body: Node, name: &str, parent: &str) ->
             "the inertia tensor of a body with mass must be positive definite",
         ));
     }
-    let inertia = [0, 1, 2].map(|a| [0, 1, 2].map(|b| local[(a, b)]));
-    Ok(BodySpec::new(name, parent, mass, pos, inertia))
+    let inertia = [0, 1, 2].map(|a| [0, 1, 2].map(|b| p.inertia[(a, b)]));
+    Ok(BodySpec::new(name, parent, p.mass, p.com.into(), inertia))
 }
 
 /// Read an MJCF document (`src` is the file and its text); `locked` joints are welded at the
@@ -453,6 +525,7 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         joints: vec![],
         names: HashMap::new(),
         joint_set: HashSet::new(),
+        moving: HashSet::new(),
     };
     // depth-first, parents first: (element, parent body name, inherited childclass)
     let mut stack = top_bodies(src, &worldbodies)?;
@@ -573,6 +646,8 @@ struct Walk<'s, 'd, 'a, 'i> {
     joints: Vec<String>,
     names: HashMap<String, Node<'a, 'i>>,
     joint_set: HashSet<String>,
+    /// Bodies with joints, or on one that has (MuJoCo's non-static bodies).
+    moving: HashSet<String>,
 }
 
 impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
@@ -622,7 +697,13 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
         }
         let pos = attr_k::<3>(src, b, &format!("{what}.pos"), "pos", [0.0; 3])?;
         let quat = orientation(src, self.c, b, &what)?;
-        let mut spec = inertial(src, self.c, b, &name, parent)?
+        let moving = self.moving.contains(parent)
+            || elements(b).any(|e| e.has_tag_name("joint") || e.has_tag_name("freejoint"));
+        if moving {
+            self.moving.insert(name.clone());
+        }
+        let mut spec = self
+            .mass_props(b, (&name, parent), &class, (pos, moving))?
             .at(pos)
             .rotated(quat);
         if let Some(t) = b.attribute("gravcomp") {
@@ -649,6 +730,63 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
         }
         self.bodies.push(spec);
         Ok((name, class))
+    }
+
+    /// Body `b`'s mass properties as MuJoCo's compiler makes them: from its geoms when
+    /// `inertiafromgeom` is true, or auto and it has no `<inertial>` (an `<inertial>` is kept
+    /// when no geom has mass), else from its `<inertial>`; then `boundmass` / `boundinertia`.
+    fn mass_props(
+        &self,
+        b: Node<'a, 'i>,
+        (name, parent): (&str, &str),
+        class: &str,
+        (pos, moving): ([f64; 3], bool),
+    ) -> R<BodySpec> {
+        let (src, c) = (self.src, self.c);
+        let what = format!("body[{name}]");
+        let inertial = elements(b).find(|e| e.has_tag_name("inertial"));
+        let iwhat = format!("{what}.inertial");
+        let mut props = inertial
+            .map(|n| explicit_inertial(src, c, n, &iwhat))
+            .transpose()?;
+        let mut at = inertial.map_or((b, &what), |n| (n, &iwhat));
+        if c.from_geom == "true" || (c.from_geom == "auto" && inertial.is_none()) {
+            let mut parts = vec![];
+            for (k, g) in elements(b).filter(|e| e.has_tag_name("geom")).enumerate() {
+                let gclass = g.attribute("class").unwrap_or(class);
+                let gname = g.attribute("name").map_or(format!("{k}"), String::from);
+                let gwhat = format!("{what}.geom[{gname}]");
+                if !self.defaults.classes.contains_key(gclass) && gclass != MAIN {
+                    return Err(err(
+                        src,
+                        g,
+                        &format!("{gwhat}.class"),
+                        format!("unknown default class `{gclass}`"),
+                    ));
+                }
+                let chain = self.defaults.geom_chain(g, gclass);
+                let a = GeomAttrs {
+                    src,
+                    chain,
+                    what: gwhat,
+                };
+                parts.extend(geom_mass(src, c, &a, moving)?);
+            }
+            if let Some(p) = gi::combine(&parts) {
+                props = Some(p);
+                at = (b, &what);
+            }
+        }
+        if c.boundmass > 0.0 || c.boundinertia > 0.0 {
+            // MuJoCo: a body without an inertial frame gets its own `pos` as the centre of mass
+            let p = props.unwrap_or(MassProps {
+                mass: 0.0,
+                com: Vector3::from(pos),
+                inertia: Matrix3::zeros(),
+            });
+            props = Some(gi::bound(p, c.boundmass, c.boundinertia));
+        }
+        body_spec(src, at.0, at.1, (name, parent), props)
     }
 
     /// One `contact` record per geom of body `b` that collides (`contype` or `conaffinity` not 0).
@@ -905,4 +1043,198 @@ impl<'a> JointAttrs<'_, 'a, '_> {
             .with_reference(reference);
         Ok((js, reference))
     }
+}
+
+/// A geom element's attributes: its own, else its default class chain's (`chain[0]` is the
+/// element, then its class and the class's parents).
+struct GeomAttrs<'s, 'a, 'i> {
+    src: &'s Source,
+    chain: Vec<Node<'a, 'i>>,
+    what: String,
+}
+
+impl<'a, 'i> GeomAttrs<'_, 'a, 'i> {
+    /// The attribute and the element that states it.
+    fn get(&self, a: &str) -> Option<(Node<'a, 'i>, &'a str)> {
+        self.chain
+            .iter()
+            .find_map(|n| n.attribute(a).map(|v| (*n, v)))
+    }
+
+    fn num<const K: usize>(&self, a: &str, default: [f64; K]) -> R<[f64; K]> {
+        match self.get(a) {
+            None => Ok(default),
+            Some((n, t)) => fixed(self.src, n, &format!("{}.{a}", self.what), a, t),
+        }
+    }
+
+    /// `size`, number by number: MuJoCo fills the class's size and the element overwrites the
+    /// numbers it gives (`size="0.5"` over a default `0.1 0.2 0.3` is 0.5 0.2 0.3).
+    fn size(&self) -> R<[f64; 3]> {
+        let mut out = [None; 3];
+        for n in &self.chain {
+            if let Some(t) = n.attribute("size") {
+                let v = parse_list(self.src, *n, &format!("{}.size", self.what), "size", t)?;
+                for (k, x) in v.into_iter().take(3).enumerate() {
+                    out[k] = out[k].or(Some(x));
+                }
+            }
+        }
+        Ok(out.map(|x| x.unwrap_or(0.0)))
+    }
+
+    /// The orientation of the first element of the chain that gives one.
+    fn orientation(&self, c: &Compiler) -> R<UnitQuaternion<f64>> {
+        let given = ["quat", "axisangle", "euler", "xyaxes", "zaxis"];
+        match self
+            .chain
+            .iter()
+            .find(|n| given.iter().any(|a| n.attribute(*a).is_some()))
+        {
+            None => Ok(UnitQuaternion::identity()),
+            Some(n) => Ok(rotation(orientation(self.src, c, *n, &self.what)?)),
+        }
+    }
+
+    /// The geom's frame in the body and its size: `pos` and orientation, or `fromto` (centre at
+    /// the midpoint, z along from - to as MuJoCo's `mjuu_z2quat`, half-length |from - to| / 2 as
+    /// size[1] of a capsule or cylinder, size[2] of a box or ellipsoid whose size[1] = size[0]).
+    fn frame(
+        &self,
+        c: &Compiler,
+        shape: Shape,
+    ) -> R<(Vector3<f64>, UnitQuaternion<f64>, [f64; 3])> {
+        let mut size = self.size()?;
+        let pos = Vector3::from(self.num::<3>("pos", [0.0; 3])?);
+        let Some((n, _)) = self.get("fromto") else {
+            return Ok((pos, self.orientation(c)?, size));
+        };
+        let w = format!("{}.fromto", self.what);
+        if shape == Shape::Sphere {
+            return Err(err(
+                self.src,
+                n,
+                &w,
+                "fromto requires a capsule, cylinder, box or ellipsoid",
+            ));
+        }
+        if pos != Vector3::zeros() {
+            return Err(err(
+                self.src,
+                self.chain[0],
+                &w,
+                "both pos and fromto given",
+            ));
+        }
+        let f = self.num::<6>("fromto", [0.0; 6])?;
+        let v = Vector3::new(f[0] - f[3], f[1] - f[4], f[2] - f[5]);
+        let half = v.norm() / 2.0;
+        if half < gi::MJ_EPS {
+            return Err(err(self.src, n, &w, "the fromto points coincide"));
+        }
+        if matches!(shape, Shape::Box | Shape::Ellipsoid) {
+            size = [size[0], size[0], half];
+        } else {
+            size[1] = half;
+        }
+        let mid = Vector3::new(f[0] + f[3], f[1] + f[4], f[2] + f[5]) / 2.0;
+        Ok((mid, z2quat(v), size))
+    }
+
+    /// The geom's mass: `mass` when given (0 when the volume is not above mjEPS), else
+    /// `density` (1000) times the volume (the area for a shell).
+    fn mass(&self, shape: Shape, size: [f64; 3], shell: bool) -> R<f64> {
+        let vol = gi::volume(shape, size, shell);
+        let (attr, value) = match self.get("mass") {
+            Some(_) => ("mass", self.num::<1>("mass", [0.0])?[0]),
+            None => ("density", self.num::<1>("density", [1000.0])?[0]),
+        };
+        if value < 0.0 {
+            let n = self.get(attr).map_or(self.chain[0], |x| x.0);
+            return Err(err(
+                self.src,
+                n,
+                &format!("{}.{attr}", self.what),
+                format!("`{attr}` must be >= 0, got {value}"),
+            ));
+        }
+        Ok(match attr {
+            "mass" if vol > gi::MJ_EPS => value,
+            "mass" => 0.0,
+            _ => value * vol,
+        })
+    }
+
+    /// A geom type without a closed form: a plane adds nothing (refused in a moving body, as
+    /// MuJoCo does); a mesh, sdf or height field only with `mass="0"` or `density="0"`.
+    fn no_shape(&self, kind: &str, moving: bool) -> R<()> {
+        let (src, g, what) = (self.src, self.chain[0], &self.what);
+        match kind {
+            "plane" if moving => Err(err(
+                src,
+                g,
+                what,
+                "a plane geom in a body that moves: MuJoCo allows planes only in static bodies",
+            )),
+            "plane" => Ok(()),
+            "mesh" | "sdf" | "hfield" => {
+                let zero = |a| {
+                    self.get(a)
+                        .is_some_and(|(_, v)| v.trim().parse::<f64>() == Ok(0.0))
+                };
+                if zero("mass") || (self.get("mass").is_none() && zero("density")) {
+                    return Ok(());
+                }
+                let asset = self
+                    .get(if kind == "hfield" { "hfield" } else { "mesh" })
+                    .map_or("?", |x| x.1);
+                Err(err(src, g, what, format!("the inertia of {kind} geom (`{asset}`) is not supported (give the body an <inertial>, or the geom mass=\"0\")")))
+            }
+            other => Err(err(
+                src,
+                g,
+                &format!("{what}.type"),
+                format!("unknown geom type `{other}`"),
+            )),
+        }
+    }
+}
+
+/// One geom's share of its body's mass properties (`None` for a geom outside
+/// `inertiagrouprange` or without volume).
+fn geom_mass(src: &Source, c: &Compiler, a: &GeomAttrs, moving: bool) -> R<Option<GeomMass>> {
+    let group = a.num::<1>("group", [0.0])?[0];
+    if group < c.groups[0] || group > c.groups[1] {
+        return Ok(None);
+    }
+    let kind = a.get("type").map_or("sphere", |x| x.1);
+    let Some(shape) = Shape::parse(kind) else {
+        a.no_shape(kind, moving)?;
+        return Ok(None);
+    };
+    let shell = a.get("shellinertia").is_some_and(|x| x.1 == "true");
+    let (pos, rot, size) = a.frame(c, shape)?;
+    if let Some(k) = (0..shape.sizes()).find(|&k| !(size[k] > 0.0)) {
+        return Err(err(
+            src,
+            a.chain[0],
+            &format!("{}.size", a.what),
+            format!(
+                "size {k} of a {kind} geom must be positive, got {}",
+                size[k]
+            ),
+        ));
+    }
+    let mass = a.mass(shape, size, shell)?;
+    let principal = if mass > 0.0 {
+        gi::principal(shape, size, mass, shell)
+    } else {
+        [0.0; 3]
+    };
+    Ok(Some(GeomMass {
+        mass,
+        pos,
+        rot,
+        principal,
+    }))
 }

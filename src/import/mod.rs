@@ -3,7 +3,8 @@
 //!
 //! - [`urdf`]: URDF (ROS) files: links, inertials, revolute / continuous / prismatic / fixed /
 //!   floating joints, joint damping; visuals and meshes are not read.
-//! - [`mjcf`]: MuJoCo MJCF files: bodies, explicit inertials, hinge / slide / ball / free joints
+//! - [`mjcf`]: MuJoCo MJCF files: bodies, inertials (explicit or from primitive geoms, as MuJoCo
+//!   computes them: `geom_inertia`), hinge / slide / ball / free joints
 //!   with damping, armature, springs and `ref`, body `gravcomp`, joint defaults; sites and assets
 //!   are not read.
 //! - [`unmodelled`]: what either file holds that is read and not modelled (limits, friction,
@@ -14,6 +15,7 @@
 //! Errors are [`SceneError`](crate::located::SceneError)s located in the description file (file,
 //! line, column, element).
 
+mod geom_inertia;
 pub mod mjcf;
 pub mod unmodelled;
 pub mod urdf;

@@ -218,7 +218,7 @@ HAND = """<mujoco model="hand">
 def test_hand_written_mjcf_matches_mujoco(tmp_path):
     xml = tmp_path / "hand.xml"
     xml.write_text(HAND)
-    # a body with geoms needs an explicit inertial; here each has one (the world's plane is no body)
+    # each body has an explicit inertial (inertia from geoms: test_mjcf_geom_inertia.py)
     scene = mjcf_scene(tmp_path, xml, dict(gravity=[0.0, 0.0, -9.81]))
     assert scene.q_names[:7] == ["root.x", "root.y", "root.z", "root.qw", "root.qx", "root.qy", "root.qz"]
     model = mujoco.MjModel.from_xml_path(str(xml))
