@@ -116,6 +116,15 @@ enum Command {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
         args: Vec<String>,
     },
+    /// Import the robot files of public collections (example-robot-data, gymnasium, dm_control,
+    /// MuJoCo Menagerie) and compare A and G + Q with MuJoCo's and Pinocchio's reading of each
+    /// (Python harness). `progmo corpus --help`.
+    #[command(disable_help_flag = true)]
+    Corpus {
+        /// Arguments for the harness.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<String>,
+    },
     /// Tolerance report over distributions of runs (Python harness): parameters, initial states
     /// and solver settings drawn from a sweep file, each sample checked in the simulators, on this
     /// machine or a Ray cluster. `progmo sweep --help`.
@@ -237,6 +246,7 @@ where
         Command::Check { args } => harness("check", &["-m", "progmo.cli", "check"], &args),
         Command::Debug { args } => harness("debug", &["-m", "progmo.cli", "debug"], &args),
         Command::Bench { args } => harness("bench", &["-m", "progmo.bench.main"], &args),
+        Command::Corpus { args } => harness("corpus", &["-m", "progmo.corpus"], &args),
         Command::Report { args } => harness("report", &["-m", "progmo.cli", "report"], &args),
         Command::Sweep { args } => harness("sweep", &["-m", "progmo.sweep"], &args),
     }

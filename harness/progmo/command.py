@@ -3,7 +3,8 @@
 ``solve``, ``validate``, ``export`` and ``--help`` run the Rust command line in this process
 (``progmo::cli::run`` through the binding; the bundled scenes are found by name); ``check``,
 ``debug`` and ``report`` run the harness (``progmo.cli``), ``sweep`` the tolerance sweeps
-(``progmo.sweep``), ``bench`` the benchmarks (``progmo.bench.main``). Exit codes are those of the subcommand (``progmo --help``).
+(``progmo.sweep``), ``bench`` the benchmarks (``progmo.bench.main``), ``corpus`` the robot-file corpus
+(``progmo.corpus``). Exit codes are those of the subcommand (``progmo --help``).
 """
 
 from __future__ import annotations
@@ -26,6 +27,10 @@ def main(argv: list[str] | None = None) -> int:
         from .sweep import main as sweep_main
 
         return run(lambda: sweep_main(args[1:]), "progmo sweep")
+    if args and args[0] == "corpus":
+        from .corpus import main as corpus_main
+
+        return run(lambda: corpus_main(args[1:]), "progmo corpus")
     if args and args[0] == "bench":
         from .bench.main import main as bench_main
 

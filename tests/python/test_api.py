@@ -177,7 +177,7 @@ def test_same_exit_code_for_the_same_bad_scene_in_every_subcommand(tmp_path):
 
 
 def test_every_subcommand_help_has_one_style():
-    for sub in ("solve", "validate", "export", "check", "debug", "report", "bench"):
+    for sub in ("solve", "validate", "export", "check", "debug", "report", "bench", "corpus"):
         r = progmo_cmd(sub, "--help")
         assert r.returncode == 0, (sub, r.stderr)
         lines = r.stdout.splitlines()

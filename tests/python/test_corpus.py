@@ -1,0 +1,107 @@
+"""`progmo corpus` (issue 30 item 3): a bounded sample of example-robot-data, the table's structure,
+a negative control (the simulators read a URDF with perturbed masses: parity must fail), --data
+discovery, and a missing collection listed as not installed."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from progmo import corpus, data
+
+UR5 = "example-robot-data/robots/ur_description/urdf/ur5_robot.urdf"
+
+PENDULUM = """<mujoco model="pendulum">
+  <worldbody>
+    <body name="link1" pos="0 0 1">
+      <joint name="j1" type="hinge" axis="0 1 0" damping="0.3"/>
+      <inertial pos="0 0 -0.4" mass="1.2" diaginertia="0.02 0.03 0.01"/>
+      <body name="link2" pos="0 0 -0.8">
+        <joint name="j2" type="hinge" axis="1 0 0" armature="0.01"/>
+        <inertial pos="0.01 0 -0.25" mass="0.7" diaginertia="0.015 0.014 0.002"/>
+        <geom type="capsule" fromto="0 0 0 0 0 -0.5" size="0.05" contype="0" conaffinity="0"/>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+def _ur5() -> Path:
+    return next(d / UR5 for d in data.robot_path() if (d / UR5).is_file())
+
+
+def test_sample_of_example_robot_data(tmp_path, capsys):
+    assert corpus.main(["-c", "example-robot-data", "--sample", "3", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr()
+    assert "| collection | files | imports | imported | import rate |" in out.out
+    assert re.search(r"\[example-robot-data 3/3\]", out.err)  # progress on stderr
+    doc = json.loads((tmp_path / "corpus.json").read_text())
+    assert (tmp_path / "corpus.md").read_text().startswith("# progmo corpus")
+    (row,) = doc["collections"]
+    assert row["collection"] == "example-robot-data" and row["status"] == "ok" and row["files"] == 3
+    for key in ("imports", "imported", "import_rate", "parity_checked", "mujoco_within", "pinocchio_within",
+                "worst_parity", "refusals", "free_base"):
+        assert key in row
+    assert row["imported"] >= 2 and row["parity_checked"] >= 1
+    judged = [r["parity"][s] for r in doc["files"] if r["parity"] for s in corpus.SIMULATORS
+              if r["parity"][s]["status"] == "ok"]
+    assert judged and all(p["worst"] <= corpus.PARITY_TOL for p in judged)
+    assert all(r["error"] is None or {"kind", "location", "message", "reason"} <= set(r["error"]) for r in doc["files"])
+    assert any(r.get("note") == corpus.FREE_BASE for r in doc["files"])  # free roots: import only
+
+
+def test_negative_control_perturbed_mass_is_outside_tolerance(tmp_path):
+    urdf = _ur5()
+    bad = tmp_path / "ur5_heavier.urdf"
+    bad.write_text(re.sub(r'(<mass value=")([0-9.eE+-]+)"',
+                          lambda m: f'{m[1]}{float(m[2]) * 1.01!r}"', urdf.read_text()))
+    (good,) = [r for r in corpus.check_file("urdf", urdf, tmp_path) if r["root_joint"] == "fixed"]
+    (worse,) = [r for r in corpus.check_file("urdf", urdf, tmp_path, simulator_file=bad)
+                if r["root_joint"] == "fixed"]
+    for s in corpus.SIMULATORS:
+        assert good["parity"][s]["worst"] <= corpus.PARITY_TOL
+        assert worse["parity"][s]["status"] == "ok" and worse["parity"][s]["worst"] > 1e-4
+    row = corpus.summarize("negative", 1, [worse])
+    assert row["mujoco_within"] == row["pinocchio_within"] == 0 and row["worst_parity"] > 1e-4
+
+
+def test_data_folder_is_searched(tmp_path):
+    assets = tmp_path / "data" / "gymnasium" / "gymnasium" / "envs" / "mujoco" / "assets"
+    assets.mkdir(parents=True)
+    (assets / "pendulum.xml").write_text(PENDULUM)
+    rows, records = corpus.run([c for c in corpus.COLLECTIONS if c.name == "gymnasium"], tmp_path / "data",
+                               False, None, 2, lambda s: None)
+    assert rows[0]["imported"] == 1 and rows[0]["parity_checked"] == 1
+    assert rows[0]["mujoco_within"] == rows[0]["pinocchio_within"] == 1
+    assert records[0]["relpath"] == "pendulum.xml"
+
+
+def test_missing_collection_is_listed_not_installed(tmp_path, capsys):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert corpus.main(["--data", str(empty), "--data-only", "--out", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    doc = json.loads((tmp_path / "out" / "corpus.json").read_text())
+    assert [r["collection"] for r in doc["collections"]] == corpus.NAMES  # none dropped
+    for r in doc["collections"]:
+        assert r["status"].startswith("not installed") and "pip install" in r["status"]
+        assert r["collection"] in out
+    assert "pip install example-robot-data" in out
+
+
+def test_bad_usage(tmp_path, capsys):
+    assert corpus.main(["--data", str(tmp_path / "nowhere"), "--out", str(tmp_path)]) == 2
+    assert "not a folder" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        corpus.main(["-c", "nosuch"])
+
+
+def test_sample_is_deterministic_and_spread():
+    files = [Path(f"f{i:02}") for i in range(10)]
+    assert corpus.sample(files, 3) == [files[0], files[4], files[9]]  # linspace 0, 4.5, 9 rounded to even
+    assert corpus.sample(files, 3) == corpus.sample(list(files), 3)
+    assert corpus.sample(files, None) == files and corpus.sample(files, 50) == files
