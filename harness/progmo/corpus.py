@@ -169,7 +169,8 @@ def error_record(e: BaseException) -> dict[str, Any]:
     msg = str(getattr(e, "message", None) or e).splitlines()
     first = msg[0] if msg else type(e).__name__
     f, line = getattr(e, "file", None), getattr(e, "line", None)
-    loc = f"{Path(f).name}:{line}" if f else ""
+    # the generated scene (deleted after the run) stands for the model as a whole
+    loc = "" if not f else "the model" if Path(f).name == "scene.toml" else f"{Path(f).name}:{line}"
     field = re.sub(r"\[[^\]]*\]", "[]", str(getattr(e, "field", None) or ""))
     gist = re.sub(r"`[^`]*`", "`…`", first)
     gist = re.sub(r"-?\d+(\.\d+)?(e-?\d+)?", "#", gist)
