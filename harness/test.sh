@@ -50,7 +50,9 @@ wait "$chromium_pid" || { cat "$chromium_log" >&2; echo "warning: no headless Ch
 rm -f "$chromium_log"
 phase "pytest (harness; one worker per core, a test file per worker: pytest-xdist)"
 py_status=0
-.venv/bin/python -m pytest -q -n "$(nproc)" --dist loadfile --durations=15 tests/python || py_status=$?
+# --timeout: a test still running after 30 min fails with every thread's stack (pytest-timeout)
+# instead of holding the run until CI's own limit ends it with nothing said.
+.venv/bin/python -m pytest -q -n "$(nproc)" --dist loadfile --durations=15 --timeout=1800 tests/python || py_status=$?
 phase "the C++ anchor's background build (the bench tests waited for it on its lock)"
 wait "$anchor_pid" || { echo "warning: the C++ anchor's background build failed (the bench tests built it again and reported why):" >&2; tail -5 "$anchor_log" >&2; }
 rm -f "$anchor_log"

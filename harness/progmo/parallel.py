@@ -132,7 +132,13 @@ def run_all(tasks: list[Task], options, jobs: int) -> Iterator[tuple[Task, Check
                 yield tasks[i], r
         return
     ctx = multiprocessing.get_context("spawn")
-    results = ctx.Queue()
+    # The results channel is a manager's queue: each put is a whole message on the worker's own
+    # connection. A plain multiprocessing.Queue shares one pipe and one lock among the workers, and
+    # a worker dying while its feeder thread writes (os._exit, a crash, the OOM killer) leaves half
+    # a message in the pipe, or the lock taken: the parent's read, or the other workers' writes,
+    # then wait forever.
+    manager = ctx.Manager()
+    results = manager.Queue()
     broken: list[Task] = []
     seen: set[int] = set()
 
@@ -172,6 +178,7 @@ def run_all(tasks: list[Task], options, jobs: int) -> Iterator[tuple[Task, Check
         # Interrupted (or the consumer stopped early): do not wait for running checks.
         pool.shutdown(wait=False, cancel_futures=True)
         _terminate(pool)
+        manager.shutdown()
     # A dead worker breaks the whole pool; rerun each affected check alone to find the culprit.
     for t in broken:
         solo = ProcessPoolExecutor(max_workers=1, mp_context=ctx)

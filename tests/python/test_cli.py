@@ -191,6 +191,17 @@ def test_a_dying_worker_is_an_error_of_its_check_only(env, monkeypatch):
     assert [r["status"] for k, r in res.items() if k != ("heavy_top", "mujoco")] == ["pass"] * (2 * N - 1)
 
 
+@pytest.mark.timeout(300)
+def test_a_dying_worker_never_hangs_the_run(env, monkeypatch):
+    # A worker that dies just after reporting a result (os._exit with its last result still being
+    # written) once left half a message in a shared multiprocessing.Queue: the parent's read then
+    # waited forever, about one run in four. Five runs, each must end (pytest-timeout fails it).
+    monkeypatch.setenv(parallel.RUNNER_ENV, "fake_checks:run_check")
+    for _ in range(5):
+        assert env(*TWO, plan={"heavy_top/mujoco": "die"}, jobs="2") == 1
+        assert statuses(env.out)[("double_pendulum", SIMS[-1])] == "pass"
+
+
 def test_rerun_command_is_exact_without_accept(env):
     assert env("--accept", "-s", "mujoco", "heavy_top") == 0
     cmd = json.loads((env.out / "run.json").read_text())["provenance"]["command"]
