@@ -48,11 +48,55 @@ impl std::error::Error for SceneError {}
 pub struct Source {
     pub file: PathBuf,
     pub text: String,
+    /// Empty for the text of one file. Otherwise `text` was composed from pieces of several files
+    /// (an MJCF file with its `<include>`s expanded): the pieces in order, covering `text`, each
+    /// with the file it came from; lines and errors are reported in that file.
+    pub spliced: Vec<Splice>,
+}
+
+/// A piece of a composed [`Source`]: `text[range]` is `source.text[offset..]`.
+#[derive(Clone, Debug)]
+pub struct Splice {
+    pub range: Range<usize>,
+    pub source: std::sync::Arc<Source>,
+    pub offset: usize,
 }
 
 impl Source {
-    /// 1-based (line, column) of a byte offset.
+    /// The text of one file.
+    pub fn new(file: PathBuf, text: String) -> Self {
+        Source {
+            file,
+            text,
+            spliced: vec![],
+        }
+    }
+
+    /// For a composed text: the file's source an offset came from, the offset there, and the
+    /// bytes left in that piece.
+    fn origin(&self, offset: usize) -> Option<(&Source, usize, usize)> {
+        let k = self
+            .spliced
+            .partition_point(|s| s.range.end <= offset)
+            .min(self.spliced.len().checked_sub(1)?);
+        let s = &self.spliced[k];
+        let into = offset.saturating_sub(s.range.start).min(s.range.len());
+        Some((&s.source, s.offset + into, s.range.len() - into))
+    }
+
+    /// The file a byte offset of the text came from (`file` unless the text is composed).
+    pub fn file_at(&self, offset: usize) -> &std::path::Path {
+        match self.origin(offset) {
+            Some((src, at, _)) => src.file_at(at),
+            None => &self.file,
+        }
+    }
+
+    /// 1-based (line, column) of a byte offset, in the file it came from ([`Source::file_at`]).
     pub fn line_col(&self, offset: usize) -> (usize, usize) {
+        if let Some((src, at, _)) = self.origin(offset) {
+            return src.line_col(at);
+        }
         let offset = offset.min(self.text.len());
         let before = &self.text[..offset];
         let line = before.matches('\n').count() + 1;
@@ -76,8 +120,11 @@ impl Source {
         )
     }
 
-    /// An error at a byte span.
+    /// An error at a byte span (in the file the span came from).
     pub fn error(&self, span: Range<usize>, field: &str, message: impl Into<String>) -> SceneError {
+        if let Some((src, at, left)) = self.origin(span.start) {
+            return src.error(at..at + span.len().min(left), field, message);
+        }
         let (line, column) = self.line_col(span.start);
         let first_line_len = self.text
             [span.start.min(self.text.len())..span.end.min(self.text.len())]

@@ -15,6 +15,7 @@
 //! colliding geoms and `<contact>` pairs/excludes, actuators, fluid options. Refused (located
 //! errors): springs on ball and free joints, `springdamper`, and what changes the stated model
 //! (see [`compiler`]). Sites, cameras, lights, sensors and assets are not read (no dynamics).
+//! `<include>`s are expanded first, as MuJoCo does ([`super::include`]).
 
 use super::geom_inertia::{self as gi, GeomMass, MassProps, Shape};
 use super::unmodelled::{JointRange, Recorder, Unmodelled};
@@ -322,14 +323,6 @@ impl<'a, 'i> Defaults<'a, 'i> {
                 format!("default class `{name}` is defined twice"),
             ));
         }
-        if let Some(i) = elements(n).find(|c| c.has_tag_name("include")) {
-            return Err(err(
-                src,
-                i,
-                &format!("default[{name}].include"),
-                "<include> is not supported (write the file out, e.g. with MuJoCo's mj_saveLastXML)",
-            ));
-        }
         let joint = elements(n).find(|c| c.has_tag_name("joint"));
         let geom = elements(n).find(|c| c.has_tag_name("geom"));
         self.classes
@@ -494,6 +487,9 @@ fn body_spec(
 /// Read an MJCF document (`src` is the file and its text); `locked` joints are welded at the
 /// file's pose (q = their `ref`, the value reported in [`Robot::locked`]).
 pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
+    // `<include>`s expanded first: one composed document, errors located in the file they are in
+    let expanded = super::include::expand(src)?;
+    let src = expanded.as_ref().unwrap_or(src);
     let doc = super::parse_xml(src)?;
     let root = doc.root_element();
     if !root.has_tag_name("mujoco") {
@@ -567,7 +563,7 @@ fn read_top_level(src: &Source, root: Node, notes: &mut Vec<String>, rec: &mut R
     for n in elements(root) {
         let tag = n.tag_name().name();
         match tag {
-            "include" | "replicate" | "frame" | "attach" => {
+            "replicate" | "frame" | "attach" => {
                 return Err(err(src, n, tag, format!("<{tag}> is not supported (write the file out, e.g. with MuJoCo's mj_saveLastXML)")))
             }
             "deformable" => {
@@ -606,7 +602,7 @@ fn read_top_level(src: &Source, root: Node, notes: &mut Vec<String>, rec: &mut R
 type Pending<'a, 'i> = (Node<'a, 'i>, String, String);
 
 /// The bodies of the `<worldbody>` elements as a stack (the first on top); a `<frame>`,
-/// `<replicate>`, `<attach>` or `<include>` in a worldbody is refused.
+/// `<replicate>` or `<attach>` in a worldbody is refused.
 fn top_bodies<'a, 'i>(src: &Source, worldbodies: &[Node<'a, 'i>]) -> R<Vec<Pending<'a, 'i>>> {
     let mut stack: Vec<Pending> = vec![];
     for w in worldbodies.iter().rev() {
@@ -618,8 +614,8 @@ fn top_bodies<'a, 'i>(src: &Source, worldbodies: &[Node<'a, 'i>]) -> R<Vec<Pendi
         {
             stack.push((b, WORLD.to_string(), MAIN.to_string()));
         }
-        if let Some(f) = elements(*w)
-            .find(|b| ["frame", "replicate", "attach", "include"].contains(&b.tag_name().name()))
+        if let Some(f) =
+            elements(*w).find(|b| ["frame", "replicate", "attach"].contains(&b.tag_name().name()))
         {
             return Err(err(
                 src,
@@ -713,7 +709,7 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
         self.record_geoms(b, &what, &class);
         for e in elements(b) {
             let tag = e.tag_name().name();
-            if tag == "frame" || tag == "replicate" || tag == "attach" || tag == "include" {
+            if tag == "frame" || tag == "replicate" || tag == "attach" {
                 return Err(err(
                     src,
                     e,

@@ -6,7 +6,7 @@
 //! - [`mjcf`]: MuJoCo MJCF files: bodies, inertials (explicit or from primitive geoms, as MuJoCo
 //!   computes them: `geom_inertia`), hinge / slide / ball / free joints
 //!   with damping, armature, springs and `ref`, body `gravcomp`, joint defaults; sites and assets
-//!   are not read.
+//!   are not read; `<include>`d files are expanded first ([`include`]).
 //! - [`unmodelled`]: what either file holds that is read and not modelled (limits, friction,
 //!   tendons, contacts, actuators, ...): a closed vocabulary of kinds, one record per element.
 //! - [`resolve`]: where `package://PKG/...` paths are found (`$PROGMO_ROBOT_PATH`, then
@@ -16,6 +16,7 @@
 //! line, column, element).
 
 mod geom_inertia;
+pub mod include;
 pub mod mjcf;
 pub mod unmodelled;
 pub mod urdf;

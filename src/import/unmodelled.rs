@@ -131,11 +131,18 @@ impl<'s> Recorder<'s> {
     /// Record `element` of kind `kind` found at `node`.
     pub fn push(&mut self, kind: &'static str, element: String, node: roxmltree::Node) {
         debug_assert!(is_kind(kind), "{kind} is not in KINDS");
-        let (line, _) = self.src.line_col(node.range().start);
+        let at = node.range().start;
+        let (line, _) = self.src.line_col(at);
+        let from = self.src.file_at(at); // an MJCF <include>d file, or the file itself
+        let file = if from == self.src.file {
+            self.file.clone()
+        } else {
+            std::path::absolute(from).unwrap_or_else(|_| from.to_path_buf())
+        };
         self.out.push(Unmodelled {
             kind,
             element,
-            file: self.file.clone(),
+            file,
             line,
         });
     }

@@ -1100,7 +1100,7 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
         .map(|l| l.get_ref().clone())
         .collect();
     let usrc_path = path.clone();
-    let usrc = Source { file: path, text };
+    let usrc = Source::new(path, text);
     let robot = import_robot(src, m, kind, &usrc, root, &locked)?;
     let mut specs = robot.bodies;
     let mut sites: Vec<String> = specs

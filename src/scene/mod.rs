@@ -173,10 +173,7 @@ impl Scene {
                 excerpt: String::new(),
             });
         }
-        load::load(Source {
-            file: path.to_path_buf(),
-            text: text.to_string(),
-        })
+        load::load(Source::new(path.to_path_buf(), text.to_string()))
     }
 
     /// The mechanism's body frames and geometry for 3D views of recordings (tree scenes; None for
