@@ -101,6 +101,8 @@ struct Compiler {
     boundinertia: f64,
     /// `inertiagrouprange`: the geom groups that count for inertia (MuJoCo's default 0 5).
     groups: [f64; 2],
+    /// `settotalmass` (> 0: every body's mass and inertia scaled to this total; 0: off).
+    totalmass: f64,
 }
 
 fn compiler(src: &Source, root: Node) -> R<Compiler> {
@@ -111,6 +113,7 @@ fn compiler(src: &Source, root: Node) -> R<Compiler> {
         boundmass: 0.0,
         boundinertia: 0.0,
         groups: [0.0, 5.0],
+        totalmass: 0.0,
     };
     for n in elements(root).filter(|n| n.has_tag_name("compiler")) {
         if let Some(a) = n.attribute("angle") {
@@ -166,8 +169,8 @@ fn compiler(src: &Source, root: Node) -> R<Compiler> {
     Ok(c)
 }
 
-/// `boundmass`, `boundinertia` (>= 0), `inertiagrouprange`; `settotalmass` (a rescaling) is
-/// refused.
+/// `boundmass`, `boundinertia` (>= 0), `inertiagrouprange`, `settotalmass` (a total mass the
+/// bodies are scaled to when > 0, [`scale_total_mass`]).
 fn bounds(src: &Source, n: Node, c: &mut Compiler) -> R<()> {
     for a in ["boundmass", "boundinertia"] {
         if let Some(t) = n.attribute(a) {
@@ -190,16 +193,33 @@ fn bounds(src: &Source, n: Node, c: &mut Compiler) -> R<()> {
     if let Some(t) = n.attribute("inertiagrouprange") {
         c.groups = fixed::<2>(src, n, "compiler.inertiagrouprange", "inertiagrouprange", t)?;
     }
-    if let Some(v) = n.attribute("settotalmass") {
-        if v.trim().parse::<f64>().map_or(true, |x| x > 0.0) {
-            return Err(err(
-                src,
-                n,
-                "compiler.settotalmass",
-                format!(
-                    "`settotalmass=\"{v}\"` (MuJoCo would rescale the masses) is not supported"
-                ),
-            ));
+    if let Some(t) = n.attribute("settotalmass") {
+        let v = fixed::<1>(src, n, "compiler.settotalmass", "settotalmass", t)?[0];
+        c.totalmass = v.max(0.0); // MuJoCo: only a positive value rescales
+    }
+    Ok(())
+}
+
+/// `<compiler settotalmass="M">`, M > 0, as MuJoCo's compiler applies it after every body's mass
+/// properties are known (geoms, `<inertial>`, bounds): each body's mass and inertia times
+/// M / (the sum of the bodies' masses), the centres of mass unchanged.
+fn scale_total_mass(src: &Source, root: Node, bodies: &mut [BodySpec], total: f64) -> R<()> {
+    let sum: f64 = bodies.iter().map(|b| b.mass).sum();
+    if !(sum > 0.0) {
+        return Err(err(
+            src,
+            root,
+            "compiler.settotalmass",
+            format!("settotalmass=\"{total}\" on bodies without mass: nothing to scale"),
+        ));
+    }
+    let k = total / sum;
+    for b in bodies {
+        b.mass *= k;
+        for row in &mut b.inertia {
+            for x in row {
+                *x *= k;
+            }
         }
     }
     Ok(())
@@ -538,6 +558,9 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
     }
     if worldbodies.is_empty() || w.bodies.is_empty() {
         return Err(err(src, root, "worldbody", "no <body> in <worldbody>"));
+    }
+    if c.totalmass > 0.0 {
+        scale_total_mass(src, root, &mut w.bodies, c.totalmass)?;
     }
     if let Some(k) = w.used_locked.iter().position(|u| !u) {
         return Err(src.error(

@@ -6,7 +6,8 @@ test_robot_files_mujoco.py). Covered: every primitive type, fromto for capsule, 
 ellipsoid, each orientation form, several geoms in one body (mass or density, density 0, a
 non-colliding geom, groups), shellinertia, geom defaults (classes, childclass, a partial size,
 default orientation and fromto), inertiafromgeom true/false, inertiagrouprange, boundmass and
-boundinertia. Negative controls: a 1 % denser geom, or a 1 % higher boundmass, on MuJoCo's side fails.
+boundinertia, settotalmass. Negative controls: a 1 % denser geom, a 1 % higher boundmass or total
+mass, on MuJoCo's side fails.
 """
 
 import pytest
@@ -120,7 +121,12 @@ COMPILER = """<mujoco>
 """
 
 
-@pytest.mark.parametrize("name,text", [("shapes", SHAPES), ("defaults", DEFAULTS), ("compiler", COMPILER)])
+# settotalmass after the bounds (MuJoCo scales the bounded masses: the order is tested here)
+TOTALMASS = COMPILER.replace('boundinertia="2e-4"/>', 'boundinertia="2e-4" settotalmass="3.7"/>')
+
+
+@pytest.mark.parametrize("name,text", [("shapes", SHAPES), ("defaults", DEFAULTS), ("compiler", COMPILER),
+                                       ("totalmass", TOTALMASS)])
 def test_inertia_from_geoms_matches_mujoco(name, text, tmp_path):
     xml = tmp_path / f"{name}.xml"
     xml.write_text(text)
@@ -135,8 +141,9 @@ def test_inertia_from_geoms_matches_mujoco(name, text, tmp_path):
 
 @pytest.mark.parametrize(
     "text,old,new",
-    [(SHAPES, 'density="800"', 'density="808"'), (COMPILER, 'boundmass="0.05"', 'boundmass="0.0505"')],
-    ids=["denser_geom", "higher_boundmass"],
+    [(SHAPES, 'density="800"', 'density="808"'), (COMPILER, 'boundmass="0.05"', 'boundmass="0.0505"'),
+     (TOTALMASS, 'settotalmass="3.7"', 'settotalmass="3.737"')],
+    ids=["denser_geom", "higher_boundmass", "higher_totalmass"],
 )
 def test_negative_control_changed_file_in_mujoco_fails(text, old, new, tmp_path):
     xml = tmp_path / "file.xml"
@@ -147,3 +154,36 @@ def test_negative_control_changed_file_in_mujoco_fails(text, old, new, tmp_path)
     model.opt.gravity[:] = g
     wa, wf = worst(scene, model, 30)
     assert wa > 1e3 * TOL and wf > 1e3 * TOL
+
+
+@pytest.mark.parametrize("name,text", [("compiler", COMPILER), ("totalmass", TOTALMASS)])
+def test_pinocchio_reading_with_another_mass_is_not_checked(name, text, tmp_path):
+    # Pinocchio 4.1's MJCF reader derives geom masses its own way and ignores settotalmass: its
+    # reading of such a file is declared not checked, with both totals, rather than failing the check
+    from progmo.simulators import Unsupported
+    from progmo.simulators.robot_file import RobotFile, pinocchio_model
+
+    xml = tmp_path / f"{name}.xml"
+    xml.write_text(text)
+    with pytest.raises(Unsupported, match="moving mass .* MuJoCo's compile of it"):
+        pinocchio_model(RobotFile(xml, "mjcf"), [0.0, 0.0, -9.81], None)
+    # control: the same kind of file with explicit inertials only is read by Pinocchio
+    explicit = tmp_path / "explicit.xml"
+    explicit.write_text(EXPLICIT)
+    assert pinocchio_model(RobotFile(explicit, "mjcf"), [0.0, 0.0, -9.81], None).model.nv == 7
+
+
+EXPLICIT = """<mujoco>
+  <worldbody>
+    <body name="root" pos="0 0 1">
+      <freejoint name="root"/>
+      <inertial pos="0.1 0 0" mass="2" diaginertia="0.1 0.2 0.25"/>
+      <geom type="sphere" size="0.1" mass="5"/>
+      <body name="arm" pos="0 0 -0.2">
+        <joint name="a" type="hinge" axis="0 1 0"/>
+        <inertial pos="0 0 -0.1" mass="0.5" diaginertia="0.01 0.01 0.002"/>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
