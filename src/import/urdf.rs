@@ -244,6 +244,32 @@ fn loop_error(
 }
 
 /// Read a URDF document (`src` is the file and its text).
+/// The xacro macro language (ROS) is not URDF: its first element or `${...}` / `$(...)` attribute
+/// is refused with the command that expands the file.
+fn refuse_xacro(src: &Source, robot: Node) -> R<()> {
+    const XACRO: &str = "http://www.ros.org/wiki/xacro";
+    let expand = "a xacro file, not URDF: expand it first (`xacro FILE.urdf.xacro > FILE.urdf`, ROS's xacro) and name the .urdf";
+    for n in robot.descendants().filter(|n| n.is_element()) {
+        if n.tag_name().namespace() == Some(XACRO) {
+            let tag = format!("xacro:{}", n.tag_name().name());
+            return Err(err(src, n, &tag, format!("<{tag}>: {expand}")));
+        }
+        if let Some(a) = n
+            .attributes()
+            .find(|a| a.value().contains("${") || a.value().contains("$("))
+        {
+            let (tag, name) = (n.tag_name().name(), a.name());
+            return Err(err(
+                src,
+                n,
+                &format!("{tag}.{name}"),
+                format!("`{name}=\"{}\"` is a xacro expression: {expand}", a.value()),
+            ));
+        }
+    }
+    Ok(())
+}
+
 pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot> {
     let doc = super::parse_xml(src)?;
     let robot = doc.root_element();
@@ -255,6 +281,7 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
             "the root element of a URDF file must be <robot>",
         ));
     }
+    refuse_xacro(src, robot)?;
     let (links, link_order) = read_links(src, robot)?;
     let graph = read_joints(src, robot, &links)?;
     let root = find_root(src, robot, &links, &link_order, &graph.parent_joint)?;
