@@ -376,3 +376,67 @@ fn inertia_from_geoms_closed_forms() {
         (2.0 - ms) * r * r / 2.0 + 0.4 * ms * r * r,
     );
 }
+
+/// `[initial] keyframe`: the key's qpos and qvel start the motion (q entries replace them); an
+/// unknown key, a keyframe of a model without one, a locked joint off its weld and a qpos longer
+/// than the model's are refused where they are written.
+#[test]
+fn a_keyframe_starts_the_motion() {
+    let xml = robots().join("two_link.xml");
+    let start = |init: &str, extra: &str| {
+        let text = scene_text(&xml, extra).replace("[initial]\n", &format!("[initial]\n{init}\n"));
+        load(&text)
+    };
+    let q0v0 = |s: Scene| {
+        let SceneSystem::Tree(p) = s.system else {
+            panic!("a tree system")
+        };
+        (p.q0.as_slice().to_vec(), p.v0.as_slice().to_vec())
+    };
+    let (q, v) = q0v0(start("keyframe = \"home\"", "").unwrap_or_else(|e| panic!("{e}")));
+    assert_eq!((q, v), (vec![0.3, -0.2, 0.05], vec![0.1, 0.0, 0.0]));
+    let (q, _) = q0v0(start("keyframe = \"home\"\nq = { elbow = 0.5 }", "").unwrap());
+    assert_eq!(q, vec![0.3, 0.5, 0.05]);
+    // a key without qpos is MuJoCo's qpos0 (here: every ref 0)
+    let (q, v) = q0v0(start("keyframe = \"rest\"", "").unwrap());
+    assert_eq!((q, v), (vec![0.0; 3], vec![0.0; 3]));
+    let e = start("keyframe = \"hom\"", "")
+        .map(|_| ())
+        .expect_err("refused");
+    assert!(
+        e.field == "initial.keyframe" && e.message.contains("did you mean `home`"),
+        "{e}"
+    );
+    let e = start("keyframe = \"home\"", "locked_joints = [\"slide\"]")
+        .map(|_| ())
+        .expect_err("refused");
+    assert!(e.message.contains("locked joint `slide` at 0.05"), "{e}");
+    let urdf = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/robots/two_link.urdf");
+    let text = scene_text(&urdf, "")
+        .replace("kind = \"mjcf\"", "kind = \"urdf\"")
+        .replace("[initial]\n", "[initial]\nkeyframe = \"home\"\n");
+    let e = Scene::from_text(&urdf.with_file_name("scene.toml"), &text)
+        .map(|_| ())
+        .expect_err("refused");
+    assert!(
+        e.message.contains("read from an `mjcf` model's file"),
+        "{e}"
+    );
+    // a qpos longer than the model's: located at the key, in the MJCF file
+    let dir = std::env::temp_dir().join(format!("progmo-keyframe-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let long = dir.join("long.xml");
+    let text = std::fs::read_to_string(&xml).unwrap();
+    std::fs::write(
+        &long,
+        text.replace("qpos=\"0.3 -0.2 0.05\"", "qpos=\"0.3 -0.2 0.05 1\""),
+    )
+    .unwrap();
+    let e = Scene::from_text(&dir.join("s.toml"), &scene_text(&long, ""))
+        .map(|_| ())
+        .expect_err("refused");
+    assert!(
+        e.file == long && e.field == "keyframe[home].qpos" && e.message.contains("4 values"),
+        "{e}"
+    );
+}

@@ -269,6 +269,7 @@ fn the_maximal_examples_load_match_the_schema_and_use_every_key() {
         MAXIMAL_LAGRANGIAN,
         MAXIMAL_LAGRANGIAN_DIAGONAL,
         MAXIMAL_URDF,
+        MAXIMAL_MJCF,
         &maximal_closure(WELD),
         &maximal_closure(DISTANCE),
         &maximal_closure(LINE),
@@ -614,6 +615,24 @@ pos = [0.0, 0.0, 0.1]
 quat = [1.0, 0.0, 0.0, 0.0]
 
 [initial]
+
+[time]
+t1 = 1.0
+"#;
+
+/// What only an `mjcf` model takes: `[initial] keyframe`.
+const MAXIMAL_MJCF: &str = r#"
+name = "maximal_mjcf"
+description = "An mjcf model started from a keyframe of its file."
+
+[model]
+kind = "mjcf"
+file = "tests/robots/mjcf/two_link.xml"
+gravity = [0.0, 0.0, -9.81]
+
+[initial]
+keyframe = "home"
+q = { slide = 0.0 }
 
 [time]
 t1 = 1.0

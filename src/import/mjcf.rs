@@ -225,6 +225,77 @@ fn scale_total_mass(src: &Source, root: Node, bodies: &mut [BodySpec], total: f6
     Ok(())
 }
 
+/// A `<key>` of the file's `<keyframe>`: per joint (MuJoCo's qpos order, locked ones too) its
+/// position values (qpos: radians, quaternions w first, whatever `<compiler angle>` says) and its
+/// velocity values (qvel: a free joint's world linear then body angular velocity, a ball's body
+/// angular velocity: progmo's v).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Keyframe {
+    pub name: String,
+    /// The file and line of the `<key>` (errors about it are located there).
+    pub file: std::path::PathBuf,
+    pub line: usize,
+    pub joints: Vec<(String, Vec<f64>, Vec<f64>)>,
+}
+
+/// The named `<key>`s of the `<keyframe>` elements, as MuJoCo's compiler reads them: a qpos
+/// shorter than the model's is completed with qpos0, a qvel with zeros; a longer one is refused.
+/// `time`, `act`, `ctrl`, `mpos` and `mquat` are not read (no actuators, no mocap bodies).
+fn keyframes(src: &Source, root: Node, layout: &[(String, Vec<f64>)]) -> R<Vec<Keyframe>> {
+    let nq: usize = layout.iter().map(|(_, q0)| q0.len()).sum();
+    let nv: usize = layout
+        .iter()
+        .map(|(_, q0)| q0.len() - usize::from(q0.len() >= 4))
+        .sum();
+    let mut out = vec![];
+    for key in elements(root)
+        .filter(|n| n.has_tag_name("keyframe"))
+        .flat_map(elements)
+        .filter(|n| n.has_tag_name("key"))
+    {
+        let Some(name) = key.attribute("name") else {
+            continue; // an unnamed key cannot be chosen by name
+        };
+        let what = format!("keyframe[{name}]");
+        let read = |attr: &str, n: usize| -> R<Vec<f64>> {
+            let vals = match key.attribute(attr) {
+                Some(t) => parse_list(src, key, &format!("{what}.{attr}"), attr, t)?,
+                None => vec![],
+            };
+            if vals.len() > n {
+                return Err(err(
+                    src,
+                    key,
+                    &format!("{what}.{attr}"),
+                    format!("{} values for a model with {attr} of size {n}", vals.len()),
+                ));
+            }
+            Ok(vals)
+        };
+        let (qpos, qvel) = (read("qpos", nq)?, read("qvel", nv)?);
+        let (mut iq, mut iv, mut joints) = (0, 0, vec![]);
+        for (j, q0) in layout {
+            let dv = q0.len() - usize::from(q0.len() >= 4);
+            let q: Vec<f64> = (0..q0.len())
+                .map(|k| qpos.get(iq + k).copied().unwrap_or(q0[k]))
+                .collect();
+            let v: Vec<f64> = (0..dv)
+                .map(|k| qvel.get(iv + k).copied().unwrap_or(0.0))
+                .collect();
+            (iq, iv) = (iq + q0.len(), iv + dv);
+            joints.push((j.clone(), q, v));
+        }
+        let at = key.range().start;
+        out.push(Keyframe {
+            name: name.to_string(),
+            file: src.file_at(at).to_path_buf(),
+            line: src.line_col(at).0,
+            joints,
+        });
+    }
+    Ok(out)
+}
+
 fn quat_of(u: UnitQuaternion<f64>) -> [f64; 4] {
     [u.w, u.i, u.j, u.k]
 }
@@ -542,6 +613,8 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         names: HashMap::new(),
         joint_set: HashSet::new(),
         moving: HashSet::new(),
+        layout: vec![],
+        pose: ([0.0; 3], [1.0, 0.0, 0.0, 0.0]),
     };
     // depth-first, parents first: (element, parent body name, inherited childclass)
     let mut stack = top_bodies(src, &worldbodies)?;
@@ -577,6 +650,7 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         unmodelled,
         ranges: w.ranges,
         locked: w.locked_values,
+        keyframes: keyframes(src, root, &w.layout)?,
     })
 }
 
@@ -667,6 +741,11 @@ struct Walk<'s, 'd, 'a, 'i> {
     joint_set: HashSet<String>,
     /// Bodies with joints, or on one that has (MuJoCo's non-static bodies).
     moving: HashSet<String>,
+    /// Every joint in MuJoCo's qpos order (locked ones too) with its qpos0 (MuJoCo's default pose:
+    /// `ref`, the identity quaternion, a free body's pos and quat): a keyframe's layout.
+    layout: Vec<(String, Vec<f64>)>,
+    /// The pose of the body whose joints are being read (qpos0 of a free joint).
+    pose: ([f64; 3], [f64; 4]),
 }
 
 impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
@@ -730,6 +809,7 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
                 .with_gravcomp(fixed::<1>(src, b, &format!("{what}.gravcomp"), "gravcomp", t)?[0]);
         }
         self.record_geoms(b, &what, &class);
+        self.pose = (pos, quat);
         for e in elements(b) {
             let tag = e.tag_name().name();
             if tag == "frame" || tag == "replicate" || tag == "attach" {
@@ -879,6 +959,12 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
         };
         let js = a.spec(jname, kind, parent)?;
         let (js, reference) = a.dynamics(self.c, js, kind)?;
+        let qpos0 = match kind {
+            "free" => [&self.pose.0[..], &self.pose.1[..]].concat(),
+            "ball" => vec![1.0, 0.0, 0.0, 0.0],
+            _ => vec![reference],
+        };
+        self.layout.push((jname.to_string(), qpos0));
         let is_locked = self.locked.iter().position(|l| l == jname);
         if let Some(k) = is_locked {
             self.used_locked[k] = true;

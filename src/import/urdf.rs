@@ -32,6 +32,8 @@ pub struct Robot {
     pub ranges: Vec<JointRange>,
     /// Locked joints with the value of q they are welded at.
     pub locked: Vec<(String, f64)>,
+    /// MJCF `<keyframe>` keys by name (none in a URDF).
+    pub keyframes: Vec<super::mjcf::Keyframe>,
 }
 
 /// How the root link is attached to the world.
@@ -356,6 +358,7 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
         unmodelled: w.rec.out,
         ranges: w.ranges,
         locked: w.locked_values,
+        keyframes: vec![],
     })
 }
 

@@ -643,6 +643,11 @@ pub struct InitialFile {
     #[serde(default)]
     #[schemars(with = "BTreeMap<String, Initial>")]
     pub v: BTreeMap<String, Spanned<Initial>>,
+    /// An `mjcf` model's `<keyframe>` key (by name) the state starts from; `q` and `v` entries
+    /// given here replace its values.
+    #[serde(default)]
+    #[schemars(with = "Option<String>")]
+    pub keyframe: Option<Spanned<String>>,
     /// Project an inconsistent initial state onto the constraints instead of refusing it.
     #[serde(default)]
     pub assemble: bool,

@@ -175,7 +175,22 @@ fn lagrangian_system(
     }
     let (m, mut sym) = lagrangian(src, model, params)?;
     let (c, spans) = rows(src, file, &mut sym, &[])?;
-    let (q0, v0) = initial(src, file, params, &m.q_names(), &m.v_names(), None)?;
+    if let Some(k) = &file.initial.get_ref().keyframe {
+        return Err(src.error(
+            k.span(),
+            "initial.keyframe",
+            "a keyframe is read from an `mjcf` model's file: this model has none",
+        ));
+    }
+    let v_start = vec![0.0; m.v_names().len()];
+    let (q0, v0) = initial(
+        src,
+        file,
+        params,
+        &m.q_names(),
+        (&m.v_names(), &v_start),
+        None,
+    )?;
     let (t0, t1) = span(file);
     let p = Problem {
         model: m,
@@ -209,14 +224,14 @@ fn tree_system(
     let model = file.model.get_ref();
     let (m, mut sym, (notes, rf), (closures, closure_rows)) = tree_scene(src, model, params)?;
     let (c, mut spans) = rows(src, file, &mut sym, &closure_rows)?;
-    let neutral = tree::neutral(m.tree());
+    let (start, v_start) = keyframe(src, file, m.tree(), rf.as_ref())?;
     let (q0, v0) = initial(
         src,
         file,
         params,
         &m.q_names(),
-        &m.v_names(),
-        Some((m.tree(), neutral.as_slice())),
+        (&m.v_names(), &v_start),
+        Some((m.tree(), start.as_slice())),
     )?;
     let (t0, t1) = span(file);
     let mut p = Problem {
@@ -1126,6 +1141,7 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
         locked: robot.locked,
         ranges: robot.ranges,
         unmodelled,
+        keyframes: robot.keyframes,
     };
     Ok((specs, robot.joints, sites, (robot.notes, Some(info)), hints))
 }
@@ -1677,7 +1693,7 @@ fn initial(
     file: &SceneFile,
     params: &[(String, f64)],
     q_names: &[String],
-    v_names: &[String],
+    (v_names, v_start): (&[String], &[f64]),
     tree: Option<(&Arc<tree::Model>, &[f64])>,
 ) -> R<(Vec<f64>, Vec<f64>)> {
     let init = file.initial.get_ref();
@@ -1772,7 +1788,70 @@ fn initial(
             q.into_iter().map(|x| x.unwrap_or(0.0)).collect()
         }
     };
-    Ok((q, v.into_iter().map(|x| x.unwrap_or(0.0)).collect()))
+    let v = v
+        .iter()
+        .zip(v_start)
+        .map(|(x, s)| x.unwrap_or(*s))
+        .collect();
+    Ok((q, v))
+}
+
+/// The starting values `[initial]` q and v complete: the tree's neutral configuration and zero
+/// velocities, or the MJCF keyframe `[initial] keyframe` names (its joints' qpos and qvel; a locked
+/// joint's value must be the one it is welded at).
+fn keyframe(
+    src: &Source,
+    file: &SceneFile,
+    t: &Arc<tree::Model>,
+    rf: Option<&super::RobotFile>,
+) -> R<(Vec<f64>, Vec<f64>)> {
+    let mut q: Vec<f64> = tree::neutral(t).iter().copied().collect();
+    let mut v = vec![0.0; t.nv()];
+    let Some(k) = &file.initial.get_ref().keyframe else {
+        return Ok((q, v));
+    };
+    let at = |m: String| src.error(k.span(), "initial.keyframe", m);
+    let keys = rf.map_or(&[][..], |r| r.keyframes.as_slice());
+    let Some(key) = keys.iter().find(|x| &x.name == k.get_ref()) else {
+        let names: Vec<&str> = keys.iter().map(|x| x.name.as_str()).collect();
+        return Err(at(if rf.is_some_and(|r| r.kind == "mjcf") {
+            format!(
+                "no keyframe `{}` in the file{} (named keys: {})",
+                k.get_ref(),
+                check::did_you_mean(k.get_ref(), names.iter().copied()),
+                if names.is_empty() {
+                    "none".into()
+                } else {
+                    names.join(", ")
+                }
+            )
+        } else {
+            "a keyframe is read from an `mjcf` model's file: this model has none".into()
+        }));
+    };
+    let locked = rf.map_or(&[][..], |r| r.locked.as_slice());
+    for (joint, kq, kv) in &key.joints {
+        if let Some((_, welded)) = locked.iter().find(|(l, _)| l == joint) {
+            if (kq[0] - welded).abs() > 1e-12 * welded.abs().max(1.0) {
+                return Err(at(format!(
+                    "keyframe `{}` ({}:{}) puts locked joint `{joint}` at {}, but it is welded at {welded}: unlock it or give the keyframe that value",
+                    key.name,
+                    key.file.display(),
+                    key.line,
+                    kq[0]
+                )));
+            }
+            continue;
+        }
+        let j = t.joint_id(joint).expect("a joint of the imported file");
+        for (i, x) in t.joint_q_range(j).zip(kq) {
+            q[i] = *x;
+        }
+        for (i, x) in t.joint_v_range(j).zip(kv) {
+            v[i] = *x;
+        }
+    }
+    Ok((q, v))
 }
 
 /// The time span as written (checked with the settings by [`validate_settings`]).

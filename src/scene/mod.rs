@@ -122,6 +122,9 @@ pub struct RobotFile {
     pub ranges: Vec<crate::import::unmodelled::JointRange>,
     /// Every element read and not modelled, in file order, with the scene's declaration.
     pub unmodelled: Vec<UnmodelledEntry>,
+    /// The MJCF file's named keyframes (`[initial] keyframe`); empty for a URDF.
+    #[serde(skip)]
+    pub keyframes: Vec<crate::import::mjcf::Keyframe>,
 }
 
 /// One element of the robot file that is not modelled, and whether the scene declares its kind

@@ -334,3 +334,27 @@ def test_pinocchio_is_not_given_includes_it_misreads(tmp_path):
     # an include of visual settings at the top level is read right, and let through
     assert pinocchio_misreads_includes(vis) is None and pin.buildModelFromMJCF(str(vis)).nq == 2
     assert pinocchio_misreads_includes(whole) is None
+
+
+def test_keyframe_is_mujocos_reading_of_the_key(tmp_path):
+    # a free, a ball, hinges (degrees: the keyframe is in radians all the same) and a slide; the
+    # key's qpos stops after the first two hinges and its qvel after the free joint and one hinge,
+    # so the rest is MuJoCo's qpos0 (the free body's pos and quat) and zero velocities
+    key = ('  <keyframe>\n    <key name="pose" qpos="0.1 0.2 1.3 0.9 0.1 0.3 -0.2 0.4 -0.7" '
+           'qvel="0.5 -0.1 0.2 0.3 0.0 -0.4 1.5"/>\n  </keyframe>\n</mujoco>\n')
+    xml = tmp_path / "hand_key.xml"
+    xml.write_text(HAND.replace("</mujoco>\n", key))
+    p = tmp_path / "key.toml"
+    p.write_text(f'name = "key"\n[model]\nkind = "mjcf"\nfile = "{xml}"\ngravity = [0.0, 0.0, -9.81]\n'
+                 '[initial]\nkeyframe = "pose"\n[time]\nt1 = 1.0\n')
+    scene = progmo.load(str(p))
+    model = mujoco.MjModel.from_xml_path(str(xml))
+    qa, va = coordinates(scene, model)
+    q = np.asarray(scene.q0)
+    quat = slice(3, 7)
+    q[quat] /= np.linalg.norm(q[quat])  # progmo normalizes the free joint's quaternion
+    want = model.key_qpos[0][qa]
+    want[quat] /= np.linalg.norm(want[quat])
+    assert np.allclose(q, want, rtol=0, atol=1e-15), (q, want)
+    assert np.array_equal(np.asarray(scene.v0), model.key_qvel[0][va])
+    assert want[7:9].tolist() == [0.4, -0.7] and model.key_qpos[0][9:].tolist() == model.qpos0[9:].tolist()
