@@ -225,6 +225,29 @@ fn scale_total_mass(src: &Source, root: Node, bodies: &mut [BodySpec], total: f6
     Ok(())
 }
 
+/// The attributes that place a site (or a geom) in its body.
+const PLACEMENT: [&str; 7] = [
+    "pos",
+    "quat",
+    "axisangle",
+    "euler",
+    "xyaxes",
+    "zaxis",
+    "fromto",
+];
+
+/// A named `<site>`: a frame fixed in its body (the world for a `<worldbody>` site), which a scene
+/// uses as a signal source ([`crate::scene`] adds it when its rows name it). `problem`: why it
+/// cannot be one (a placement from `fromto` or from a default class), said only when it is used.
+#[derive(Clone, Debug)]
+pub struct Site {
+    pub name: String,
+    pub parent: String,
+    pub pos: [f64; 3],
+    pub quat: [f64; 4],
+    pub problem: Option<SceneError>,
+}
+
 /// A `<key>` of the file's `<keyframe>`: per joint (MuJoCo's qpos order, locked ones too) its
 /// position values (qpos: radians, quaternions w first, whatever `<compiler angle>` says) and its
 /// velocity values (qvel: a free joint's world linear then body angular velocity, a ball's body
@@ -384,7 +407,13 @@ struct Defaults<'a, 'i> {
     classes: HashMap<String, DefaultClass<'a, 'i>>,
 }
 
-type DefaultClass<'a, 'i> = (Option<String>, Option<Node<'a, 'i>>, Option<Node<'a, 'i>>);
+/// (parent class, its `<joint>`, `<geom>` and `<site>` defaults)
+type DefaultClass<'a, 'i> = (
+    Option<String>,
+    Option<Node<'a, 'i>>,
+    Option<Node<'a, 'i>>,
+    Option<Node<'a, 'i>>,
+);
 
 const MAIN: &str = "main";
 
@@ -416,8 +445,11 @@ impl<'a, 'i> Defaults<'a, 'i> {
         }
         let joint = elements(n).find(|c| c.has_tag_name("joint"));
         let geom = elements(n).find(|c| c.has_tag_name("geom"));
-        self.classes
-            .insert(name.to_string(), (parent.map(String::from), joint, geom));
+        let site = elements(n).find(|c| c.has_tag_name("site"));
+        self.classes.insert(
+            name.to_string(),
+            (parent.map(String::from), joint, geom, site),
+        );
         for c in elements(n).filter(|c| c.has_tag_name("default")) {
             self.add(src, c, Some(name))?;
         }
@@ -432,6 +464,20 @@ impl<'a, 'i> Defaults<'a, 'i> {
     /// The same for a geom.
     fn geom_attr(&self, g: Node<'a, 'i>, class: &str, attr: &str) -> Option<&'a str> {
         self.attr(g, class, attr, |d| d.2)
+    }
+
+    /// The placement attribute a `<site>` default of the class chain gives, if any.
+    fn site_placement(&self, class: &str) -> Option<(&'a str, Node<'a, 'i>)> {
+        let mut c = self.classes.get(class);
+        while let Some(d) = c {
+            if let Some(s) = d.3 {
+                if let Some(a) = PLACEMENT.iter().find(|a| s.attribute(**a).is_some()) {
+                    return Some((a, s));
+                }
+            }
+            c = d.0.as_ref().and_then(|p| self.classes.get(p));
+        }
+        None
     }
 
     /// Geom `g` of class `class` and the `<geom>` defaults of the class chain, nearest first.
@@ -615,6 +661,7 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         moving: HashSet::new(),
         layout: vec![],
         pose: ([0.0; 3], [1.0, 0.0, 0.0, 0.0]),
+        sites: vec![],
     };
     // depth-first, parents first: (element, parent body name, inherited childclass)
     let mut stack = top_bodies(src, &worldbodies)?;
@@ -628,6 +675,9 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         {
             stack.push((ch, name.clone(), class.clone()));
         }
+    }
+    for wb in &worldbodies {
+        w.sites(*wb, WORLD, MAIN)?;
     }
     if worldbodies.is_empty() || w.bodies.is_empty() {
         return Err(err(src, root, "worldbody", "no <body> in <worldbody>"));
@@ -651,6 +701,7 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         ranges: w.ranges,
         locked: w.locked_values,
         keyframes: keyframes(src, root, &w.layout)?,
+        sites: w.sites,
     })
 }
 
@@ -746,6 +797,8 @@ struct Walk<'s, 'd, 'a, 'i> {
     layout: Vec<(String, Vec<f64>)>,
     /// The pose of the body whose joints are being read (qpos0 of a free joint).
     pose: ([f64; 3], [f64; 4]),
+    /// The named `<site>`s, in file order.
+    sites: Vec<Site>,
 }
 
 impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
@@ -809,6 +862,7 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
                 .with_gravcomp(fixed::<1>(src, b, &format!("{what}.gravcomp"), "gravcomp", t)?[0]);
         }
         self.record_geoms(b, &what, &class);
+        self.sites(b, &name, &class)?;
         self.pose = (pos, quat);
         for e in elements(b) {
             let tag = e.tag_name().name();
@@ -829,6 +883,36 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
         }
         self.bodies.push(spec);
         Ok((name, class))
+    }
+
+    /// The named `<site>`s of body (or worldbody) `b`, whose childclass is `class`.
+    fn sites(&mut self, b: Node<'a, 'i>, parent: &str, class: &str) -> R<()> {
+        let src = self.src;
+        for e in elements(b).filter(|e| e.has_tag_name("site")) {
+            let Some(name) = e.attribute("name") else {
+                continue; // an unnamed site cannot be named in a row
+            };
+            let what = format!("site[{name}]");
+            let sclass = e.attribute("class").unwrap_or(class);
+            let problem = if e.attribute("fromto").is_some() {
+                Some(err(src, e, &format!("{what}.fromto"), "a site placed by `fromto` is not read as a frame: give it pos and an orientation"))
+            } else {
+                self.defaults.site_placement(sclass).map(|(a, d)| {
+                    let msg = format!("site `{name}` takes `{a}` from its default class `{sclass}` (line {}), which is not read for sites: write it on the site", src.line_col(d.range().start).0);
+                    err(src, e, &format!("{what}.class"), msg)
+                })
+            };
+            let pos = attr_k::<3>(src, e, &format!("{what}.pos"), "pos", [0.0; 3])?;
+            let quat = orientation(src, self.c, e, &what)?;
+            self.sites.push(Site {
+                name: name.to_string(),
+                parent: parent.to_string(),
+                pos,
+                quat,
+                problem,
+            });
+        }
+        Ok(())
     }
 
     /// Body `b`'s mass properties as MuJoCo's compiler makes them: from its geoms when

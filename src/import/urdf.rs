@@ -34,6 +34,8 @@ pub struct Robot {
     pub locked: Vec<(String, f64)>,
     /// MJCF `<keyframe>` keys by name (none in a URDF).
     pub keyframes: Vec<super::mjcf::Keyframe>,
+    /// MJCF named `<site>`s (none in a URDF).
+    pub sites: Vec<super::mjcf::Site>,
 }
 
 /// How the root link is attached to the world.
@@ -359,6 +361,7 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
         ranges: w.ranges,
         locked: w.locked_values,
         keyframes: vec![],
+        sites: vec![],
     })
 }
 

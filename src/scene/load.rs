@@ -1124,6 +1124,7 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
         .filter(|n| is_identifier(n))
         .collect();
     frames(src, m, &robot.joints, &mut specs, &mut sites)?;
+    site_frames(src, &robot.sites, &robot.joints, &mut specs, &mut sites)?;
     let hints = locked_hints(src, m, &robot.locked);
     for j in &robot.joints {
         if params.iter().any(|p| &p.0 == j) {
@@ -1286,6 +1287,52 @@ fn frames(
                 .rotated(ff.quat),
         );
         sites.push(ff.name.clone());
+    }
+    Ok(())
+}
+
+/// The MJCF file's `<site>`s the scene names (`NAME.` in its text: model only what a scene needs),
+/// appended as massless bodies welded where the site is, like `[[model.frames]]`. A site whose
+/// name is a link's, a joint's or a `frames` entry's, or not an identifier, is not added (that
+/// name means the other); one that cannot be read as a frame is refused with its reason, located
+/// at the site.
+fn site_frames(
+    src: &Source,
+    file_sites: &[crate::import::mjcf::Site],
+    joints: &[String],
+    specs: &mut Vec<BodySpec>,
+    sites: &mut Vec<String>,
+) -> R<()> {
+    let named = |name: &str| {
+        src.text.match_indices(name).any(|(i, _)| {
+            let before = src.text[..i].chars().next_back();
+            let after = src.text[i + name.len()..].chars().next();
+            !before.is_some_and(|c| c.is_alphanumeric() || c == '_') && after == Some('.')
+        })
+    };
+    for site in file_sites {
+        let taken = specs.iter().any(|b| b.name == site.name) || joints.contains(&site.name);
+        if taken || !is_identifier(&site.name) || !named(&site.name) {
+            continue;
+        }
+        if let Some(e) = &site.problem {
+            return Err(e.clone());
+        }
+        if specs.len() == crate::input::MAX_BODIES {
+            return Err(src.general(
+                "model.file",
+                format!(
+                    "more than {} bodies with the file's sites",
+                    crate::input::MAX_BODIES
+                ),
+            ));
+        }
+        specs.push(
+            BodySpec::massless(&site.name, &site.parent)
+                .at(site.pos)
+                .rotated(site.quat),
+        );
+        sites.push(site.name.clone());
     }
     Ok(())
 }

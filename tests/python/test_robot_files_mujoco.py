@@ -358,3 +358,47 @@ def test_keyframe_is_mujocos_reading_of_the_key(tmp_path):
     assert np.allclose(q, want, rtol=0, atol=1e-15), (q, want)
     assert np.array_equal(np.asarray(scene.v0), model.key_qvel[0][va])
     assert want[7:9].tolist() == [0.4, -0.7] and model.key_qpos[0][9:].tolist() == model.qpos0[9:].tolist()
+
+
+def test_sites_the_rows_name_are_frames_where_mujoco_puts_them(tmp_path):
+    sites = {'<body name="hand"': '<site name="tip" pos="0.01 0.02 -0.05" euler="10 20 30"/>',
+             '<body name="upper"': '<site name="mid" pos="0 0.01 -0.1" quat="0.9 0.1 0.2 0.3"/><site pos="1 1 1"/>',
+             '<body name="base"': '<site name="unused" pos="0.1 0 0"/><site name="long" type="capsule" fromto="0 0 0 0 0 1" size="0.01"/>',
+             "<worldbody>": '<site name="target" pos="0.3 0.2 0.5" zaxis="1 1 0"/>'}
+    text = HAND
+    for anchor, site in sites.items():
+        i = text.index(anchor)
+        i = text.index(">", i) + 1
+        text = text[:i] + "\n" + site + text[i:]
+    xml = tmp_path / "sites.xml"
+    xml.write_text(text)
+    rows = "".join(f'[[programme]]\nname = "r{k}"\nexpr = "shoulder\' + 0 * {s}.x"\n'
+                   for k, s in enumerate(["tip", "mid", "target"]))
+    scene = mjcf_scene(tmp_path, xml, dict(gravity=[0.0, 0.0, -9.81]), rows)
+    model = mujoco.MjModel.from_xml_path(str(xml))
+    d = mujoco.MjData(model)
+    qa, _ = coordinates(scene, model)
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        q, _ = random_state(scene, rng)
+        d.qpos[qa] = q
+        mujoco.mj_kinematics(model, d)
+        poses = {name: (np.asarray(p), np.asarray(r)) for name, p, r in scene.body_poses(q)}
+        assert "unused" not in poses and "long" not in poses  # model only what the scene names
+        for s in ("tip", "mid", "target"):
+            p, quat = poses[s]
+            R = np.zeros(9)
+            mujoco.mju_quat2Mat(R, quat)
+            assert np.allclose(p, d.site(s).xpos, atol=1e-14), (s, p, d.site(s).xpos)
+            assert np.allclose(R, d.site(s).xmat, atol=1e-14), (s, R, d.site(s).xmat)
+    # negative control: MuJoCo's reading of the tip turned by one more degree differs
+    other = mujoco.MjModel.from_xml_string(text.replace('euler="10 20 30"/>', 'euler="10 20 31"/>'))
+    d2 = mujoco.MjData(other)
+    d2.qpos[qa] = q
+    mujoco.mj_kinematics(other, d2)
+    R = np.zeros(9)
+    mujoco.mju_quat2Mat(R, poses["tip"][1])
+    assert np.abs(R - d2.site("tip").xmat).max() > 1e-3
+    # a named site placed by fromto is refused where it is, once a row names it
+    with pytest.raises(progmo.SceneError, match=r"site\[long\]\.fromto"):
+        mjcf_scene(tmp_path, xml, dict(gravity=[0.0, 0.0, -9.81]), rows + '[[programme]]\nname = "l"\nexpr = "shoulder\' + 0 * long.z"\n')
