@@ -661,6 +661,7 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         moving: HashSet::new(),
         layout: vec![],
         pose: ([0.0; 3], [1.0, 0.0, 0.0, 0.0]),
+        body_name: String::new(),
         sites: vec![],
     };
     // depth-first, parents first: (element, parent body name, inherited childclass)
@@ -795,8 +796,10 @@ struct Walk<'s, 'd, 'a, 'i> {
     /// Every joint in MuJoCo's qpos order (locked ones too) with its qpos0 (MuJoCo's default pose:
     /// `ref`, the identity quaternion, a free body's pos and quat): a keyframe's layout.
     layout: Vec<(String, Vec<f64>)>,
-    /// The pose of the body whose joints are being read (qpos0 of a free joint).
+    /// The pose of the body whose joints are being read (qpos0 of a free joint) and its name
+    /// (an unnamed free joint's name: `BODY_free`, as Pinocchio names it).
     pose: ([f64; 3], [f64; 4]),
+    body_name: String,
     /// The named `<site>`s, in file order.
     sites: Vec<Site>,
 }
@@ -864,6 +867,7 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
         self.record_geoms(b, &what, &class);
         self.sites(b, &name, &class)?;
         self.pose = (pos, quat);
+        self.body_name.clone_from(&name);
         for e in elements(b) {
             let tag = e.tag_name().name();
             if tag == "frame" || tag == "replicate" || tag == "attach" {
@@ -1008,13 +1012,20 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
                 format!("unknown default class `{jclass}`"),
             ));
         }
-        let Some(jname) = e.attribute("name") else {
-            return Err(err(
-                src,
-                e,
-                &format!("{what}.{tag}"),
-                "a joint needs a name: it names a coordinate",
-            ));
+        let free = tag == "freejoint"
+            || (tag == "joint" && self.defaults.joint_attr(e, jclass, "type") == Some("free"));
+        let unnamed_free = format!("{}_free", self.body_name);
+        let jname = match e.attribute("name") {
+            Some(n) => n,
+            None if free => unnamed_free.as_str(), // the body's coordinates: BODY_free.x, ...
+            None => {
+                return Err(err(
+                    src,
+                    e,
+                    &format!("{what}.{tag}"),
+                    "a joint needs a name: it names a coordinate",
+                ))
+            }
         };
         let jwhat = format!("joint[{jname}]");
         if !is_identifier(jname) {

@@ -402,3 +402,37 @@ def test_sites_the_rows_name_are_frames_where_mujoco_puts_them(tmp_path):
     # a named site placed by fromto is refused where it is, once a row names it
     with pytest.raises(progmo.SceneError, match=r"site\[long\]\.fromto"):
         mjcf_scene(tmp_path, xml, dict(gravity=[0.0, 0.0, -9.81]), rows + '[[programme]]\nname = "l"\nexpr = "shoulder\' + 0 * long.z"\n')
+
+
+UNNAMED_FREE = """<mujoco>
+  <worldbody>
+    <body name="trunk" pos="0 0 1">
+      <freejoint/>
+      <inertial pos="0.01 0 0" mass="2" diaginertia="0.1 0.2 0.25"/>
+      <body name="leg" pos="0 0 -0.2">
+        <joint name="hip" axis="0 1 0"/>
+        <inertial pos="0 0 -0.1" mass="0.5" diaginertia="0.01 0.01 0.002"/>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+def test_an_unnamed_free_joint_is_named_after_its_body_and_checked(tmp_path):
+    from progmo import checks
+    from progmo.simulators.robot_file import mujoco_addresses
+
+    (tmp_path / "trunk.xml").write_text(UNNAMED_FREE)
+    p = tmp_path / "trunk.toml"
+    p.write_text('name = "trunk"\n[model]\nkind = "mjcf"\nfile = "trunk.xml"\ngravity = [0.0, 0.0, -9.81]\n'
+                 '[[programme]]\nname = "swing"\nexpr = "hip - 0.3 * cos(t)"\n'
+                 '[initial]\nq = { hip = 0.3 }\n[time]\nt1 = 0.5\n')
+    scene = progmo.load(str(p))
+    assert scene.q_names[:3] == ["trunk_free.x", "trunk_free.y", "trunk_free.z"]  # Pinocchio's name too
+    model = mujoco.MjModel.from_xml_path(str(tmp_path / "trunk.xml"))
+    assert model.joint(0).name == "" and mujoco_addresses(model)["trunk_free"] == (0, 0)
+    for sim in ("mujoco", "pinocchio"):  # each simulator's own reading of the file, open loop
+        r = checks.run_check(str(p), sim)
+        assert r.status == "pass", (sim, r.status, r.reason, r.metrics)
+        assert r.metrics["parity_mass"] <= 1e-12 and r.metrics["replay_residual"] <= 1e-9, (sim, r.metrics)

@@ -189,6 +189,9 @@ def mujoco_addresses(m: Any) -> dict[str, tuple[int, int]]:
     out = {}
     for j in range(m.njnt):
         name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j)
+        if not name and int(m.jnt_type[j]) == mujoco.mjtJoint.mjJNT_FREE:
+            # an unnamed free joint: progmo (and Pinocchio) name it BODY_free
+            name = f"{mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, int(m.jnt_bodyid[j]))}_free"
         if name:
             out[name] = (int(m.jnt_qposadr[j]), int(m.jnt_dofadr[j]))
     return out
