@@ -1281,14 +1281,21 @@ fn frames(
             ));
         }
         body_names.insert(ff.name.clone());
-        specs.push(
-            BodySpec::massless(&ff.name, &ff.parent)
-                .at(ff.pos)
-                .rotated(ff.quat),
-        );
-        sites.push(ff.name.clone());
+        push_frame(specs, sites, (&ff.name, &ff.parent), (ff.pos, ff.quat));
     }
     Ok(())
+}
+
+/// A frame (a `[[model.frames]]` entry, an MJCF site): a massless body welded to `parent` at
+/// `pos`, `quat`, and a signal source of its name.
+fn push_frame(
+    specs: &mut Vec<BodySpec>,
+    sites: &mut Vec<String>,
+    (name, parent): (&str, &str),
+    (pos, quat): ([f64; 3], [f64; 4]),
+) {
+    specs.push(BodySpec::massless(name, parent).at(pos).rotated(quat));
+    sites.push(name.to_string());
 }
 
 /// The MJCF file's `<site>`s the scene names (`NAME.` in its text: model only what a scene needs),
@@ -1327,12 +1334,12 @@ fn site_frames(
                 ),
             ));
         }
-        specs.push(
-            BodySpec::massless(&site.name, &site.parent)
-                .at(site.pos)
-                .rotated(site.quat),
+        push_frame(
+            specs,
+            sites,
+            (&site.name, &site.parent),
+            (site.pos, site.quat),
         );
-        sites.push(site.name.clone());
     }
     Ok(())
 }
