@@ -176,11 +176,7 @@ fn lagrangian_system(
     let (m, mut sym) = lagrangian(src, model, params)?;
     let (c, spans) = rows(src, file, &mut sym, &[])?;
     if let Some(k) = &file.initial.get_ref().keyframe {
-        return Err(src.error(
-            k.span(),
-            "initial.keyframe",
-            "a keyframe is read from an `mjcf` model's file: this model has none",
-        ));
+        return Err(src.error(k.span(), "initial.keyframe", NO_KEYFRAME));
     }
     let v_start = vec![0.0; m.v_names().len()];
     let (q0, v0) = initial(
@@ -1310,16 +1306,25 @@ fn site_frames(
     specs: &mut Vec<BodySpec>,
     sites: &mut Vec<String>,
 ) -> R<()> {
-    let named = |name: &str| {
-        src.text.match_indices(name).any(|(i, _)| {
-            let before = src.text[..i].chars().next_back();
-            let after = src.text[i + name.len()..].chars().next();
-            !before.is_some_and(|c| c.is_alphanumeric() || c == '_') && after == Some('.')
-        })
-    };
+    use std::collections::HashSet;
+    // every word of the scene's text that a `.` follows, in one forward pass
+    let mut named: HashSet<&str> = HashSet::new();
+    let mut start = None;
+    for (i, c) in src.text.char_indices() {
+        if c.is_alphanumeric() || c == '_' {
+            start.get_or_insert(i);
+        } else {
+            if let (Some(s), '.') = (start, c) {
+                named.insert(&src.text[s..i]);
+            }
+            start = None;
+        }
+    }
+    let mut taken: HashSet<String> = specs.iter().map(|b| b.name.clone()).collect();
+    taken.extend(joints.iter().cloned());
     for site in file_sites {
-        let taken = specs.iter().any(|b| b.name == site.name) || joints.contains(&site.name);
-        if taken || !is_identifier(&site.name) || !named(&site.name) {
+        let unused = !named.contains(site.name.as_str());
+        if unused || taken.contains(&site.name) || !is_identifier(&site.name) {
             continue;
         }
         if let Some(e) = &site.problem {
@@ -1340,6 +1345,7 @@ fn site_frames(
             (&site.name, &site.parent),
             (site.pos, site.quat),
         );
+        taken.insert(site.name.clone());
     }
     Ok(())
 }
@@ -1850,6 +1856,8 @@ fn initial(
     Ok((q, v))
 }
 
+const NO_KEYFRAME: &str = "a keyframe is read from an `mjcf` model's file: this model has none";
+
 /// The starting values `[initial]` q and v complete: the tree's neutral configuration and zero
 /// velocities, or the MJCF keyframe `[initial] keyframe` names (its joints' qpos and qvel; a locked
 /// joint's value must be the one it is welded at).
@@ -1880,7 +1888,7 @@ fn keyframe(
                 }
             )
         } else {
-            "a keyframe is read from an `mjcf` model's file: this model has none".into()
+            NO_KEYFRAME.into()
         }));
     };
     let locked = rf.map_or(&[][..], |r| r.locked.as_slice());
