@@ -304,9 +304,12 @@ def check_names(spec: Spec, scene: Any) -> None:
     else a located :class:`SweepError` (with the nearest valid name). A misspelt name would otherwise
     refuse every sample, or vary nothing."""
     text = Path(spec.path).read_text()
+    # a coordinate with one value is its own velocity's name (hinge, slide, lagrangian); a ball or
+    # free joint's components are not (``j.qw`` / ``j.wx``), whatever dots a joint's name holds
+    single = [n for n in scene.q_names if n in set(scene.v_names)]
     have = {"parameters": [n for n, _ in scene.parameters],
-            "initial.q": [n for n in scene.q_names if "." not in n],
-            "initial.v": [n for n in scene.v_names if "." not in n]}
+            "initial.q": single,
+            "initial.v": single}
     what = {"parameters": "parameter", "initial.q": "coordinate", "initial.v": "velocity"}
     st = scene.settings
     integ, drift = st["integrator"], st["drift"]["kind"]

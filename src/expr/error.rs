@@ -34,7 +34,7 @@ pub enum ExprErrorKind {
     UnmatchedClose,
     #[error("unexpected `{found}` after a complete expression (missing operator?)")]
     Trailing { found: String },
-    #[error("unknown symbol `{name}`{}", suggest(.suggestion))]
+    #[error("unknown symbol {}{}", shown(.name), suggest(.suggestion))]
     UnknownSymbol {
         name: String,
         suggestion: Option<String>,
@@ -62,8 +62,18 @@ pub enum ExprErrorKind {
 
 fn suggest(s: &Option<String>) -> String {
     match s {
-        Some(s) => format!(" (did you mean `{s}`?)"),
+        Some(s) => format!(" (did you mean {}?)", shown(s)),
         None => String::new(),
+    }
+}
+
+/// A name inside a message: `` `q` ``, or `` `` `joint_8.0` `` `` when it needs backquotes.
+pub(crate) fn shown(name: &str) -> String {
+    let w = crate::expr::written(name);
+    if w.contains('`') {
+        format!("`` {w} ``")
+    } else {
+        format!("`{w}`")
     }
 }
 

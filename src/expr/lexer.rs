@@ -73,7 +73,7 @@ pub(crate) fn lex(src: &str) -> Result<Vec<Token>, ExprError> {
             let (token, end) = lx.number(i)?;
             out.push(token);
             i = end;
-        } else if is_start(c) {
+        } else if is_start(c) || c == '`' {
             let (token, end) = lx.name(i)?;
             out.push(token);
             i = end;
@@ -185,24 +185,61 @@ impl Lexer<'_> {
         Ok((token, i))
     }
 
-    /// The name starting at `start` and the index after it.
+    /// The name starting at `start` and the index after it. A part is an identifier or a
+    /// backquoted name of a robot file (`` `joint_8.0` ``: any characters but a backquote, a quote
+    /// and a line break); the token's name is the parts joined by `.`, quotes removed.
     fn name(&self, start: usize) -> Result<(Token, usize), ExprError> {
         let cs = &self.cs;
         let mut i = start;
+        let mut name = String::new();
         // part ("." part)* "'"{0,2}
         loop {
-            while i < cs.len() && is_cont(cs[i]) {
+            if cs.get(i) == Some(&'`') {
+                let open = i;
                 i += 1;
+                while i < cs.len() && !matches!(cs[i], '`' | '\n' | '\'') {
+                    i += 1;
+                }
+                if cs.get(i) != Some(&'`') {
+                    let end = (i + 1).min(cs.len());
+                    return Err(self.err(
+                        K::BadName {
+                            text: cs[open..end].iter().collect(),
+                            reason: "a backquoted name needs its closing backquote (and holds no `'` or line break)",
+                        },
+                        open,
+                        &cs[open..end],
+                    ));
+                }
+                if i == open + 1 {
+                    return Err(self.err(
+                        K::BadName {
+                            text: "``".into(),
+                            reason: "a backquoted name is not empty",
+                        },
+                        open,
+                        &cs[open..=i],
+                    ));
+                }
+                name.extend(&cs[open + 1..i]);
+                i += 1;
+            } else {
+                let from = i;
+                while i < cs.len() && is_cont(cs[i]) {
+                    i += 1;
+                }
+                name.extend(&cs[from..i]);
             }
             if i < cs.len() && cs[i] == '.' {
-                if cs.get(i + 1).is_some_and(|&d| is_start(d)) {
+                if cs.get(i + 1).is_some_and(|&d| is_start(d) || d == '`') {
+                    name.push('.');
                     i += 1;
                     continue;
                 }
                 return Err(self.err(
                     K::BadName {
                         text: cs[start..=i].iter().collect(),
-                        reason: "expected a name part after `.`",
+                        reason: "expected a name part after `.` (a name of the robot file that is not an identifier is written in backquotes: `` `joint_8.0` ``)",
                     },
                     start,
                     &cs[start..=i],
@@ -222,9 +259,10 @@ impl Lexer<'_> {
                 &cs[start..i],
             ));
         }
+        name.extend(&cs[i - primes..i]);
         let text: String = cs[start..i].iter().collect();
         let token = Token {
-            tok: Tok::Name(text.clone()),
+            tok: Tok::Name(name),
             col: start + 1,
             text,
         };

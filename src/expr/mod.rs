@@ -17,8 +17,13 @@
 //! primary = number | name | name "(" [ expr { "," expr } ] ")" | "(" expr ")" ;
 //! number  = ( digits [ "." { digit } ] | "." digits ) [ ("e" | "E") [ "+" | "-" ] digits ] ;
 //! name    = part { "." part } [ "'" | "''" ] ;       (* tip.vel.y, r', r'' *)
-//! part    = ( letter | "_" ) { letter | digit | "_" } ;   (* ASCII *)
+//! part    = ( letter | "_" ) { letter | digit | "_" }      (* ASCII *)
+//!         | "`" { any char but "`", "'" and a line break } "`" ;   (* `joint_8.0` *)
 //! ```
+//!
+//! A backquoted part is a robot file's name that is not an identifier: `` `joint_8.0`' `` is the
+//! velocity of joint `joint_8.0`, `` `link_8.0`.pos.x `` a signal of link `link_8.0`. The name the
+//! caller sees has the backquotes removed; [`written`] spells a name back as a row writes it.
 //!
 //! Whitespace (including newlines) separates tokens. Multiplication is explicit (`2*x`).
 //!
@@ -186,6 +191,30 @@ pub fn time_order(name: &str) -> u8 {
 /// The name without trailing apostrophes: `r''` → `r`.
 pub fn base_name(name: &str) -> &str {
     name.trim_end_matches('\'')
+}
+
+/// `name` as an expression writes it: unchanged when every `.`-separated part is an identifier,
+/// else with the non-identifier head in backquotes: `joint_8.0'` -> `` `joint_8.0`' ``,
+/// `link_8.0.x` -> `` `link_8.0`.x `` (a last part that is a component word of a signal or of a
+/// ball or free joint, `x y z vx vy vz wx wy wz qw qx qy qz`, stays bare).
+pub fn written(name: &str) -> String {
+    let base = base_name(name);
+    let primes = &name[base.len()..];
+    let ident = |p: &str| {
+        let mut c = p.chars();
+        matches!(c.next(), Some(ch) if ch.is_ascii_alphabetic() || ch == '_')
+            && c.all(|ch| ch.is_ascii_alphanumeric() || ch == '_')
+    };
+    if base.split('.').all(ident) {
+        return name.to_string();
+    }
+    const COMPONENTS: [&str; 13] = [
+        "x", "y", "z", "vx", "vy", "vz", "wx", "wy", "wz", "qw", "qx", "qy", "qz",
+    ];
+    match base.rsplit_once('.') {
+        Some((head, last)) if COMPONENTS.contains(&last) => format!("`{head}`.{last}{primes}"),
+        _ => format!("`{base}`{primes}"),
+    }
 }
 
 /// The symbol names `source` references (not functions, not `pi`), in order of first appearance,

@@ -173,6 +173,51 @@ fn names_with_dots_and_primes() {
     assert!(referenced_names("sin(").is_err());
 }
 
+/// A robot file's name that is not an identifier is written in backquotes; the name the caller
+/// sees has them removed, the token keeps the source text for errors.
+#[test]
+fn backquoted_names() {
+    assert_eq!(
+        referenced_names("`joint_8.0` + `joint_8.0`' * `link_8.0`.x'' - `a b`.qw").unwrap(),
+        vec!["joint_8.0", "joint_8.0'", "link_8.0.x''", "a b.qw"]
+    );
+    // mixed parts; a quoted identifier is the identifier
+    assert_eq!(referenced_names("tip.`x`").unwrap(), vec!["tip.x"]);
+    let t: SymbolTable = ["joint_8.0", "joint_8.0'", "link_8.0.x"].into_iter().collect();
+    let e = Expr::compile("2*`joint_8.0` + `joint_8.0`' + `link_8.0`.x", &t).unwrap();
+    assert_eq!(e.value(&[1.0, 10.0, 100.0]), 112.0);
+    assert_eq!(e.time_order(), 1);
+    // malformed quotes, located at the opening backquote
+    for (src, col, phrase) in [
+        ("1 + `joint_8.0", 5, "closing backquote"),
+        ("`a'b`", 1, "closing backquote"),
+        ("x + ``", 5, "not empty"),
+        ("joint_8.0", 1, "backquotes"),
+    ] {
+        let e = referenced_names(src).unwrap_err();
+        assert_eq!(e.column, col, "{src}: {e}");
+        assert!(e.message().contains(phrase), "{src}: {e}");
+    }
+    // an unknown quoted name is shown, and its neighbour suggested, as rows write them
+    let e = Expr::compile("`joint_8.1`", &t).unwrap_err();
+    assert_eq!(
+        e.message(),
+        "unknown symbol `` `joint_8.1` `` (did you mean `` `joint_8.0` ``?)"
+    );
+    for (name, w) in [
+        ("q1", "q1"),
+        ("tip.x'", "tip.x'"),
+        ("joint_8.0'", "`joint_8.0`'"),
+        ("link_8.0.qw", "`link_8.0`.qw"),
+        ("link-2.wx'", "`link-2`.wx'"),
+        ("a.0.b", "`a.0.b`"),
+    ] {
+        assert_eq!(written(name), w);
+        let back = referenced_names(&written(name)).unwrap();
+        assert_eq!(back, [name], "{name} round trip");
+    }
+}
+
 #[test]
 fn symbol_table() {
     let mut t = SymbolTable::new();

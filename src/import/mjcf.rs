@@ -513,14 +513,6 @@ impl<'a, 'i> Defaults<'a, 'i> {
     }
 }
 
-fn is_identifier(name: &str) -> bool {
-    let mut ch = name.chars();
-    matches!(ch.next(), Some(c) if c.is_ascii_alphabetic() || c == '_')
-        && ch.all(|c| c.is_ascii_alphanumeric() || c == '_')
-        && name != "t"
-        && name != "pi"
-}
-
 /// An `<inertial>` element's mass properties in the body frame (`pos`, orientation, `mass`,
 /// `diaginertia` or `fullinertia`).
 fn explicit_inertial(src: &Source, c: &Compiler, n: Node, what: &str) -> R<MassProps> {
@@ -1028,8 +1020,8 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
             }
         };
         let jwhat = format!("joint[{jname}]");
-        if !is_identifier(jname) {
-            return Err(err(src, e, &jwhat, format!("joint name `{jname}` is not an identifier (letters, digits, _): it names a coordinate in rows")));
+        if let Some(why) = super::unusable_name(jname) {
+            return Err(err(src, e, &jwhat, format!("joint name `{jname}` {why}")));
         }
         if !self.joint_set.insert(jname.to_string()) {
             return Err(err(

@@ -33,6 +33,22 @@ pub fn resolve(file: &str, scene_dir: &Path) -> Result<PathBuf, String> {
     crate::input::resolve(file, scene_dir)
 }
 
+/// Why a robot file's joint name cannot name a coordinate in rows, or None. Any name works,
+/// written in backquotes when it is not an identifier (`` `joint_8.0`' ``, see [`crate::expr`]),
+/// but for a backquote, an apostrophe (it would read as a time derivative), a line break, and `t`
+/// and `pi` (time and the constant).
+pub(crate) fn unusable_name(name: &str) -> Option<&'static str> {
+    if name.trim().is_empty() {
+        Some("is blank: a joint's name names its coordinate in rows")
+    } else if name.contains(['`', '\'', '\n', '\r']) {
+        Some("holds a backquote, an apostrophe or a line break: it cannot be written in rows (the apostrophe marks a time derivative)")
+    } else if name == "t" || name == "pi" {
+        Some("is reserved in rows (`t` is time, `pi` the constant)")
+    } else {
+        None
+    }
+}
+
 /// Test support: example-robot-data's `share` folder inside this checkout's `.venv` (what
 /// harness/setup.sh installs), for tests run without `$PROGMO_ROBOT_PATH`.
 #[doc(hidden)]

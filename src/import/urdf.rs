@@ -582,13 +582,8 @@ impl Walk<'_, '_> {
         s: JointSpec,
     ) -> R<JointSpec> {
         let src = self.src;
-        let id_ok = {
-            let mut ch = name.chars();
-            matches!(ch.next(), Some(c) if c.is_ascii_alphabetic() || c == '_')
-                && ch.all(|c| c.is_ascii_alphanumeric() || c == '_')
-        };
-        if !id_ok || name == "t" || name == "pi" {
-            return Err(err(src, j, what, format!("joint name `{name}` is not an identifier (letters, digits, _): it names a coordinate in rows")));
+        if let Some(why) = super::unusable_name(name) {
+            return Err(err(src, j, what, format!("joint name `{name}` {why}")));
         }
         let mut s = s;
         if let Some(m) = child(j, "mimic") {

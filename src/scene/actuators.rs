@@ -33,6 +33,7 @@ pub(super) fn load<M: Model>(
         src,
         file,
         v_names: p.model.v_names(),
+        q_names: p.model.q_names(),
     };
     cx.supported(has_closures)?;
     let (state_table, slots0) = cx.direction_symbols(params, p.t0, &p.q0);
@@ -54,6 +55,7 @@ struct Actuators<'a> {
     src: &'a Source,
     file: &'a SceneFile,
     v_names: Vec<String>,
+    q_names: Vec<String>,
 }
 
 /// The actuators read so far: H's columns, its state-dependent entries, names, actuated joints.
@@ -88,8 +90,9 @@ impl Actuators<'_> {
                  reactions would join tau in the index reduction",
             ));
         }
-        if let Some(j) = self.v_names.iter().find(|n| n.contains('.')) {
-            let joint = j.split('.').next().unwrap_or(j);
+        // a ball or free joint's angular velocity (`j.wx`) is no coordinate's rate
+        if let Some(j) = self.v_names.iter().find(|n| !self.q_names.contains(n)) {
+            let joint = j.rsplit_once('.').map_or(j.as_str(), |(joint, _)| joint);
             let (span, field) = self.at(0);
             return Err(src.error(
                 span,

@@ -1117,7 +1117,7 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
     let mut sites: Vec<String> = specs
         .iter()
         .map(|b| b.name.clone())
-        .filter(|n| is_identifier(n))
+        .filter(|n| !n.contains(['`', '\'']))
         .collect();
     frames(src, m, &robot.joints, &mut specs, &mut sites)?;
     site_frames(src, &robot.sites, &robot.joints, &mut specs, &mut sites)?;

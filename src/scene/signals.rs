@@ -134,9 +134,10 @@ impl Signals {
         &self.sites
     }
 
-    /// Resolve a name `site.component`; returns its quantity if it names a signal.
+    /// Resolve a name `site.component`; returns its quantity if it names a signal. The site is
+    /// all before the last `.` (a robot file's link name may hold dots: `` `link_8.0`.x ``).
     pub fn resolve(&self, name: &str) -> Option<(usize, Quantity)> {
-        let (site, comp) = name.split_once('.')?;
+        let (site, comp) = name.rsplit_once('.')?;
         let i = self.sites.iter().position(|s| s.name == site)?;
         Quantity::parse(comp).map(|q| (i, q))
     }

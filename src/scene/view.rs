@@ -75,7 +75,7 @@ pub(super) fn view(
     let mut traced: Vec<TracedSite> = vec![];
     for row in &file.programme {
         for n in expr::referenced_names(row.expr.get_ref()).unwrap_or_default() {
-            let Some((site, comp)) = n.split_once('.') else {
+            let Some((site, comp)) = n.rsplit_once('.') else {
                 continue;
             };
             if Quantity::parse(comp).is_none() || traced.iter().any(|s| s.name == site) {

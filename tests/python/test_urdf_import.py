@@ -184,3 +184,55 @@ def test_imported_frame_jacobian_matches_pinocchio(path, tmp_path):
     bad = pin_model(path)
     bad.jointPlacements[2].translation += np.array([1e-3, 0.0, 0.0])
     assert jacobian_worst(scene, bad, link) > 1e-4
+
+
+DOTTED = """<robot name="dotted">
+  <link name="base.0"/>
+  <link name="link_1.0">
+    <inertial><origin xyz="0.2 0 0"/><mass value="1.5"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.02"/></inertial>
+  </link>
+  <link name="link-2.0">
+    <inertial><origin xyz="0 0 -0.15"/><mass value="0.8"/><inertia ixx="0.006" ixy="0" ixz="0" iyy="0.006" iyz="0" izz="0.001"/></inertial>
+  </link>
+  <joint name="joint_0.0" type="revolute"><parent link="base.0"/><child link="link_1.0"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="100" velocity="10"/></joint>
+  <joint name="joint-1.0" type="revolute"><parent link="link_1.0"/><child link="link-2.0"/>
+    <origin xyz="0.4 0 0"/><axis xyz="0 1 0"/><limit lower="-3" upper="3" effort="100" velocity="10"/></joint>
+</robot>
+"""
+
+
+def test_names_that_are_not_identifiers_are_written_in_backquotes_and_checked(tmp_path):
+    """allegro's ``joint_8.0`` and the like: any name of the file works in rows, backquoted
+    (``\\`joint_0.0\\`'``, ``\\`link-2.0\\`.z``); the scene is checked open loop in each simulator's
+    own reading of the file, whose names are the file's."""
+    from progmo import checks
+
+    (tmp_path / "dotted.urdf").write_text(DOTTED)
+    p = tmp_path / "dotted.toml"
+    p.write_text('name = "dotted"\n[model]\nkind = "urdf"\nfile = "dotted.urdf"\ngravity = [0.0, 0.0, -9.81]\n'
+                 '[model.ignore]\njoint_limit = "the motion stays within +-3 rad"\n'
+                 'effort_limit = "u is the generalized force the motion needs"\n'
+                 'velocity_limit = "not part of the dynamics"\n'
+                 '[[programme]]\nname = "turn"\nexpr = "`joint_0.0` - 0.4*(1 - cos(2*t))"\n'
+                 '[[programme]]\nname = "tilt"\nexpr = "`link-2.0`.qw - cos(0.25)*cos(`joint_0.0`/2)"\n'
+                 '[initial]\nq = { "joint-1.0" = 0.5 }\n[time]\nt1 = 1.0\n')
+    scene = progmo.load(str(p))
+    assert scene.q_names == ["joint_0.0", "joint-1.0"]
+    sol = scene.solve()
+    q = np.asarray(sol.q)
+    assert sol.success, sol.message
+    assert np.abs(q[:, 0] - 0.4 * (1 - np.cos(2 * np.asarray(sol.t)))).max() < 1e-8
+    assert np.abs(q[:, 1] - 0.5).max() < 1e-8  # qw = cos(q0/2) cos(q1/2) holds q1 at 0.5
+    for sim in ("mujoco", "pinocchio"):
+        r = checks.run_check(str(p), sim)
+        assert r.status == "pass", (sim, r.status, r.reason, r.metrics)
+        assert r.metrics["parity_mass"] <= 1e-12 and r.metrics["replay_residual"] <= 1e-6, (sim, r.metrics)
+    # unquoted, the dot reads as a signal's: the error says how to write the name
+    p.write_text(p.read_text().replace("`joint_0.0`", "joint_0.0"))
+    with pytest.raises(progmo.SceneError, match=r"backquotes"):
+        progmo.load(str(p))
+    # a misspelt name is suggested as it must be written
+    p.write_text(p.read_text().replace("joint_0.0 -", "`joint_0.1` -"))
+    with pytest.raises(progmo.SceneError, match=r"did you mean `` `joint_0.0` ``"):
+        progmo.load(str(p))
