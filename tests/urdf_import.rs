@@ -369,6 +369,11 @@ fn semi_definite_inertias_import() {
         let want = 2.0 * 0.09 + if tag == "rod" { 0.00012 } else { 0.0 };
         assert!((a[(1, 1)] - want).abs() < 1e-12, "{tag}: {a}");
     }
+    // mass 0 with an inertia (bolt's feet): a rotor, its moment about the j2 axis is A's j2 entry
+    let rotor = r#"<inertial><origin xyz="0 0 0.3"/><mass value="0"/><inertia ixx="0.01" iyy="0.02" izz="0.01"/></inertial>"#;
+    let s = load_beside(&arm("rotor", rotor)).unwrap_or_else(|e| panic!("rotor: {e}"));
+    let a = mass_matrix(&s);
+    assert!((a[(1, 1)] - 0.02).abs() < 1e-15, "rotor: {a}");
 }
 
 /// ANYmal's `ixx = ixy = ... = 1e-6` (rank one: eigenvalues 3e-6, about -2e-22 and 0) on a link
@@ -390,7 +395,8 @@ fn round_off_eigenvalues_are_clipped_with_a_note() {
     let n = &s.import_notes[0];
     assert!(n.starts_with("link `flange`: inertia eigenvalue -"), "{n}");
     assert!(n.ends_with("(round-off) clipped to zero"), "{n}");
-    let e = match load_beside(&arm("ones_b", ones)) {
+    let f = arm("ones_b", ones);
+    let e = match load_beside(&f) {
         Err(e) => e,
         Ok(_) => panic!("a moving rank-one inertia"),
     };
@@ -398,6 +404,9 @@ fn round_off_eigenvalues_are_clipped_with_a_note() {
         e.message.contains("'b'") && e.message.contains("triangle inequality"),
         "{e}"
     );
+    // located at the link's <inertia> in the robot file, not at the scene's [model]
+    assert_eq!((e.file.as_path(), e.line), (f.as_path(), 6), "{e}");
+    assert_eq!(e.field, "link[b].inertial.inertia", "{e}");
 }
 
 /// A truly negative eigenvalue (-1e-3) is refused, located at the `<inertia>` element.

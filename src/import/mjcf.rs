@@ -647,6 +647,7 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         ranges: vec![],
         locked_values: vec![],
         bodies: vec![],
+        body_at: vec![],
         joints: vec![],
         names: HashMap::new(),
         joint_set: HashSet::new(),
@@ -695,6 +696,7 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         locked: w.locked_values,
         keyframes: keyframes(src, root, &w.layout)?,
         sites: w.sites,
+        body_at: w.body_at,
     })
 }
 
@@ -780,6 +782,8 @@ struct Walk<'s, 'd, 'a, 'i> {
     ranges: Vec<JointRange>,
     locked_values: Vec<(String, f64)>,
     bodies: Vec<BodySpec>,
+    /// Where each body's mass properties come from ([`super::urdf::Robot::body_at`]).
+    body_at: Vec<(String, SceneError)>,
     joints: Vec<String>,
     names: HashMap<String, Node<'a, 'i>>,
     joint_set: HashSet<String>,
@@ -915,7 +919,7 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
     /// `inertiafromgeom` is true, or auto and it has no `<inertial>` (an `<inertial>` is kept
     /// when no geom has mass), else from its `<inertial>`; then `boundmass` / `boundinertia`.
     fn mass_props(
-        &self,
+        &mut self,
         b: Node<'a, 'i>,
         (name, parent): (&str, &str),
         class: &str,
@@ -965,6 +969,8 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
             });
             props = Some(gi::bound(p, c.boundmass, c.boundinertia));
         }
+        self.body_at
+            .push(super::urdf::body_at(src, at.0, name, at.1));
         body_spec(src, at.0, at.1, (name, parent), props)
     }
 

@@ -36,6 +36,15 @@ pub struct Robot {
     pub keyframes: Vec<super::mjcf::Keyframe>,
     /// MJCF named `<site>`s (none in a URDF).
     pub sites: Vec<super::mjcf::Site>,
+    /// Where each body's mass properties are written (URDF `<inertial>`, MJCF `<inertial>` or
+    /// the element they come from), as an error located there: a check of the assembled tree
+    /// (the triangle inequality of a rigid body) is reported at that line of the file.
+    pub body_at: Vec<(String, SceneError)>,
+}
+
+/// Body `name`'s place for errors of its mass properties: `n`, field `what`.
+pub(crate) fn body_at(src: &Source, n: Node, name: &str, what: &str) -> (String, SceneError) {
+    (name.to_string(), err(src, n, what, ""))
 }
 
 /// How the root link is attached to the world.
@@ -115,6 +124,18 @@ fn origin(src: &Source, n: Node) -> R<([f64; 3], [f64; 3])> {
     }
 }
 
+/// Where link `name`'s mass properties are written: its `<inertia>`, else `<inertial>`, else the link.
+fn link_at(src: &Source, link: Node, name: &str) -> (String, SceneError) {
+    let inertial = child(link, "inertial");
+    match inertial.and_then(|i| child(i, "inertia")) {
+        Some(n) => body_at(src, n, name, &format!("link[{name}].inertial.inertia")),
+        None => match inertial {
+            Some(i) => body_at(src, i, name, &format!("link[{name}].inertial")),
+            None => body_at(src, link, name, &format!("link[{name}]")),
+        },
+    }
+}
+
 /// The body of a link: massless without `<inertial>` or with mass 0 and zero inertia. A link with
 /// mass needs a positive semi-definite inertia; round-off negative eigenvalues are clipped to zero
 /// (a note in `notes` names the link).
@@ -149,12 +170,14 @@ fn link_body(
     if i == [0.0; 6] && mass == 0.0 {
         return Ok(BodySpec::massless(name, parent));
     }
-    if mass <= 0.0 {
+    // mass 0 with an inertia: the spatial inertia is still semi-definite (bolt's feet); whether the
+    // motion is determined is A's rank check
+    if mass < 0.0 || !mass.is_finite() {
         return Err(err(
             src,
             mass_node,
             &format!("{what}.mass"),
-            format!("mass must be positive (or 0 with zero inertia: a massless link), got {mass}"),
+            format!("mass must be positive, or 0 (a massless link, or one with inertia only), got {mass}"),
         ));
     }
     let at = inertia_node.unwrap_or(inertial);
@@ -299,6 +322,7 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
         rec: Recorder::new(src),
         ranges: vec![],
         locked_values: vec![],
+        body_at: vec![],
     };
     record_collisions(&mut w.rec, &links, &link_order);
     for t in robot.children().filter(|c| c.has_tag_name("transmission")) {
@@ -309,6 +333,7 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
     let root_is_world = root == WORLD && child(links[root], "inertial").is_none();
     if !root_is_world {
         let mut b = link_body(src, links[root], root, WORLD, &mut w.notes)?;
+        w.body_at.push(link_at(src, links[root], root));
         if root_joint == RootJoint::Free {
             b = b.joint(JointSpec::free(ROOT_JOINT_NAME));
             w.joints.push(ROOT_JOINT_NAME.to_string());
@@ -362,6 +387,7 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
         locked: w.locked_values,
         keyframes: vec![],
         sites: vec![],
+        body_at: w.body_at,
     })
 }
 
@@ -539,6 +565,7 @@ struct Walk<'s, 'l> {
     ranges: Vec<JointRange>,
     locked_values: Vec<(String, f64)>,
     notes: Vec<String>,
+    body_at: Vec<(String, SceneError)>,
 }
 
 impl Walk<'_, '_> {
@@ -551,6 +578,7 @@ impl Walk<'_, '_> {
         let mut b = link_body(src, link, c, parent, &mut self.notes)?
             .at(xyz)
             .rotated(rpy_quat(rpy));
+        self.body_at.push(link_at(src, link, c));
         let kind = j
             .attribute("type")
             .ok_or_else(|| err(src, j, &what, "missing attribute `type`"))?;

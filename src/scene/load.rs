@@ -764,7 +764,8 @@ fn tree_scene(
     };
     let joint_names: Vec<&str> = joint_names.iter().map(|s| s.as_str()).collect();
     let joint_set: std::collections::HashSet<&str> = joint_names.iter().copied().collect();
-    let tree = Arc::new(build_tree(src, m, specs)?);
+    let body_at = notes.1.as_ref().map_or(&[][..], |r| r.body_at.as_slice());
+    let tree = Arc::new(build_tree(src, m, specs, body_at)?);
     let mut sites = link_sites_of(&tree, &link_sites, &joint_set, &mut hints);
     scene_sites(src, m, &tree, &joint_set, &mut sites)?;
     let closures = super::closures::load(src, m, &tree, &joint_names, &mut sites)?;
@@ -785,7 +786,14 @@ fn tree_scene(
 
 /// The kinematic tree of the bodies (sorted parents first) in the model's fields, within the
 /// limit of coordinates.
-fn build_tree(src: &Source, m: &ModelFile, specs: Vec<BodySpec>) -> R<tree::Model> {
+/// `body_at`: where a robot file writes each body's mass properties (errors of a body are
+/// reported there; empty for a tree scene).
+fn build_tree(
+    src: &Source,
+    m: &ModelFile,
+    specs: Vec<BodySpec>,
+    body_at: &[(String, SceneError)],
+) -> R<tree::Model> {
     let fields = Fields {
         gravity: m.gravity.unwrap_or([0.0; 3]),
         attractors: m
@@ -798,7 +806,16 @@ fn build_tree(src: &Source, m: &ModelFile, specs: Vec<BodySpec>) -> R<tree::Mode
             .collect(),
     };
     let specs = parents_first(specs);
-    let tree = tree::Model::new(&specs, fields).map_err(|e| located_model_error(src, m, e))?;
+    let tree = tree::Model::new(&specs, fields).map_err(|e| match &e {
+        ModelError::Body { body, msg } => match body_at.iter().find(|b| &b.0 == body) {
+            Some((_, at)) => SceneError {
+                message: format!("body '{body}': {msg}"),
+                ..at.clone()
+            },
+            None => located_model_error(src, m, e),
+        },
+        _ => located_model_error(src, m, e),
+    })?;
     if tree.nv() > crate::input::MAX_COORDINATES {
         let limit = crate::input::MAX_COORDINATES;
         let message = format!(
@@ -1139,6 +1156,7 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
         ranges: robot.ranges,
         unmodelled,
         keyframes: robot.keyframes,
+        body_at: robot.body_at,
     };
     Ok((specs, robot.joints, sites, (robot.notes, Some(info)), hints))
 }

@@ -125,6 +125,9 @@ pub struct RobotFile {
     /// The MJCF file's named keyframes (`[initial] keyframe`); empty for a URDF.
     #[serde(skip)]
     pub keyframes: Vec<crate::import::mjcf::Keyframe>,
+    /// Where each body's mass properties are written in the file ([`crate::import::urdf::Robot::body_at`]).
+    #[serde(skip)]
+    pub body_at: Vec<(String, crate::located::SceneError)>,
 }
 
 /// One element of the robot file that is not modelled, and whether the scene declares its kind

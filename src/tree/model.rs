@@ -127,7 +127,7 @@ impl JointSpec {
 /// Specification of one body.
 ///
 /// Mass properties: `mass > 0` with `inertia` (about the CoM, body frame) symmetric positive
-/// semi-definite (exactly zero: a point mass at `com`); each rigid body (a body with joints, or the
+/// semi-definite (exactly zero: a point mass at `com`), or `mass == 0` with a nonzero such inertia; each rigid body (a body with joints, or the
 /// world, with what is welded to it) has principal moments satisfying the triangle inequality; or `massless = true` with `mass == 0` and zero inertia (coordinate bodies).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct BodySpec {
@@ -410,11 +410,12 @@ fn mass_properties(name: &str, s: &BodySpec) -> Result<(Matrix3<f64>, Vector3<f6
             ));
         }
     } else {
-        if s.mass <= 0.0 {
+        // mass 0 with a rotational inertia is a semi-definite body too (bolt's feet)
+        if s.mass < 0.0 || (s.mass == 0.0 && inertia.iter().all(|x| *x == 0.0)) {
             return Err(berr(
                 name,
                 format!(
-                    "mass must be positive, got {} (set massless = true for a massless body)",
+                    "mass must be positive, or 0 with a nonzero inertia, got {} (set massless = true for a massless body)",
                     s.mass
                 ),
             ));
