@@ -278,6 +278,27 @@ def _compare(scene: Any, be: Any, n: int, seed: int) -> dict[str, Any]:
     return {"status": "ok", "mass": mass, "bias": bias, "worst": max(mass, bias), "states": n}
 
 
+def mujoco_refusal(kind: str, path: Path) -> str | None:
+    """MuJoCo's own compiler on the file (a URDF through the faithful copy the check reads:
+    ``robot_file.urdf_for_mujoco``): None when it compiles, else its error's first line. Asked of
+    every refused import, so the table tells a defect of the file that MuJoCo refuses too (an
+    inertia with a negative eigenvalue, moments against the triangle inequality, a massless moving
+    body) from a refusal of progmo's alone."""
+    import mujoco
+
+    from .simulators.robot_file import urdf_for_mujoco
+
+    try:
+        if kind == "urdf":
+            mujoco.MjModel.from_xml_string(urdf_for_mujoco(path))
+        else:
+            mujoco.MjModel.from_xml_path(str(path))
+    except Exception as e:
+        text = str(e).strip().splitlines()
+        return f"{type(e).__name__}: {text[0] if text else ''}"
+    return None
+
+
 def check_file(kind: str, path: Path, folder: Path, *, n_states: int = STATES,
                simulator_file: Path | None = None, simulators: tuple[str, ...] = SIMULATORS) -> list[dict[str, Any]]:
     """One record per import of the file (a URDF: fixed and free root; an MJCF: as written)."""
@@ -294,6 +315,7 @@ def check_file(kind: str, path: Path, folder: Path, *, n_states: int = STATES,
             scene = load(kind, path, rj, folder)
         except Exception as e:  # SceneError (located), or anything else the import raises
             rec["error"] = error_record(e)
+            rec["mujoco_refuses"] = mujoco_refusal(kind, path)
             out.append(rec)
             continue
         rec.update(imported=True, nq=len(scene.q_names), nv=len(scene.v_names),
@@ -313,9 +335,15 @@ def summarize(name: str, files: int, records: list[dict[str, Any]], note: str = 
         return {"collection": name, "status": note, "files": files}
     imported = [r for r in records if r["imported"]]
     checked = [r for r in imported if r["parity"]]
+    # refusals MuJoCo's compiler shares (the file's defect); the rest are progmo's alone
+    shared = [r for r in records if not r["imported"] and r.get("mujoco_refuses")]
     row: dict[str, Any] = {"collection": name, "status": "ok", "files": files, "imports": len(records),
                            "imported": len(imported),
                            "import_rate": len(imported) / len(records) if records else 0.0,
+                           "refused_by_mujoco_too": len(shared),
+                           "import_rate_mujoco_compiles": (len(imported) / (len(records) - len(shared))
+                                                           if len(records) > len(shared) else 0.0),
+                           "shared_refusals": Counter(r["mujoco_refuses"][:110] for r in shared).most_common(5),
                            "free_base": sum(1 for r in imported if r.get("note") == FREE_BASE),
                            "parity_checked": len(checked)}
     worst = 0.0
@@ -334,16 +362,18 @@ def summarize(name: str, files: int, records: list[dict[str, Any]], note: str = 
 
 def table(rows: list[dict[str, Any]]) -> str:
     """The markdown table of the rows, then each collection's refusal reasons."""
-    head = ("| collection | files | imports | imported | import rate | parity checked | within 1e-12 "
-            "(MuJoCo; Pinocchio) | worst parity |\n|---|---|---|---|---|---|---|---|")
+    head = ("| collection | files | imports | imported | import rate | refused, MuJoCo too | import rate "
+            "where MuJoCo compiles | parity checked | within 1e-12 (MuJoCo; Pinocchio) | worst parity |\n"
+            "|---|---|---|---|---|---|---|---|---|---|")
     lines = [head]
     for r in rows:
         if r["status"] != "ok":
-            lines.append(f"| {r['collection']} | {r['status']} | | | | | | |")
+            lines.append(f"| {r['collection']} | {r['status']} | | | | | | | | |")
             continue
         worst = "—" if r["worst_parity"] is None else f"{r['worst_parity']:.1e}"
         lines.append(
             f"| {r['collection']} | {r['files']} | {r['imports']} | {r['imported']} | {100 * r['import_rate']:.0f}% "
+            f"| {r['refused_by_mujoco_too']} | {100 * r['import_rate_mujoco_compiles']:.0f}% "
             f"| {r['parity_checked']} (+{r['free_base']} free base: import only) "
             f"| {r['mujoco_within']}/{r['mujoco_compared']}; {r['pinocchio_within']}/{r['pinocchio_compared']} "
             f"| {worst} |")
@@ -351,6 +381,9 @@ def table(rows: list[dict[str, Any]]) -> str:
         if r["status"] == "ok" and r["refusals"]:
             lines.append(f"\n{r['collection']}: top refusal reasons")
             lines += [f"- {n} x {reason}" for reason, n in r["refusals"]]
+        if r["status"] == "ok" and r["shared_refusals"]:
+            lines.append(f"\n{r['collection']}: refused imports MuJoCo's compiler refuses too")
+            lines += [f"- {n} x {reason}" for reason, n in r["shared_refusals"]]
         for s in SIMULATORS:
             if r["status"] == "ok" and r[f"{s}_not_compared"]:
                 lines.append(f"\n{r['collection']}: not compared in {s}")

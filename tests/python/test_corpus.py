@@ -105,3 +105,28 @@ def test_sample_is_deterministic_and_spread():
     assert corpus.sample(files, 3) == [files[0], files[4], files[9]]  # linspace 0, 4.5, 9 rounded to even
     assert corpus.sample(files, 3) == corpus.sample(list(files), 3)
     assert corpus.sample(files, None) == files and corpus.sample(files, 50) == files
+
+
+def test_refusals_mujoco_shares_are_told_apart(tmp_path):
+    """A refused import is asked of MuJoCo's compiler too: an inertia with a negative eigenvalue is
+    the file's defect (MuJoCo refuses it as well) and leaves the second rate; a refusal of progmo's
+    alone (here: a joint named `t`, which rows cannot write; MuJoCo compiles the file) stays in it."""
+    link = ('<link name="{n}"><inertial><mass value="1"/><inertia ixx="{i}" ixy="0" ixz="0" iyy="0.1" '
+            'iyz="0" izz="0.1"/></inertial></link>')
+    def robot(name: str, inertia: str, joint: str) -> Path:
+        f = tmp_path / f"{name}.urdf"
+        f.write_text(f'<robot name="{name}">' + link.format(n="a", i="0.1") + link.format(n="b", i=inertia)
+                     + f'<joint name="{joint}" type="revolute"><parent link="a"/><child link="b"/>'
+                     '<axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint></robot>')
+        return f
+    defect = corpus.check_file("urdf", robot("defect", "-0.05", "j"), tmp_path)
+    alone = corpus.check_file("urdf", robot("alone", "0.1", "t"), tmp_path)
+    fine = corpus.check_file("urdf", robot("fine", "0.1", "j"), tmp_path)
+    assert not any(r["imported"] for r in defect + alone) and all(r["imported"] for r in fine)
+    assert all("eigenvalue" in r["mujoco_refuses"] for r in defect), defect
+    assert all(r["mujoco_refuses"] is None for r in alone), alone
+    row = corpus.summarize("mixed", 3, defect + alone + fine)
+    assert row["imports"] == 6 and row["imported"] == 2 and row["refused_by_mujoco_too"] == 2
+    assert row["import_rate"] == pytest.approx(2 / 6) and row["import_rate_mujoco_compiles"] == pytest.approx(2 / 4)
+    md = corpus.table([row])
+    assert "| mixed | 3 | 6 | 2 | 33% | 2 | 50% |" in md and "refuses too" in md
