@@ -183,7 +183,9 @@ fn backquoted_names() {
     );
     // mixed parts; a quoted identifier is the identifier
     assert_eq!(referenced_names("tip.`x`").unwrap(), vec!["tip.x"]);
-    let t: SymbolTable = ["joint_8.0", "joint_8.0'", "link_8.0.x"].into_iter().collect();
+    let t: SymbolTable = ["joint_8.0", "joint_8.0'", "link_8.0.x"]
+        .into_iter()
+        .collect();
     let e = Expr::compile("2*`joint_8.0` + `joint_8.0`' + `link_8.0`.x", &t).unwrap();
     assert_eq!(e.value(&[1.0, 10.0, 100.0]), 112.0);
     assert_eq!(e.time_order(), 1);

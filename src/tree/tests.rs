@@ -714,7 +714,13 @@ fn validation_errors() {
         BodySpec::new("b", "a", 1.0, [0.0; 3], iso).joint(JointSpec::free("f")),
     ]);
     assert!(e.contains("'f'") && e.contains("free joint"), "{e}");
-    let e = err(vec![BodySpec::new("z", WORLD, 0.0, [0.0; 3], [[0.0; 3]; 3])]);
+    let e = err(vec![BodySpec::new(
+        "z",
+        WORLD,
+        0.0,
+        [0.0; 3],
+        [[0.0; 3]; 3],
+    )]);
     assert!(e.contains("massless"), "{e}");
     // mass 0 with an inertia (a rotor) is a semi-definite body
     assert!(ok(vec![BodySpec::new("rotor", WORLD, 0.0, [0.0; 3], iso)]).is_ok());

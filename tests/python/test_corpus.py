@@ -130,3 +130,26 @@ def test_refusals_mujoco_shares_are_told_apart(tmp_path):
     assert row["import_rate"] == pytest.approx(2 / 6) and row["import_rate_mujoco_compiles"] == pytest.approx(2 / 4)
     md = corpus.table([row])
     assert "| mixed | 3 | 6 | 2 | 33% | 2 | 50% |" in md and "refuses too" in md
+
+
+def test_bench_targets_judge_the_rates_and_parity():
+    """The bench page's corpus targets: 95 % per collection and every comparison within 1e-12; a
+    sampled run is not measured; a collection below the rate is named in the verdict."""
+    from progmo.bench import targets as tg
+
+    ok = {"status": "ok", "worst": 1e-15}
+    def rec(imported: bool, worst: float = 1e-15) -> dict:
+        p = {"mujoco": {**ok, "worst": worst}, "pinocchio": {**ok, "worst": worst}} if imported else None
+        return {"imported": imported, "parity": p, "error": None if imported else {"reason": "r"},
+                "mujoco_refuses": None}
+    full = corpus.summarize("full", 20, [rec(True)] * 20)
+    low = corpus.summarize("low", 20, [rec(True)] * 18 + [rec(False)] * 2)
+    off = corpus.summarize("off", 2, [rec(True), rec(True, worst=1e-9)])
+    rate, parity = tg.corpus_targets([full])
+    assert rate.met and parity.met and "full 20/20 (100%" in rate.measured
+    rate, parity = tg.corpus_targets([full, low])
+    assert not rate.met and rate.verdict == "MISSED: low 90%" and parity.met
+    rate, parity = tg.corpus_targets([off])
+    assert rate.met and parity.verdict == "MISSED: 2 outside"
+    assert all(t.status == "not measured" for t in tg.corpus_targets([full], "a sample of 2 files"))
+    assert all(t.status == "not measured" for t in tg.corpus_targets([]))

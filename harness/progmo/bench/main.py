@@ -1,4 +1,4 @@
-"""`progmo bench [--quick] [--out DIR] [--only workprecision,scipy,conditioning,scaling,anchor,robot,testset,servo,drift,executors,nightly]`
+"""`progmo bench [--quick] [--out DIR] [--only workprecision,scipy,conditioning,scaling,anchor,robot,testset,servo,drift,executors,nightly,corpus]`
 
 Speed against error: writes CSV, PNG and index.html to DIR (default out/bench) and prints the key
 numbers. The `progmo` binary forwards `progmo bench ...` to `python -m progmo.bench.main ...`.
@@ -19,6 +19,9 @@ chains, 7 rounds of 5 loops), 7 s with --quick.
   anchor's binary (built on first use as above).
   Part `nightly` (bench/nightly.py) runs `progmo check` of the whole catalog once (minutes; one
   scene with --smoke) for issue 31's nightly target.
+  Part `corpus` runs `progmo corpus` (import and parity of the public robot collections, issue 30)
+  on the installed collections and `--corpus-data DIR`: every file in a full run (about 10 s),
+  10 per collection with --quick, 2 with --smoke (the targets are then not measured).
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import argparse
 import html as _html
+import json
 import sys
 import time
 from dataclasses import dataclass, field
@@ -41,13 +45,13 @@ if TYPE_CHECKING:
     from .targets import Target
 
 PARTS = ("workprecision", "scipy", "conditioning", "scaling", "anchor", "robot", "testset", "servo", "drift",
-         "executors", "nightly")
+         "executors", "nightly", "corpus")
 
 # sweep sizes; --quick is the default a test or a shared 2-core machine can afford
 QUICK: dict[str, Any] = dict(servo_tols=[1e-6, 1e-8, 1e-10], scenes=("double_pendulum", "chain_8"), tols=[1e-4, 1e-6, 1e-8, 1e-10], repeats=3,
              scipy_tols=[1e-4, 1e-6, 1e-8, 1e-10], radau_min_tol=1e-8, states=3,
              testset_tols=[1e-4, 1e-6, 1e-8, 1e-10], drift_rounds=3, anchor_rounds=3, anchor_budget=0.02,
-             robot=dict(rounds=3, budget_s=0.02, check_states=5, solve_repeats=3, load_repeats=10))
+             robot=dict(rounds=3, budget_s=0.02, check_states=5, solve_repeats=3, load_repeats=10), corpus_sample=10)
 # full: every bundled scene in the work-precision sweep (scipy only where a hand-written pipeline exists)
 FULL: dict[str, Any] = dict(servo_tols=[10.0 ** -k for k in range(4, 12)], scenes=("double_pendulum", "chain_8", "example_2_1", "example_2_1_through_rd0", "example_3_1_free",
                     "heavy_top", "planar_arm_line", "knife_edge", "appell_hamel", "slider_crank"),
@@ -58,7 +62,7 @@ FULL: dict[str, Any] = dict(servo_tols=[10.0 ** -k for k in range(4, 12)], scene
 # --smoke: the smallest end-to-end run (tests): one scene, two tolerances, two chain lengths
 SMOKE: dict[str, Any] = dict(servo_tols=[1e-6], scenes=("double_pendulum",), tols=[1e-5, 1e-8], repeats=1, scipy_tols=[1e-5, 1e-8],
              radau_min_tol=1e-8, states=2, scaling_ns=[2, 7], conditioning="smoke", testset_tols=[1e-6], drift_rounds=1,
-             anchor_ns=[2, 7], anchor_rounds=1, anchor_budget=0.002, sweep_samples=2, nightly_scenes=["double_pendulum"],
+             anchor_ns=[2, 7], anchor_rounds=1, anchor_budget=0.002, sweep_samples=2, nightly_scenes=["double_pendulum"], corpus_sample=2,
              robot=dict(rounds=1, budget_s=0.002, check_states=3, solve_repeats=1, load_repeats=2))
 
 
@@ -73,6 +77,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--accept", action="store_true",
                    help="record this run's small-problem figures (anchor part, n = 2 and 4) as the accepted "
                         "ones (bench/accepted.json) that later runs are judged against")
+    p.add_argument("--corpus-data", default=None, metavar="DIR",
+                   help="corpus part: folder of unzipped collections, as `progmo corpus --data`")
     p.add_argument("--scenes", default=None,
                    help="comma-separated bundled scene names for workprecision/scipy "
                         "(default double_pendulum,chain_8)")
@@ -128,6 +134,8 @@ class _Bench:
     servo_why: str = "the servo part did not run (--only)"
     nightly: dict | None = None
     nightly_why: str = "the nightly part did not run (--only)"
+    corpus: list[dict] | None = None
+    corpus_why: str = "the corpus part did not run (--only)"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -540,11 +548,45 @@ def _part_nightly(b: _Bench) -> None:
                        + "</p><p>Its report: <a href='nightly/report.html'>nightly/report.html</a>.</p>"))
 
 
+def _part_corpus(b: _Bench) -> None:
+    """Part `corpus`: `progmo corpus` on the installed collections (and --corpus-data), its table."""
+    from .. import corpus as cp
+
+    title = "9. Robot files of public collections: import rate and parity"
+    n = b.cfg.get("corpus_sample")
+    data = Path(b.ns.corpus_data) if b.ns.corpus_data else None
+    try:
+        rows, records = cp.run(list(cp.COLLECTIONS), data, True, n, cp.STATES, lambda s: None)
+    except Exception as e:  # a bug of the harness: the part fails, the page says so
+        b.failed.append(f"corpus: {e}")
+        b.corpus_why = f"the corpus part failed: {e}"
+        b.sections.append((title, f"<p><b>FAILED</b>: {_html.escape(str(e))}</p>"))
+        return
+    b.corpus = rows
+    if n is not None:
+        b.corpus_why = f"this run took a sample of {n} files per collection, not every file"
+    (b.out / "corpus").mkdir(exist_ok=True)
+    md = cp.table(rows)
+    (b.out / "corpus" / "corpus.md").write_text("# progmo corpus\n\n" + md)
+    (b.out / "corpus" / "corpus.json").write_text(json.dumps(
+        {"tolerance": cp.PARITY_TOL, "states": cp.STATES, "sample": n, "collections": rows, "files": records}, indent=1))
+    for r in rows:
+        if r["status"] == "ok":
+            b.summary.append(f"corpus {r['collection']}: {r['imported']}/{r['imports']} imports "
+                             f"({r['import_rate']:.0%}; {r['import_rate_mujoco_compiles']:.0%} where MuJoCo compiles), "
+                             f"within 1e-12 MuJoCo {r['mujoco_within']}/{r['mujoco_compared']}, "
+                             f"Pinocchio {r['pinocchio_within']}/{r['pinocchio_compared']}")
+    rerun = "progmo corpus" + (f" --data {data}" if data else "") + (f" --sample {n}" if n else "")
+    b.sections.append((title, f"<p>{_html.escape(cp.__doc__.split(chr(10) + chr(10))[0])}</p>"
+                       f"<pre>{_html.escape(md)}</pre><p>Rerun: <code>{_html.escape(rerun)}</code>; every file's "
+                       "result: <a href='corpus/corpus.json'>corpus/corpus.json</a>.</p>"))
+
+
 # each part's step, run in the order of PARTS
 _PART_RUNS: dict[str, Callable[[_Bench], None]] = dict(
     workprecision=_part_workprecision, scipy=_part_scipy, conditioning=_part_conditioning, scaling=_part_scaling,
     anchor=_part_anchor, robot=_part_robot, testset=_part_testset, servo=_part_servo, drift=_part_drift,
-    executors=_part_executors, nightly=_part_nightly)
+    executors=_part_executors, nightly=_part_nightly, corpus=_part_corpus)
 
 
 def _finish(b: _Bench, t_start: float) -> int:
@@ -562,6 +604,7 @@ def _finish(b: _Bench, t_start: float) -> int:
     b.targets.append(tg.servo_target(b.servo, b.servo_why))
     b.targets.append(tg.nightly_target(b.nightly if b.nightly and b.nightly["whole_catalog"] else None,
                                        b.nightly_why))
+    b.targets += tg.corpus_targets(b.corpus, b.corpus_why if b.corpus is None or b.cfg.get("corpus_sample") else "")
     b.targets.append(tg.ci_target())
 
     elapsed = time.perf_counter() - t_start

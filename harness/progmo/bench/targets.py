@@ -192,6 +192,32 @@ def nightly_target(res: dict | None, why: str = "") -> Target:
     return Target(name, measured, "met" if w <= NIGHTLY_MAX_S else f"MISSED by {w / NIGHTLY_MAX_S:.2f}x")
 
 
+CORPUS_MIN_RATE = 0.95
+
+
+def corpus_targets(rows: Sequence[dict] | None, why: str = "") -> list[Target]:
+    """Issue 30's corpus targets from the corpus part's rows (``corpus.summarize``): import rate
+    >= 95 % per collection found, and every compared import's A and G + Q within 1e-12."""
+    rate = f"robot-file corpus: import rate >= {CORPUS_MIN_RATE:.0%} in each collection"
+    parity = "robot-file corpus: every compared import within 1e-12 of MuJoCo's and Pinocchio's reading"
+    found = [r for r in rows or [] if r["status"] == "ok"]
+    if not found:
+        w = why or "the corpus part found no collection"
+        return [not_measured(rate, w), not_measured(parity, w)]
+    low = [r for r in found if r["import_rate"] < CORPUS_MIN_RATE]
+    measured = "; ".join(f"{r['collection']} {r['imported']}/{r['imports']} ({r['import_rate']:.0%}; "
+                         f"{r['import_rate_mujoco_compiles']:.0%} where MuJoCo compiles)" for r in found)
+    out = [Target(rate, measured, why and f"not measured: {why}" or (
+        "met" if not low else "MISSED: " + ", ".join(f"{r['collection']} {r['import_rate']:.0%}" for r in low)))]
+    compared = sum(r[f"{s}_compared"] for r in found for s in ("mujoco", "pinocchio"))
+    within = sum(r[f"{s}_within"] for r in found for s in ("mujoco", "pinocchio"))
+    worst = max((r["worst_parity"] for r in found if r["worst_parity"] is not None), default=None)
+    pm = f"{within}/{compared} comparisons within, worst {worst:.1e}" if worst is not None else "none compared"
+    out.append(Target(parity, pm, why and f"not measured: {why}" or (
+        "met" if compared and within == compared else f"MISSED: {compared - within} outside")))
+    return out
+
+
 def ci_target() -> Target:
     return not_measured(f"CI on a fresh clone <= {CI_MAX_S / 60:.0f} min",
                         "the fresh-clone `bash .ci/run` is timed where CI runs (the session note names the figure)")
