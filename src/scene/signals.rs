@@ -79,6 +79,9 @@ pub struct Site {
     pub pos: [f64; 3],
 }
 
+/// The site index of the system's centre of mass (`com.x`, `com.y'`, `com.z''`), a virtual site.
+pub const COM: usize = usize::MAX;
+
 /// The signals a scene's expressions read, in slot order.
 #[derive(Clone, Debug, Default)]
 pub struct Signals {
@@ -86,6 +89,10 @@ pub struct Signals {
     sites: Vec<Site>,
     /// (site index, quantity) per signal slot.
     list: Vec<(usize, Quantity)>,
+    /// The centre of mass c = sum_i m_i p_i / M over the bodies with mass: (body, p_i its CoM in
+    /// the body frame, m_i / M). c, its rates and its Jacobian are the same weighted sums of the
+    /// bodies' point kinematics.
+    com: Vec<(usize, [f64; 3], f64)>,
 }
 
 /// Scratch for computing signals.
@@ -122,10 +129,19 @@ impl Signals {
 
     /// Signals on `sites` of `tree`; add them with [`Signals::push`].
     pub fn new(tree: Arc<tree::Model>, sites: Vec<Site>) -> Self {
+        let bodies = tree.bodies();
+        let total: f64 = bodies.iter().map(|b| b.mass).sum();
+        let com = bodies
+            .iter()
+            .enumerate()
+            .filter(|(_, b)| b.mass > 0.0)
+            .map(|(i, b)| (i, [b.com.x, b.com.y, b.com.z], b.mass / total))
+            .collect();
         Signals {
             tree: Some(tree),
             sites,
             list: vec![],
+            com,
         }
     }
 
@@ -136,9 +152,18 @@ impl Signals {
 
     /// Resolve a name `site.component`; returns its quantity if it names a signal. The site is
     /// all before the last `.` (a robot file's link name may hold dots: `` `link_8.0`.x ``).
+    /// `com.x`, `com.y'`, `com.z''` (positions only) are the system's centre of mass unless a
+    /// site is named `com`.
     pub fn resolve(&self, name: &str) -> Option<(usize, Quantity)> {
         let (site, comp) = name.rsplit_once('.')?;
-        let i = self.sites.iter().position(|s| s.name == site)?;
+        let Some(i) = self.sites.iter().position(|s| s.name == site) else {
+            return match Quantity::parse(comp) {
+                Some(q @ Quantity::Position { .. }) if site == "com" && !self.com.is_empty() => {
+                    Some((COM, q))
+                }
+                _ => None,
+            };
+        };
         Quantity::parse(comp).map(|q| (i, q))
     }
 
@@ -201,6 +226,23 @@ impl Signals {
             tree::forward_acceleration(tree, data, a, &Vector3::zeros());
         }
         for (k, &(si, quantity)) in self.list.iter().enumerate() {
+            if si == COM {
+                let Quantity::Position { axis, order } = quantity else {
+                    unreachable!("the centre of mass has positions only")
+                };
+                let mut c = S::zero();
+                for (b, p, w) in &self.com {
+                    let pk = tree::point_kinematics(tree, data, *b, &lift(p));
+                    let x = match order {
+                        0 => pk.pos[axis],
+                        1 => pk.vel[axis],
+                        _ => pk.acc[axis],
+                    };
+                    c += x * S::from(*w);
+                }
+                out[k] = c;
+                continue;
+            }
             let site = &self.sites[si];
             let p = lift(&site.pos);
             let (rot, origin) = tree::body_frame(tree, data, site.body);
@@ -259,6 +301,10 @@ impl Signals {
         data.zero_v = zero_a;
         let z = S::zero();
         for (k, &(si, quantity)) in self.list.iter().enumerate() {
+            if si == COM {
+                self.com_jet(tree, data, quantity, needs[k], k, out);
+                continue;
+            }
             let site = &self.sites[si];
             let pk = tree::point_kinematics(tree, data, site.body, &lift(&site.pos));
             let (quat, dquat) = if let Quantity::Orientation { .. } = quantity {
@@ -293,6 +339,44 @@ impl Signals {
                 };
             });
         }
+    }
+}
+
+impl Signals {
+    /// Signal `k`, a centre-of-mass component, into `out` ([`Signals::jets`]): the bodies' jets
+    /// and Jacobian rows weighted by m_i / M.
+    fn com_jet<S: Scalar>(
+        &self,
+        tree: &tree::Model,
+        data: &tree::TreeData<S>,
+        quantity: Quantity,
+        need: bool,
+        k: usize,
+        out: &mut SignalJets<S>,
+    ) {
+        let Quantity::Position { axis, order } = quantity else {
+            unreachable!("the centre of mass has positions only")
+        };
+        let z = S::zero();
+        let mut jet = [z; 3];
+        if need {
+            out.jac.row_mut(k).fill(z);
+        }
+        for (b, p, w) in &self.com {
+            let w = S::from(*w);
+            let pk = tree::point_kinematics(tree, data, *b, &lift(p));
+            let x = [pk.pos[axis], pk.vel[axis], pk.acc[axis]];
+            for (m, j) in jet.iter_mut().enumerate().take(3 - order as usize) {
+                *j += x[m + order as usize] * w;
+            }
+            if need {
+                let mut row = out.jac.row_mut(k);
+                tree::for_each_point_column(tree, data, *b, &pk.pos, |j, _, lin| {
+                    row[j] += lin[axis] * w;
+                });
+            }
+        }
+        out.taylor[k] = jet;
     }
 }
 

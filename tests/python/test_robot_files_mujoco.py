@@ -436,3 +436,37 @@ def test_an_unnamed_free_joint_is_named_after_its_body_and_checked(tmp_path):
         r = checks.run_check(str(p), sim)
         assert r.status == "pass", (sim, r.status, r.reason, r.metrics)
         assert r.metrics["parity_mass"] <= 1e-12 and r.metrics["replay_residual"] <= 1e-9, (sim, r.metrics)
+
+
+def test_centre_of_mass_of_a_floating_base_matches_mujoco(tmp_path):
+    """`com.x` ... `com.z'` of a free-floating body with a leg equal MuJoCo's subtree_com and
+    subtree_linvel of the world (mj_subtreeVel) at random states (MuJoCo's free-joint qpos and qvel
+    are progmo's q and v: position, quaternion w x y z; world linear, body angular velocity); a leg
+    10 % heavier in MuJoCo's model must fail the same comparison."""
+    (tmp_path / "trunk.xml").write_text(UNNAMED_FREE)
+    p = tmp_path / "com.toml"
+    rows = "".join(f'[[programme]]\nname = "r{k}"\nexpr = "com.{c}{d}"\n'
+                   for k, (d, c) in enumerate((d, c) for d in ("", "'") for c in "xyz"))
+    p.write_text('name = "com"\n[model]\nkind = "mjcf"\nfile = "trunk.xml"\n' + rows
+                 + '[initial]\nassemble = false\n[time]\nt1 = 0.5\n')
+    scene = progmo.load(str(p))
+    rng = np.random.default_rng(3)
+
+    def worst(model) -> float:
+        d = mujoco.MjData(model)
+        w = 0.0
+        for _ in range(5):
+            q = np.array(scene.q0) + rng.uniform(-0.5, 0.5, len(scene.q0))
+            q[3:7] /= np.linalg.norm(q[3:7])
+            v = rng.uniform(-1.0, 1.0, len(scene.v_names))
+            d.qpos[:], d.qvel[:] = q, v
+            mujoco.mj_forward(model, d)
+            mujoco.mj_subtreeVel(model, d)
+            ours = np.asarray(scene.residuals(np.zeros(1), q[None, :], v[None, :]))[0]
+            w = max(w, np.abs(ours - np.concatenate([d.subtree_com[0], d.subtree_linvel[0]])).max())
+        return w
+
+    model = mujoco.MjModel.from_xml_path(str(tmp_path / "trunk.xml"))
+    assert worst(model) <= 1e-14
+    model.body_mass[2] *= 1.1
+    assert worst(model) > 1e-4

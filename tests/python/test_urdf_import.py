@@ -236,3 +236,61 @@ def test_names_that_are_not_identifiers_are_written_in_backquotes_and_checked(tm
     p.write_text(p.read_text().replace("joint_0.0 -", "`joint_0.1` -"))
     with pytest.raises(progmo.SceneError, match=r"did you mean `` `joint_0.0` ``"):
         progmo.load(str(p))
+
+
+def com_scene(path: pathlib.Path, tmp: pathlib.Path, order: str) -> "progmo.Scene":
+    """The robot of `path` with three rows reading the centre of mass at one derivative `order`
+    ("", "'" or "''")."""
+    with open(path, "rb") as f:
+        m = tomllib.load(f)["model"]
+    locked = ", ".join(f'"{j}"' for j in m.get("locked_joints", []))
+    rows = [f"com.{c}{order}" for c in "xyz"]
+    text = f'name = "com"\n[model]\nkind = "urdf"\nfile = "{m["file"]}"\nlocked_joints = [{locked}]\n' + \
+           "".join(f'[[programme]]\nname = "r{k}"\nexpr = "{e}"\n' for k, e in enumerate(rows)) + \
+           '[initial]\nassemble = false\n[time]\nt1 = 1.0\n'
+    p = tmp / f"com{len(order)}.toml"
+    p.write_text(text)
+    return progmo.load(str(p))
+
+
+def com_worst(scenes: list, model: pin.Model) -> float:
+    """Largest |ours - Pinocchio| of c, c' and c'' (pin.centerOfMass) and of the Jacobian
+    (pin.jacobianCenterOfMass, from c' at v = e_k) at random states."""
+    d = model.createData()
+    names = [model.names[j] for j in range(1, model.njoints)]
+    perm = [scenes[0].q_names.index(n) for n in names]
+    n = len(perm)
+    rng = np.random.default_rng(7)
+    w = 0.0
+    for _ in range(5):
+        q = np.array(scenes[0].q0) + rng.uniform(-0.5, 0.5, n)
+        v, a = rng.uniform(-1.0, 1.0, n), rng.uniform(-1.0, 1.0, n)
+        pin.centerOfMass(model, d, q[perm], v[perm], a[perm])
+        # Pinocchio's covers the bodies its joints move; progmo's, like MuJoCo's subtree_com of the
+        # world, every body of the file: the universe's inertia (the fixed root link) is a constant
+        # point mass in the world frame
+        m0, c0 = model.inertias[0].mass, model.inertias[0].lever
+        k = d.mass[0] / (d.mass[0] + m0)
+        wants = (k * d.com[0] + (1 - k) * c0, k * d.vcom[0], k * d.acom[0])
+        for s, want in zip(scenes, wants):
+            ours = np.asarray(s.residuals(np.zeros(1), q[None, :], v[None, :], a[None, :]))[0]
+            w = max(w, np.abs(ours - want).max())
+        rates = np.asarray(scenes[1].residuals(np.zeros(n), np.tile(q, (n, 1)), np.eye(n), np.zeros((n, n)))).T
+        J = k * pin.jacobianCenterOfMass(model, d, q[perm])
+        w = max(w, np.abs(J - rates[:, perm]).max())
+    return w
+
+
+@pytest.mark.parametrize("path", urdf_scenes(), ids=lambda p: p.stem)
+def test_centre_of_mass_signals_match_pinocchio(path, tmp_path):
+    """Issue 30 item 4: `com.x`, `com.x'`, `com.x''` (the system's centre of mass from the tree's
+    point kinematics, weighted by m_i / M over every body) equal Pinocchio's centerOfMass and
+    jacobianCenterOfMass with the universe's (fixed) inertia added;
+    one link 10 % heavier in Pinocchio's model must fail the same comparison."""
+    scenes = [com_scene(path, tmp_path, o) for o in ("", "'", "''")]
+    w = com_worst(scenes, pin_model(path))
+    print(f"{path.stem}: centre of mass max |d| = {w:.2e}")
+    assert w <= TOL, f"{path.stem}: centre of mass differs by {w:.2e}"
+    bad = pin_model(path)
+    bad.inertias[3].mass *= 1.1
+    assert com_worst(scenes, bad) > 1e-5
