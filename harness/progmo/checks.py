@@ -1145,7 +1145,17 @@ def _inverse_dynamics(c: _Check) -> None:
     # inverse dynamics along the trajectory
     stride = max(1, -(-len(ref.t) // INVERSE_SAMPLES))
     ks = np.arange(0, len(ref.t), stride)
-    du = np.array([np.abs(be.inverse_force(ref.t[k], ref.q[k], ref.v[k], ref.a[k]) - ref.u[k]) for k in ks])
+    # with loop closures the file's inverse dynamics needs u plus the closures' reactions B_c^T lambda_c
+    closures = be.report.get("closures", [])
+    names = [r["name"] for r in scene.rows]
+    cidx = [names.index(r) for cl in closures for r in cl["rows"] if r not in cl["set_aside"]]
+
+    def needed(k: int) -> np.ndarray:
+        if not cidx:
+            return ref.u[k]
+        B = np.asarray(scene.dynamics(float(ref.t[k]), ref.q[k], ref.v[k])["B"])
+        return ref.u[k] + B[cidx].T @ np.asarray(ref.lam[k])[cidx]
+    du = np.array([np.abs(be.inverse_force(ref.t[k], ref.q[k], ref.v[k], ref.a[k]) - needed(k)) for k in ks])
     uabs = float(np.abs(ref.u).max()) if ref.u.size else 0.0
     su = uabs if uabs > 0 else max(sF, 1e-300)
     rel = du.max(axis=1) / su
@@ -1154,7 +1164,9 @@ def _inverse_dynamics(c: _Check) -> None:
     c.where["inverse_dynamics"] = f"joint {c.worst_joint['inverse_dynamics']}"
     c.first["inverse_dynamics"] = (ref.t[ks], rel)
     c.res.notes.append(f"inverse_dynamics: u from {c.simulator}'s inverse dynamics of the file at {len(ks)} "
-                       f"samples of the solution vs the solver's u, relative to max|u| {su:.3g}: "
+                       f"samples of the solution vs the solver's u"
+                       + (" plus the closures' reactions B_c^T lambda_c" if cidx else "")
+                       + f", relative to max|u| {su:.3g}: "
                        f"{rel.max():.3g} (worst joint {c.worst_joint['inverse_dynamics']})")
     bval = {b.metric: b.value for b in c.res.budgets}
     bad = [(m, v) for m, v in (("parity_mass", c.file_parity["parity_mass"]),

@@ -41,11 +41,9 @@ class MujocoBackend:
             report = {**report, "harness_forces": [hf for hf in report.get("harness_forces", [])
                                                   if hf["kind"] not in FILE_FORCES]}
         require_forces(report, SUPPORTED, "MuJoCo")
-        if report.get("closures") and robot is not None:
-            raise Unsupported("loop closures over a robot file: MuJoCo's reading of the file has no sites for them")
         self._file_notes: list[str] = []
         if robot is not None:
-            self.m, self._file_notes = mujoco_model(robot, report["gravity"])
+            self.m, self._file_notes = mujoco_model(robot, report["gravity"], report.get("closures", []))
             report = name_report(report, mujoco_addresses(self.m))
         else:
             self.m = mujoco.MjModel.from_xml_string(doc)
@@ -194,16 +192,16 @@ class MujocoBackend:
         finally:
             m.opt.disableflags = flags
         total = cm.f_from_sim(q, f)
-        if Jc is None:
+        if Jc is None or programme is None:  # inverse_force: the whole force, closures' share included
             return total
-        Bp = B[programme] if programme is not None else B[:0]
+        Bp = B[programme]
         lam = np.linalg.lstsq(np.vstack([Jc, Bp]).T, total, rcond=None)[0]
         return Bp.T @ lam[len(Jc):]
 
     def inverse_force(self, t, q, v, a) -> np.ndarray:
-        """The control force MuJoCo's inverse dynamics needs for dv/dt = a at (t, q, v), our
+        """The generalized force MuJoCo's inverse dynamics needs for dv/dt = a at (t, q, v), our
         coordinates: qfrc_inverse (M with armature, bias, minus passive forces) minus the scene's
-        other forces (robot files: no closures)."""
+        other forces; with loop closures it includes their reactions (equalities off)."""
         return self.instant_u(t, q, v, a, np.zeros((0, self.cm.nv)), np.zeros(0))
 
     def unmodelled(self) -> list[dict]:
@@ -222,6 +220,8 @@ class MujocoBackend:
             out.append({"kind": "tendon", "element": f"tendon {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_TENDON, i) or i}",
                         "location": "MuJoCo's reading"})
         for i in range(m.neq):
+            if mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_EQUALITY, i) in self.closure_names:
+                continue  # the scene's loop closures, added to the file's model (robot_file)
             out.append({"kind": "equality", "element": f"equality {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_EQUALITY, i) or i}",
                         "location": "MuJoCo's reading"})
         if m.opt.density or m.opt.viscosity or np.any(m.opt.wind):

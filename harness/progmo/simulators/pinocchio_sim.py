@@ -98,9 +98,6 @@ class PinocchioBackend:
         the report the rest reads."""
         rj = report.get("root_joint")
         if robot is not None:
-            if report.get("closures"):
-                raise Unsupported("loop closures over a robot file: Pinocchio's reading of the file has "
-                                  "no frames for their sites")
             if rj and rj["python"] != "pin.JointModelFreeFlyer()":
                 raise Unsupported(f"root joint {rj['python']} over a robot file")
             self.file = pinocchio_model(robot, report["gravity"], rj)
@@ -180,10 +177,17 @@ class PinocchioBackend:
                                   f"{c['name']!r} (RigidConstraintModel: CONTACT_3D and CONTACT_6D only)")
 
             def side(site: str, body, point, quat):
-                if body is None and not model.existFrame(site):
+                if model.existFrame(site):  # the export's site frame
+                    fr = model.frames[model.getFrameId(site)]
+                    return fr.parentJoint, fr.placement
+                if body is None:
                     return 0, _se3(point, quat)
-                fr = model.frames[model.getFrameId(site)]
-                return fr.parentJoint, fr.placement
+                # the user's robot file: the point on the body's own frame
+                if not model.existFrame(body, pin.FrameType.BODY):
+                    raise Unsupported(f"closure {c['name']!r}: body {body!r} is not a body of Pinocchio's "
+                                      "reading of the file")
+                fr = model.frames[model.getFrameId(body, pin.FrameType.BODY)]
+                return fr.parentJoint, fr.placement * _se3(point, quat)
             j1, p1 = side(c["site_a"], c["body_a"], c["point_a"], c["quat_a"])
             j2, p2 = side(c["site_b"], c["body_b"], c["point_b"], c["quat_b"])
             cm = pin.RigidConstraintModel(getattr(pin.ContactType, CONTACT[c["kind"]]), model, j1, p1, j2, p2,

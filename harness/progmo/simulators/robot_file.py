@@ -119,8 +119,10 @@ def urdf_for_mujoco(path: Path) -> str:
     return ET.tostring(root, encoding="unicode")
 
 
-def mujoco_model(rf: RobotFile, gravity: list[float]) -> tuple[Any, list[str]]:
-    """MuJoCo's model of the file with the scene's additions; notes say what was prepared."""
+def mujoco_model(rf: RobotFile, gravity: list[float], closures: list[dict] = ()) -> tuple[Any, list[str]]:  # type: ignore[assignment]
+    """MuJoCo's model of the file with the scene's additions (a free root, the loop closures of
+    the export report as sites and equalities, set as the export sets them: MUJOCO_CLOSURES.md);
+    notes say what was prepared."""
     import mujoco
 
     notes = []
@@ -152,8 +154,16 @@ def mujoco_model(rf: RobotFile, gravity: list[float]) -> tuple[Any, list[str]]:
                      + ", ".join(rf.locked))
     if rf.root_joint == "free":
         root = spec.worldbody.first_body()
-        root.add_freejoint(name="root")
+        root.add_freejoint(name=ROOT_JOINT)
         notes.append(f"free root joint 'root' added to body {root.name!r}")
+    if closures:
+        _add_closures(spec, closures, rf)
+        notes.append("loop closures added as sites and equalities: " + ", ".join(
+            f"{c['name']} ({'connect' if c['kind'] == 'point' else 'weld'})" for c in closures))
+        if "equality" in rf.ignored:  # the file's own, declared ignored: removed, not switched off
+            for e in list(spec.equalities):
+                if e.name not in {c["name"] for c in closures}:
+                    spec.delete(e)
     # ideal rigid-body dynamics (shared/notes/simulators.md) except what the file says
     spec.option.gravity = np.asarray(gravity, float)
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_RK4
@@ -161,7 +171,7 @@ def mujoco_model(rf: RobotFile, gravity: list[float]) -> tuple[Any, list[str]]:
     declared = {"joint_limit": mujoco.mjtDisableBit.mjDSBL_LIMIT,
                 "frictionloss": mujoco.mjtDisableBit.mjDSBL_FRICTIONLOSS,
                 "equality": mujoco.mjtDisableBit.mjDSBL_EQUALITY}
-    switched = [k for k in declared if k in rf.ignored]
+    switched = [k for k in declared if k in rf.ignored and not (k == "equality" and closures)]
     for k in switched:
         off |= declared[k]
     spec.option.disableflags = int(spec.option.disableflags) | int(off)
@@ -181,6 +191,39 @@ def mujoco_model(rf: RobotFile, gravity: list[float]) -> tuple[Any, list[str]]:
                  + (", " + ", ".join(switched) + " off (declared ignored by the scene)" if switched else "")
                  + "; the file's armature, damping, springs and gravcomp kept")
     return m, notes
+
+
+#: the name of the free root joint a scene's ``root_joint = "free"`` adds (progmo's, src/import/urdf.rs)
+ROOT_JOINT = "root"
+
+#: the export's equality settings (src/export/mjcf.rs, MUJOCO_CLOSURES.md): timeconst 4 steps
+CLOSURE_TIMECONST_STEPS, CLOSURE_SOLIMP = 4.0, [0.9999, 0.9999, 0.001, 0.5, 2.0]
+
+
+def _add_closures(spec: Any, closures: list[dict], rf: RobotFile) -> None:
+    """Each closure's two sites on its bodies (the world: ``body`` None) and a ``connect`` (point)
+    or ``weld`` equality between them; the solver set as the export sets it."""
+    import mujoco
+
+    for c in closures:
+        if c["kind"] not in ("point", "weld"):
+            raise Unsupported(f"the {c['kind']} closure {c['name']!r} over a robot file in MuJoCo "
+                              "(connect and weld equalities only)")
+        for site, body, point, quat in ((c["site_a"], c["body_a"], c["point_a"], c["quat_a"]),
+                                        (c["site_b"], c["body_b"], c["point_b"], c["quat_b"])):
+            b = spec.worldbody if body is None else spec.body(body)
+            if b is None:
+                raise Unsupported(f"closure {c['name']!r}: body {body!r} is not in MuJoCo's reading of {rf.path.name}")
+            b.add_site(name=site, pos=list(map(float, point)), quat=list(map(float, quat)))
+        kind = mujoco.mjtEq.mjEQ_CONNECT if c["kind"] == "point" else mujoco.mjtEq.mjEQ_WELD
+        spec.add_equality(name=c["name"], type=kind, objtype=mujoco.mjtObj.mjOBJ_SITE,
+                          name1=c["site_a"], name2=c["site_b"],
+                          solref=[CLOSURE_TIMECONST_STEPS * spec.option.timestep, 1.0], solimp=CLOSURE_SOLIMP)
+    spec.option.solver = mujoco.mjtSolver.mjSOL_NEWTON
+    spec.option.iterations = 200
+    spec.option.tolerance = 1e-15
+    spec.option.ls_tolerance = 1e-15
+    spec.option.jacobian = mujoco.mjtJacobian.mjJAC_DENSE
 
 
 def mujoco_addresses(m: Any) -> dict[str, tuple[int, int]]:
@@ -277,6 +320,9 @@ def pinocchio_model(rf: RobotFile, gravity: list[float], root: dict | None) -> P
     if rf.fmt == "urdf":
         if root:
             model = pin.buildModelFromUrdf(str(rf.path), pin.JointModelFreeFlyer(), root["name"])
+        elif rf.root_joint == "free":  # the scene's free root, named as progmo names it
+            model = pin.buildModelFromUrdf(str(rf.path), pin.JointModelFreeFlyer(), ROOT_JOINT)
+            notes.append(f"free root joint {ROOT_JOINT!r} added (JointModelFreeFlyer)")
         else:
             model = pin.buildModelFromUrdf(str(rf.path))
         notes.append(f"Pinocchio reads {rf.path.name} (buildModelFromUrdf)")
