@@ -1155,7 +1155,7 @@ def _inverse_dynamics(c: _Check) -> None:
             return ref.u[k]
         B = np.asarray(scene.dynamics(float(ref.t[k]), ref.q[k], ref.v[k])["B"])
         return ref.u[k] + B[cidx].T @ np.asarray(ref.lam[k])[cidx]
-    du = np.array([np.abs(be.inverse_force(ref.t[k], ref.q[k], ref.v[k], ref.a[k]) - needed(k)) for k in ks])
+    du = np.array([np.abs(be.inverse_force(ref.t[k], ref.q[k], ref.v[k], ref.a[k]) - needed(int(k))) for k in ks])
     uabs = float(np.abs(ref.u).max()) if ref.u.size else 0.0
     su = uabs if uabs > 0 else max(sF, 1e-300)
     rel = du.max(axis=1) / su

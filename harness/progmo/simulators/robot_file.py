@@ -119,12 +119,13 @@ def urdf_for_mujoco(path: Path) -> str:
     return ET.tostring(root, encoding="unicode")
 
 
-def mujoco_model(rf: RobotFile, gravity: list[float], closures: list[dict] = ()) -> tuple[Any, list[str]]:  # type: ignore[assignment]
+def mujoco_model(rf: RobotFile, gravity: list[float], closures: list[dict] | None = None) -> tuple[Any, list[str]]:
     """MuJoCo's model of the file with the scene's additions (a free root, the loop closures of
     the export report as sites and equalities, set as the export sets them: MUJOCO_CLOSURES.md);
     notes say what was prepared."""
     import mujoco
 
+    closures = closures or []
     notes = []
     if rf.fmt == "urdf":
         spec = mujoco.MjSpec.from_string(urdf_for_mujoco(rf.path))
@@ -134,24 +135,7 @@ def mujoco_model(rf: RobotFile, gravity: list[float], closures: list[dict] = ())
     else:
         spec = mujoco.MjSpec.from_file(str(rf.path))
         notes.append(f"MuJoCo reads {rf.path.name} as given")
-    gone = []  # equalities over a locked joint (a URDF <mimic>) lock with it
-    for e in list(spec.equalities):
-        if e.type == mujoco.mjtEq.mjEQ_JOINT and (e.name1 in rf.locked or e.name2 in rf.locked):
-            if not (e.name1 in rf.locked and (not e.name2 or e.name2 in rf.locked)):
-                raise Unsupported(f"joint equality (mimic) between {e.name1} and {e.name2}: only one of them "
-                                  "is locked")
-            gone.append(f"{e.name1} = f({e.name2})" if e.name2 else e.name1)
-            spec.delete(e)
-    if gone:
-        notes.append("joint equalities (URDF mimic) between locked joints removed with them: " + ", ".join(gone))
-    for j in rf.locked:
-        js = spec.joint(j)
-        if js is None:
-            raise Unsupported(f"locked joint {j!r} is not in MuJoCo's reading of {rf.path.name}")
-        spec.delete(js)
-    if rf.locked:
-        notes.append("locked joints removed in MuJoCo's copy (welded in the file's pose: q = 0, MJCF q = ref): "
-                     + ", ".join(rf.locked))
+    _remove_locked(spec, rf, notes)
     if rf.root_joint == "free":
         root = spec.worldbody.first_body()
         root.add_freejoint(name=ROOT_JOINT)
@@ -224,6 +208,31 @@ def _add_closures(spec: Any, closures: list[dict], rf: RobotFile) -> None:
     spec.option.tolerance = 1e-15
     spec.option.ls_tolerance = 1e-15
     spec.option.jacobian = mujoco.mjtJacobian.mjJAC_DENSE
+
+
+def _remove_locked(spec: Any, rf: RobotFile, notes: list[str]) -> None:
+    """The locked joints removed from MuJoCo's spec (welded in the file's pose), with the joint
+    equalities (a URDF <mimic>) over them."""
+    import mujoco
+
+    gone = []  # equalities over a locked joint (a URDF <mimic>) lock with it
+    for e in list(spec.equalities):
+        if e.type == mujoco.mjtEq.mjEQ_JOINT and (e.name1 in rf.locked or e.name2 in rf.locked):
+            if not (e.name1 in rf.locked and (not e.name2 or e.name2 in rf.locked)):
+                raise Unsupported(f"joint equality (mimic) between {e.name1} and {e.name2}: only one of them "
+                                  "is locked")
+            gone.append(f"{e.name1} = f({e.name2})" if e.name2 else e.name1)
+            spec.delete(e)
+    if gone:
+        notes.append("joint equalities (URDF mimic) between locked joints removed with them: " + ", ".join(gone))
+    for j in rf.locked:
+        js = spec.joint(j)
+        if js is None:
+            raise Unsupported(f"locked joint {j!r} is not in MuJoCo's reading of {rf.path.name}")
+        spec.delete(js)
+    if rf.locked:
+        notes.append("locked joints removed in MuJoCo's copy (welded in the file's pose: q = 0, MJCF q = ref): "
+                     + ", ".join(rf.locked))
 
 
 def mujoco_addresses(m: Any) -> dict[str, tuple[int, int]]:
