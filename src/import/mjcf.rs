@@ -658,17 +658,12 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         sites: vec![],
     };
     // depth-first, parents first: (element, parent body name, inherited childclass)
-    let mut stack = top_bodies(src, &worldbodies)?;
-    while let Some((b, parent, class)) = stack.pop() {
-        let (name, class) = w.body(b, &parent, &class)?;
-        for ch in elements(b)
-            .filter(|x| x.has_tag_name("body"))
-            .collect::<Vec<_>>()
-            .into_iter()
-            .rev()
-        {
-            stack.push((ch, name.clone(), class.clone()));
-        }
+    let mut stack = top_bodies(src, &c, &worldbodies)?;
+    while let Some((b, parent, class, frame)) = stack.pop() {
+        let (name, class) = w.body(b, &parent, &class, frame)?;
+        let mut children = vec![];
+        child_bodies(src, &c, b, (&name, &class), IDENTITY, false, &mut children)?;
+        stack.extend(children.into_iter().rev());
     }
     for wb in &worldbodies {
         w.sites(*wb, WORLD, MAIN)?;
@@ -706,25 +701,49 @@ fn read_top_level(src: &Source, root: Node, notes: &mut Vec<String>, rec: &mut R
     for n in elements(root) {
         let tag = n.tag_name().name();
         match tag {
-            "replicate" | "frame" | "attach" => {
-                return Err(err(src, n, tag, format!("<{tag}> is not supported (write the file out, e.g. with MuJoCo's mj_saveLastXML)")))
-            }
+            "replicate" | "frame" | "attach" => return Err(err(
+                src,
+                n,
+                tag,
+                format!(
+                    "<{tag}> is not supported here (a <frame> belongs in <worldbody> or a <body>)"
+                ),
+            )),
             "deformable" => {
-                return Err(err(src, n, tag, "<deformable> (flexes, skins) is not supported: progmo models rigid bodies"))
+                return Err(err(
+                    src,
+                    n,
+                    tag,
+                    "<deformable> (flexes, skins) is not supported: progmo models rigid bodies",
+                ))
             }
             "option" => {
                 if n.attribute("gravity").is_some() {
-                    notes.push("<option gravity> not read: gravity comes from the scene's model.gravity".to_string());
+                    notes.push(
+                        "<option gravity> not read: gravity comes from the scene's model.gravity"
+                            .to_string(),
+                    );
                 }
                 for a in ["density", "viscosity", "wind"] {
-                    if n.attribute(a).is_some_and(|v| v.split_whitespace().any(|x| x.parse::<f64>() != Ok(0.0))) {
+                    if n.attribute(a)
+                        .is_some_and(|v| v.split_whitespace().any(|x| x.parse::<f64>() != Ok(0.0)))
+                    {
                         rec.push("fluid", format!("option.{a}"), n);
                     }
                 }
             }
             "equality" | "tendon" | "actuator" => {
-                let kind = if tag == "tendon" { "tendon" } else if tag == "equality" { "equality" } else { "actuator" };
-                for (k, e) in elements(n).filter(|e| !e.has_tag_name("default")).enumerate() {
+                let kind = if tag == "tendon" {
+                    "tendon"
+                } else if tag == "equality" {
+                    "equality"
+                } else {
+                    "actuator"
+                };
+                for (k, e) in elements(n)
+                    .filter(|e| !e.has_tag_name("default"))
+                    .enumerate()
+                {
                     let name = e.attribute("name").map_or(format!("{k}"), String::from);
                     rec.push(kind, format!("{tag}.{}[{name}]", e.tag_name().name()), e);
                 }
@@ -732,7 +751,11 @@ fn read_top_level(src: &Source, root: Node, notes: &mut Vec<String>, rec: &mut R
             "contact" => {
                 for (k, e) in elements(n).enumerate() {
                     let name = e.attribute("name").map_or(format!("{k}"), String::from);
-                    rec.push("contact", format!("contact.{}[{name}]", e.tag_name().name()), e);
+                    rec.push(
+                        "contact",
+                        format!("contact.{}[{name}]", e.tag_name().name()),
+                        e,
+                    );
                 }
             }
             _ => {}
@@ -741,34 +764,83 @@ fn read_top_level(src: &Source, root: Node, notes: &mut Vec<String>, rec: &mut R
     Ok(())
 }
 
-/// A body still to read: (element, parent body name, inherited childclass).
-type Pending<'a, 'i> = (Node<'a, 'i>, String, String);
+/// A body still to read: (element, parent body name, inherited childclass, the pose of the
+/// `<frame>`s around it in the parent body's frame).
+type Pending<'a, 'i> = (Node<'a, 'i>, String, String, Pose);
 
-/// The bodies of the `<worldbody>` elements as a stack (the first on top); a `<frame>`,
-/// `<replicate>` or `<attach>` in a worldbody is refused.
-fn top_bodies<'a, 'i>(src: &Source, worldbodies: &[Node<'a, 'i>]) -> R<Vec<Pending<'a, 'i>>> {
-    let mut stack: Vec<Pending> = vec![];
-    for w in worldbodies.iter().rev() {
-        for b in elements(*w)
-            .filter(|b| b.has_tag_name("body"))
-            .collect::<Vec<_>>()
-            .into_iter()
-            .rev()
-        {
-            stack.push((b, WORLD.to_string(), MAIN.to_string()));
-        }
-        if let Some(f) =
-            elements(*w).find(|b| ["frame", "replicate", "attach"].contains(&b.tag_name().name()))
-        {
-            return Err(err(
-                src,
-                f,
-                f.tag_name().name(),
-                format!("<{}> is not supported", f.tag_name().name()),
-            ));
+/// A placement: position and quaternion (w, x, y, z) in the enclosing frame.
+type Pose = ([f64; 3], [f64; 4]);
+
+const IDENTITY: Pose = ([0.0; 3], [1.0, 0.0, 0.0, 0.0]);
+
+/// `outer` after `inner`: the pose `inner` (given in `outer`'s frame) in `outer`'s parent frame.
+fn compose(outer: Pose, inner: Pose) -> Pose {
+    let r = rotation(outer.1);
+    let p = Vector3::from(outer.0) + r * Vector3::from(inner.0);
+    (p.into(), quat_of(r * rotation(inner.1)))
+}
+
+/// The bodies of the `<worldbody>` elements as a stack (the first on top).
+fn top_bodies<'a, 'i>(
+    src: &Source,
+    c: &Compiler,
+    worldbodies: &[Node<'a, 'i>],
+) -> R<Vec<Pending<'a, 'i>>> {
+    let mut all = vec![];
+    for w in worldbodies {
+        child_bodies(src, c, *w, (WORLD, MAIN), IDENTITY, true, &mut all)?;
+    }
+    all.reverse();
+    Ok(all)
+}
+
+/// The child bodies of `parent` in document order, those inside `<frame>` elements (nested too)
+/// with the frames' composed pose and childclass, as MuJoCo's compiler resolves them. A frame in a
+/// body holds bodies (and frames) only: a geom, site, joint or inertial in it is refused (its pose
+/// would change the body's mass properties or joints); in the worldbody its static geometry is not
+/// read. `<replicate>` and `<attach>` are refused.
+fn child_bodies<'a, 'i>(
+    src: &Source,
+    c: &Compiler,
+    parent: Node<'a, 'i>,
+    (name, class): (&str, &str),
+    frame: Pose,
+    in_world: bool,
+    out: &mut Vec<Pending<'a, 'i>>,
+) -> R<()> {
+    for e in elements(parent) {
+        let tag = e.tag_name().name();
+        match tag {
+            "body" => out.push((e, name.to_string(), class.to_string(), frame)),
+            "frame" => {
+                let what = format!("frame[{}]", e.attribute("name").unwrap_or(""));
+                let pos = attr_k::<3>(src, e, &format!("{what}.pos"), "pos", [0.0; 3])?;
+                let quat = orientation(src, c, e, &what)?;
+                let fclass = e.attribute("childclass").unwrap_or(class);
+                let held = ["geom", "site", "joint", "freejoint", "inertial"];
+                if let Some(x) =
+                    elements(e).find(|x| !in_world && held.contains(&x.tag_name().name()))
+                {
+                    let t = x.tag_name().name();
+                    return Err(err(src, x, &format!("{what}.{t}"), format!("a <{t}> inside a <frame> of a body is not supported (only bodies and frames are read in a frame): move it into the body, composing the frame's pose")));
+                }
+                child_bodies(
+                    src,
+                    c,
+                    e,
+                    (name, fclass),
+                    compose(frame, (pos, quat)),
+                    in_world,
+                    out,
+                )?;
+            }
+            "replicate" | "attach" => {
+                return Err(err(src, e, tag, format!("<{tag}> is not supported (write the file out, e.g. with MuJoCo's mj_saveLastXML)")));
+            }
+            _ => {}
         }
     }
-    Ok(stack)
+    Ok(())
 }
 
 /// What the depth-first walk over the bodies builds, and what it checks names against.
@@ -803,7 +875,13 @@ struct Walk<'s, 'd, 'a, 'i> {
 impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
     /// Body `b` on `parent` with the inherited childclass `class`: its placement, mass properties,
     /// gravcomp, colliding geoms and joints; returns its name and its childclass.
-    fn body(&mut self, b: Node<'a, 'i>, parent: &str, class: &str) -> R<(String, String)> {
+    fn body(
+        &mut self,
+        b: Node<'a, 'i>,
+        parent: &str,
+        class: &str,
+        frame: Pose,
+    ) -> R<(String, String)> {
         let src = self.src;
         let k = self.bodies.len();
         if k == crate::input::MAX_BODIES {
@@ -847,6 +925,7 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
         }
         let pos = attr_k::<3>(src, b, &format!("{what}.pos"), "pos", [0.0; 3])?;
         let quat = orientation(src, self.c, b, &what)?;
+        let (pos, quat) = compose(frame, (pos, quat)); // the <frame>s around it
         let moving = self.moving.contains(parent)
             || elements(b).any(|e| e.has_tag_name("joint") || e.has_tag_name("freejoint"));
         if moving {
@@ -866,14 +945,6 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
         self.body_name.clone_from(&name);
         for e in elements(b) {
             let tag = e.tag_name().name();
-            if tag == "frame" || tag == "replicate" || tag == "attach" {
-                return Err(err(
-                    src,
-                    e,
-                    &format!("{what}.{tag}"),
-                    format!("<{tag}> is not supported"),
-                ));
-            }
             if tag != "joint" && tag != "freejoint" {
                 continue;
             }

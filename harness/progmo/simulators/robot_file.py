@@ -306,6 +306,19 @@ def pinocchio_misreads_includes(path: Path) -> str | None:
     return check(path, top=True)
 
 
+def pinocchio_misreads_frames(path: Path) -> str | None:
+    """Why Pinocchio 4.1 cannot read an MJCF file's ``<frame>``s, or None. Measured: a body inside a
+    ``<frame>`` stops its reader (``RuntimeError: No such node (body)``)."""
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError):
+        return None  # progmo's importer and MuJoCo report an unreadable file
+    if next(root.iter("frame"), None) is not None:
+        return (f"Pinocchio 4.1's MJCF reader cannot read the <frame> elements of {path.name} "
+                "(RuntimeError: No such node (body)): not checked in Pinocchio")
+    return None
+
+
 def pinocchio_mass_differs(model: Any, mj: Any, name: str) -> str | None:
     """Why Pinocchio's reading of an MJCF file cannot judge progmo's, or None: its moving bodies'
     total mass differs from MuJoCo's compile of the same file. Pinocchio 4.1's MJCF reader derives
@@ -336,7 +349,7 @@ def pinocchio_model(rf: RobotFile, gravity: list[float], root: dict | None) -> P
             model = pin.buildModelFromUrdf(str(rf.path))
         notes.append(f"Pinocchio reads {rf.path.name} (buildModelFromUrdf)")
     else:
-        why = pinocchio_misreads_includes(rf.path)
+        why = pinocchio_misreads_includes(rf.path) or pinocchio_misreads_frames(rf.path)
         if why:
             raise Unsupported(why)
         model = pin.buildModelFromMJCF(str(rf.path))
