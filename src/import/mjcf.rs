@@ -701,14 +701,16 @@ fn read_top_level(src: &Source, root: Node, notes: &mut Vec<String>, rec: &mut R
     for n in elements(root) {
         let tag = n.tag_name().name();
         match tag {
-            "replicate" | "frame" | "attach" => return Err(err(
-                src,
-                n,
-                tag,
-                format!(
+            "replicate" | "frame" | "attach" => {
+                return Err(err(
+                    src,
+                    n,
+                    tag,
+                    format!(
                     "<{tag}> is not supported here (a <frame> belongs in <worldbody> or a <body>)"
                 ),
-            )),
+                ))
+            }
             "deformable" => {
                 return Err(err(
                     src,
