@@ -9,7 +9,7 @@
 
 use crate::programme::Level;
 use crate::scalar::Scalar;
-use crate::tree::spatial::quat_from_rot;
+use crate::tree::spatial::{cross, quat_from_rot};
 use crate::tree::{self, TreeData};
 use nalgebra::{DMatrix, Vector3};
 use std::sync::Arc;
@@ -23,6 +23,9 @@ pub enum Quantity {
     Orientation { k: usize },
     /// World angular velocity component (order 0) or angular acceleration (order 1).
     Angular { axis: usize, order: u8 },
+    /// The system's angular momentum about its centre of mass, world frame (order 0), or its
+    /// rate (order 1): `com.hx`, `com.hx'` only.
+    Momentum { axis: usize, order: u8 },
 }
 
 impl Quantity {
@@ -31,7 +34,7 @@ impl Quantity {
         let o = match *self {
             Quantity::Position { order, .. } => order,
             Quantity::Orientation { .. } => 0,
-            Quantity::Angular { order, .. } => order + 1,
+            Quantity::Angular { order, .. } | Quantity::Momentum { order, .. } => order + 1,
         };
         match o {
             0 => Level::Position,
@@ -56,6 +59,11 @@ impl Quantity {
         if let Some(rest) = base.strip_prefix('w') {
             if let Some(a) = axis(rest) {
                 return (order <= 1).then_some(Quantity::Angular { axis: a, order });
+            }
+        }
+        if let Some(rest) = base.strip_prefix('h') {
+            if let Some(a) = axis(rest) {
+                return (order <= 1).then_some(Quantity::Momentum { axis: a, order });
             }
         }
         if order == 0 {
@@ -93,6 +101,9 @@ pub struct Signals {
     /// the body frame, m_i / M). c, its rates and its Jacobian are the same weighted sums of the
     /// bodies' point kinematics.
     com: Vec<(usize, [f64; 3], f64)>,
+    /// Per entry of `com` (and bodies of mass 0 with a rotational inertia, weight 0): m_i and the
+    /// inertia about the CoM in the body frame, for the angular momentum about c.
+    com_inertia: Vec<(f64, nalgebra::Matrix3<f64>)>,
 }
 
 /// Scratch for computing signals.
@@ -131,17 +142,26 @@ impl Signals {
     pub fn new(tree: Arc<tree::Model>, sites: Vec<Site>) -> Self {
         let bodies = tree.bodies();
         let total: f64 = bodies.iter().map(|b| b.mass).sum();
-        let com = bodies
+        let with_mass: Vec<usize> = (0..bodies.len())
+            .filter(|&i| bodies[i].mass > 0.0 || bodies[i].inertia.iter().any(|x| *x != 0.0))
+            .collect();
+        let com = with_mass
             .iter()
-            .enumerate()
-            .filter(|(_, b)| b.mass > 0.0)
-            .map(|(i, b)| (i, [b.com.x, b.com.y, b.com.z], b.mass / total))
+            .map(|&i| {
+                let b = &bodies[i];
+                (i, [b.com.x, b.com.y, b.com.z], b.mass / total)
+            })
+            .collect();
+        let com_inertia = with_mass
+            .iter()
+            .map(|&i| (bodies[i].mass, bodies[i].inertia))
             .collect();
         Signals {
             tree: Some(tree),
             sites,
             list: vec![],
-            com,
+            com: if total > 0.0 { com } else { vec![] },
+            com_inertia,
         }
     }
 
@@ -152,19 +172,23 @@ impl Signals {
 
     /// Resolve a name `site.component`; returns its quantity if it names a signal. The site is
     /// all before the last `.` (a robot file's link name may hold dots: `` `link_8.0`.x ``).
-    /// `com.x`, `com.y'`, `com.z''` (positions only) are the system's centre of mass unless a
-    /// site is named `com`.
+    /// `com.x`, `com.y'`, `com.z''` are the system's centre of mass, `com.hx`, `com.hx'` its
+    /// angular momentum about it (world frame), unless a site is named `com`.
     pub fn resolve(&self, name: &str) -> Option<(usize, Quantity)> {
         let (site, comp) = name.rsplit_once('.')?;
         let Some(i) = self.sites.iter().position(|s| s.name == site) else {
             return match Quantity::parse(comp) {
-                Some(q @ Quantity::Position { .. }) if site == "com" && !self.com.is_empty() => {
+                Some(q @ (Quantity::Position { .. } | Quantity::Momentum { .. }))
+                    if site == "com" && !self.com.is_empty() =>
+                {
                     Some((COM, q))
                 }
                 _ => None,
             };
         };
-        Quantity::parse(comp).map(|q| (i, q))
+        Quantity::parse(comp)
+            .filter(|q| !matches!(q, Quantity::Momentum { .. }))
+            .map(|q| (i, q))
     }
 
     /// Add a signal; returns its index among the signals.
@@ -202,7 +226,7 @@ impl Signals {
             .map(|&(_, q)| match q {
                 Quantity::Position { order, .. } => order,
                 Quantity::Orientation { .. } => 0,
-                Quantity::Angular { order, .. } => order + 1,
+                Quantity::Angular { order, .. } | Quantity::Momentum { order, .. } => order + 1,
             })
             .max()
             .unwrap_or(0)
@@ -227,8 +251,12 @@ impl Signals {
         }
         for (k, &(si, quantity)) in self.list.iter().enumerate() {
             if si == COM {
+                if let Quantity::Momentum { axis, order } = quantity {
+                    out[k] = self.momentum(tree, data, order)[axis];
+                    continue;
+                }
                 let Quantity::Position { axis, order } = quantity else {
-                    unreachable!("the centre of mass has positions only")
+                    unreachable!("the centre of mass has positions and momenta only")
                 };
                 let mut c = S::zero();
                 for (b, p, w) in &self.com {
@@ -257,6 +285,7 @@ impl Signals {
                         Quantity::Angular { axis, order: 0 } => pk.omega[axis],
                         Quantity::Angular { axis, .. } => pk.alpha[axis],
                         Quantity::Orientation { .. } => unreachable!(),
+                        Quantity::Momentum { .. } => unreachable!("the centre of mass's only"),
                     }
                 }
             };
@@ -320,6 +349,7 @@ impl Signals {
                 Quantity::Position { axis, .. } => [pk.acc[axis], z, z],
                 Quantity::Angular { axis, order: 0 } => [pk.omega[axis], pk.alpha[axis], z],
                 Quantity::Angular { axis, .. } => [pk.alpha[axis], z, z],
+                Quantity::Momentum { .. } => unreachable!("the centre of mass's only"),
                 Quantity::Orientation { k: c } => {
                     let a = omega_times(&pk.alpha, &quat);
                     let b = omega_times(&pk.omega, &dquat);
@@ -336,6 +366,7 @@ impl Signals {
                     Quantity::Position { axis, .. } => lin[axis],
                     Quantity::Angular { axis, .. } => wc[axis],
                     Quantity::Orientation { k: c } => omega_times(&wc, &quat)[c],
+                    Quantity::Momentum { .. } => unreachable!("the centre of mass's only"),
                 };
             });
         }
@@ -354,8 +385,11 @@ impl Signals {
         k: usize,
         out: &mut SignalJets<S>,
     ) {
+        if let Quantity::Momentum { axis, order } = quantity {
+            return self.momentum_jet(tree, data, (axis, order), need, k, out);
+        }
         let Quantity::Position { axis, order } = quantity else {
-            unreachable!("the centre of mass has positions only")
+            unreachable!("the centre of mass has positions and momenta only")
         };
         let z = S::zero();
         let mut jet = [z; 3];
@@ -377,6 +411,75 @@ impl Signals {
             }
         }
         out.taylor[k] = jet;
+    }
+}
+
+impl Signals {
+    /// The centre of mass c from the position pass in `data`.
+    fn com_point<S: Scalar>(&self, tree: &tree::Model, data: &TreeData<S>) -> Vector3<S> {
+        let mut c = Vector3::zeros();
+        for (b, p, w) in &self.com {
+            c += tree::point_kinematics(tree, data, *b, &lift(p)).pos * S::from(*w);
+        }
+        c
+    }
+
+    /// The angular momentum about the centre of mass, world frame, from the passes in `data`:
+    /// h = sum_i [R I_i R^T w_i + m_i (p_i - c) x v_i] (order 0), or its rate
+    /// sum_i [R I_i R^T alpha_i + w_i x R I_i R^T w_i + m_i (p_i - c) x a_i] (order 1: the terms
+    /// m_i (v_i - c') x v_i sum to -c' x M c' = 0).
+    fn momentum<S: Scalar>(&self, tree: &tree::Model, data: &TreeData<S>, order: u8) -> Vector3<S> {
+        let c = self.com_point(tree, data);
+        let mut h = Vector3::zeros();
+        for ((b, p, _), (m, inertia)) in self.com.iter().zip(&self.com_inertia) {
+            let pk = tree::point_kinematics(tree, data, *b, &lift(p));
+            let iw = pk.rot * inertia.map(S::from) * pk.rot.transpose();
+            let r = pk.pos - c;
+            h += if order == 0 {
+                iw * pk.omega + cross(&r, &pk.vel) * S::from(*m)
+            } else {
+                iw * pk.alpha
+                    + cross(&pk.omega, &(iw * pk.omega))
+                    + cross(&r, &pk.acc) * S::from(*m)
+            };
+        }
+        h
+    }
+
+    /// Signal `k`, a component of the angular momentum about c, into `out` ([`Signals::jets`]):
+    /// h: (h, h'_0), h': h'_0 (passes with dv/dt = 0); its Jacobian row is the centroidal momentum
+    /// matrix's angular row, sum_i [R I_i R^T J_w,i + m_i (p_i - c) x J_v,i] (d h' / d(dv/dt)).
+    fn momentum_jet<S: Scalar>(
+        &self,
+        tree: &tree::Model,
+        data: &TreeData<S>,
+        (axis, order): (usize, u8),
+        need: bool,
+        k: usize,
+        out: &mut SignalJets<S>,
+    ) {
+        let z = S::zero();
+        let rate = self.momentum(tree, data, 1)[axis];
+        out.taylor[k] = if order == 0 {
+            [self.momentum(tree, data, 0)[axis], rate, z]
+        } else {
+            [rate, z, z]
+        };
+        if !need {
+            return;
+        }
+        let c = self.com_point(tree, data);
+        let mut row = out.jac.row_mut(k);
+        row.fill(z);
+        for ((b, p, _), (m, inertia)) in self.com.iter().zip(&self.com_inertia) {
+            let pk = tree::point_kinematics(tree, data, *b, &lift(p));
+            let iw = pk.rot * inertia.map(S::from) * pk.rot.transpose();
+            let r = pk.pos - c;
+            let m = S::from(*m);
+            tree::for_each_point_column(tree, data, *b, &pk.pos, |j, wc, lin| {
+                row[j] += (iw * wc + cross(&r, &lin) * m)[axis];
+            });
+        }
     }
 }
 
