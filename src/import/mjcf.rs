@@ -797,10 +797,9 @@ fn top_bodies<'a, 'i>(
 }
 
 /// The child bodies of `parent` in document order, those inside `<frame>` elements (nested too)
-/// with the frames' composed pose and childclass, as MuJoCo's compiler resolves them. A frame in a
-/// body holds bodies (and frames) only: a geom, site, joint or inertial in it is refused (its pose
-/// would change the body's mass properties or joints); in the worldbody its static geometry is not
-/// read. `<replicate>` and `<attach>` are refused.
+/// with the frames' composed pose and childclass, as MuJoCo's compiler resolves them (its sites:
+/// `Walk::sites_in`). A geom, joint or inertial in a body's frame is refused (its pose would change
+/// the body's mass properties or joints); in the worldbody its static geometry is not read. `<replicate>` and `<attach>` are refused.
 fn child_bodies<'a, 'i>(
     src: &Source,
     c: &Compiler,
@@ -819,12 +818,12 @@ fn child_bodies<'a, 'i>(
                 let pos = attr_k::<3>(src, e, &format!("{what}.pos"), "pos", [0.0; 3])?;
                 let quat = orientation(src, c, e, &what)?;
                 let fclass = e.attribute("childclass").unwrap_or(class);
-                let held = ["geom", "site", "joint", "freejoint", "inertial"];
+                let held = ["geom", "joint", "freejoint", "inertial"];
                 if let Some(x) =
                     elements(e).find(|x| !in_world && held.contains(&x.tag_name().name()))
                 {
                     let t = x.tag_name().name();
-                    return Err(err(src, x, &format!("{what}.{t}"), format!("a <{t}> inside a <frame> of a body is not supported (only bodies and frames are read in a frame): move it into the body, composing the frame's pose")));
+                    return Err(err(src, x, &format!("{what}.{t}"), format!("a <{t}> inside a <frame> of a body is not supported (bodies, sites and frames are read in a frame): move it into the body, composing the frame's pose")));
                 }
                 child_bodies(
                     src,
@@ -960,7 +959,20 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
 
     /// The named `<site>`s of body (or worldbody) `b`, whose childclass is `class`.
     fn sites(&mut self, b: Node<'a, 'i>, parent: &str, class: &str) -> R<()> {
+        self.sites_in(b, parent, class, IDENTITY)
+    }
+
+    /// The named `<site>`s among `b`'s children, those in `<frame>`s (nested too) with the frames'
+    /// composed pose and childclass; `frame`: the pose of the frames around `b` in the body.
+    fn sites_in(&mut self, b: Node<'a, 'i>, parent: &str, class: &str, frame: Pose) -> R<()> {
         let src = self.src;
+        for f in elements(b).filter(|e| e.has_tag_name("frame")) {
+            let what = format!("frame[{}]", f.attribute("name").unwrap_or(""));
+            let pos = attr_k::<3>(src, f, &format!("{what}.pos"), "pos", [0.0; 3])?;
+            let quat = orientation(src, self.c, f, &what)?;
+            let fclass = f.attribute("childclass").unwrap_or(class).to_string();
+            self.sites_in(f, parent, &fclass, compose(frame, (pos, quat)))?;
+        }
         for e in elements(b).filter(|e| e.has_tag_name("site")) {
             let Some(name) = e.attribute("name") else {
                 continue; // an unnamed site cannot be named in a row
@@ -977,6 +989,7 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
             };
             let pos = attr_k::<3>(src, e, &format!("{what}.pos"), "pos", [0.0; 3])?;
             let quat = orientation(src, self.c, e, &what)?;
+            let (pos, quat) = compose(frame, (pos, quat));
             self.sites.push(Site {
                 name: name.to_string(),
                 parent: parent.to_string(),

@@ -479,11 +479,13 @@ FRAMES = """<mujoco>
   </default>
   <worldbody>
     <frame pos="0.1 -0.2 0.5" euler="0 0 30" childclass="pitch">
+      <frame pos="0 0 1" zaxis="1 1 0"><site name="goal" pos="0.2 0 0"/></frame>
       <body name="upper" pos="0 0 0.3" quat="0.9 0.1 0 0.2">
         <joint name="shoulder"/>
         <inertial pos="0.1 0 -0.1" mass="1.3" diaginertia="0.02 0.03 0.015"/>
         <frame pos="0.2 0 0" axisangle="1 0 0 20">
           <frame euler="0 15 0">
+            <site name="mark" pos="0.1 0 -0.05" euler="0 0 10"/>
             <body name="lower" pos="0 0.05 -0.3">
               <joint name="elbow" axis="1 0 0"/>
               <inertial pos="0 0 -0.15" mass="0.7" diaginertia="0.01 0.012 0.004"/>
@@ -518,8 +520,39 @@ def test_frames_are_composed_as_mujoco_composes_them(tmp_path):
     assert max(wa, wf) > 1e-4
     (tmp_path / "bad.xml").write_text(FRAMES.replace(
         '<frame euler="0 15 0">', '<frame euler="0 15 0"><geom type="sphere" size="0.1"/>'))
-    with pytest.raises(progmo.SceneError, match=r"bad\.xml:12:.*inside a <frame> of a body is not supported"):
+    with pytest.raises(progmo.SceneError, match=r"bad\.xml:13:.*inside a <frame> of a body is not supported"):
         mjcf_scene(tmp_path, tmp_path / "bad.xml", {})
+
+
+def test_sites_in_frames_are_where_mujoco_puts_them(tmp_path):
+    """A named site inside frames (of a body, and of the worldbody) is a frame where MuJoCo's
+    site_xpos / site_xmat put it, at random states; one degree more in MuJoCo's copy differs."""
+    xml = tmp_path / "frames.xml"
+    xml.write_text(FRAMES)
+    rows = "".join(f'[[programme]]\nname = "r{k}"\nexpr = "shoulder\' + 0 * {s}.x"\n'
+                   for k, s in enumerate(["mark", "goal"]))
+    scene = mjcf_scene(tmp_path, xml, dict(gravity=[0.0, 0.0, -9.81]), rows)
+
+    def worst(text: str) -> float:
+        model = mujoco.MjModel.from_xml_string(text)
+        d = mujoco.MjData(model)
+        qa, _ = coordinates(scene, model)
+        rng = np.random.default_rng(4)
+        w = 0.0
+        for _ in range(5):
+            q, _ = random_state(scene, rng)
+            d.qpos[qa] = q
+            mujoco.mj_kinematics(model, d)
+            poses = {name: (np.asarray(p), np.asarray(r)) for name, p, r in scene.body_poses(q)}
+            for s in ("mark", "goal"):
+                p, quat = poses[s]
+                R = np.zeros(9)
+                mujoco.mju_quat2Mat(R, quat)
+                w = max(w, np.abs(p - d.site(s).xpos).max(), np.abs(R - d.site(s).xmat).max())
+        return w
+
+    assert worst(FRAMES) <= 1e-14
+    assert worst(FRAMES.replace('euler="0 0 10"/>', 'euler="0 0 11"/>')) > 1e-3
 
 
 def test_pinocchio_is_not_given_frames_it_cannot_read(tmp_path):
