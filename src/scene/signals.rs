@@ -252,7 +252,8 @@ impl Signals {
         for (k, &(si, quantity)) in self.list.iter().enumerate() {
             if si == COM {
                 if let Quantity::Momentum { axis, order } = quantity {
-                    out[k] = self.momentum(tree, data, order)[axis];
+                    let (h, dh) = self.momentum(tree, data);
+                    out[k] = if order == 0 { h[axis] } else { dh[axis] };
                     continue;
                 }
                 let Quantity::Position { axis, order } = quantity else {
@@ -424,26 +425,27 @@ impl Signals {
         c
     }
 
-    /// The angular momentum about the centre of mass, world frame, from the passes in `data`:
-    /// h = sum_i [R I_i R^T w_i + m_i (p_i - c) x v_i] (order 0), or its rate
-    /// sum_i [R I_i R^T alpha_i + w_i x R I_i R^T w_i + m_i (p_i - c) x a_i] (order 1: the terms
-    /// m_i (v_i - c') x v_i sum to -c' x M c' = 0).
-    fn momentum<S: Scalar>(&self, tree: &tree::Model, data: &TreeData<S>, order: u8) -> Vector3<S> {
+    /// The angular momentum about the centre of mass, world frame, from the passes in `data`,
+    /// and its rate, in one sweep over the bodies:
+    /// h = sum_i [R I_i R^T w_i + m_i (p_i - c) x v_i],
+    /// h' = sum_i [R I_i R^T alpha_i + w_i x R I_i R^T w_i + m_i (p_i - c) x a_i] (the terms
+    /// m_i (v_i - c') x v_i sum to -c' x M c' = 0; h' reads the acceleration pass).
+    fn momentum<S: Scalar>(
+        &self,
+        tree: &tree::Model,
+        data: &TreeData<S>,
+    ) -> (Vector3<S>, Vector3<S>) {
         let c = self.com_point(tree, data);
-        let mut h = Vector3::zeros();
+        let (mut h, mut dh) = (Vector3::zeros(), Vector3::zeros());
         for ((b, p, _), (m, inertia)) in self.com.iter().zip(&self.com_inertia) {
             let pk = tree::point_kinematics(tree, data, *b, &lift(p));
             let iw = pk.rot * inertia.map(S::from) * pk.rot.transpose();
-            let r = pk.pos - c;
-            h += if order == 0 {
-                iw * pk.omega + cross(&r, &pk.vel) * S::from(*m)
-            } else {
-                iw * pk.alpha
-                    + cross(&pk.omega, &(iw * pk.omega))
-                    + cross(&r, &pk.acc) * S::from(*m)
-            };
+            let (r, m) = (pk.pos - c, S::from(*m));
+            let iw_w = iw * pk.omega;
+            h += iw_w + cross(&r, &pk.vel) * m;
+            dh += iw * pk.alpha + cross(&pk.omega, &iw_w) + cross(&r, &pk.acc) * m;
         }
-        h
+        (h, dh)
     }
 
     /// Signal `k`, a component of the angular momentum about c, into `out` ([`Signals::jets`]):
@@ -459,11 +461,11 @@ impl Signals {
         out: &mut SignalJets<S>,
     ) {
         let z = S::zero();
-        let rate = self.momentum(tree, data, 1)[axis];
+        let (h, dh) = self.momentum(tree, data);
         out.taylor[k] = if order == 0 {
-            [self.momentum(tree, data, 0)[axis], rate, z]
+            [h[axis], dh[axis], z]
         } else {
-            [rate, z, z]
+            [dh[axis], z, z]
         };
         if !need {
             return;
