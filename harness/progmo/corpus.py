@@ -13,7 +13,7 @@ kind, location and first line. A fixed-base import is then compared with each si
 of the file (``simulators.robot_file``, through the check's back-ends: joints mapped by name,
 contact off, the file's actuators inert, every unmodelled kind the file holds declared ignored so
 limits, friction loss, equalities, tendons and fluid forces are off): A(q) and G + Q at a few
-random states (q0 +- 0.5, |v| <= 1), relative to max|A| and max|G + Q|. Free bases (a URDF's free
+random states (q0 +- 0.5, |v| <= 1), relative to max|A| and max(max|G + Q|, max|A| x 1 m/s^2). Free bases (a URDF's free
 root, an MJCF ``<freejoint>``) count in the import rate only: their conventions differ per
 simulator (quaternion order, body or world angular velocity).
 """
@@ -54,6 +54,8 @@ class Collection:
     package: str  # the import name of the installed package
     folder: str  # the package's folder inside the collection's root
     pip: str  # the command that provides it
+    pattern: str = ""  # the files inside ``folder`` (default: ``**/*.urdf`` or ``*.xml``)
+    exclude: str = ""  # a sub-folder of ``folder`` counted as its own collection
 
 
 COLLECTIONS = (
@@ -61,6 +63,12 @@ COLLECTIONS = (
                "pip install example-robot-data"),
     Collection("gymnasium", "mjcf", "gymnasium", "gymnasium/envs/mujoco/assets", "pip install 'gymnasium[mujoco]'"),
     Collection("dm_control", "mjcf", "dm_control", "dm_control/suite", "pip install dm-control"),
+    Collection("pybullet_data", "urdf", "pybullet_data", "pybullet_data", "pip install pybullet",
+               exclude="random_urdfs"),
+    Collection("pybullet_data/random_urdfs", "urdf", "pybullet_data", "pybullet_data/random_urdfs",
+               "pip install pybullet"),
+    Collection("robosuite", "mjcf", "robosuite", "robosuite/models/assets/robots", "pip install robosuite",
+               pattern="*/robot.xml"),
     Collection("mujoco_menagerie", "mjcf", "mujoco_menagerie", "",
                "pip install mujoco-menagerie && mujoco-menagerie prefetch (or git clone "
                "https://github.com/google-deepmind/mujoco_menagerie and pass --data)"),
@@ -139,8 +147,9 @@ def find(c: Collection, data: Path | None, installed: bool = True) -> tuple[Path
     for base in _candidates(c, data, installed):
         folder = base / c.folder
         if folder.is_dir():
-            pattern = "**/*.urdf" if c.kind == "urdf" else "*.xml"
-            files = sorted(folder.glob(pattern))
+            pattern = c.pattern or ("**/*.urdf" if c.kind == "urdf" else "*.xml")
+            files = sorted(f for f in folder.glob(pattern)
+                           if not c.exclude or f.relative_to(folder).parts[0] != c.exclude)
             if files:
                 return folder, files, ""
     return None, [], f"not installed: {c.pip}"
@@ -274,23 +283,30 @@ def _compare(scene: Any, be: Any, n: int, seed: int) -> dict[str, Any]:
         Ms, rs = be.model_terms(scene.t0, q, v)
         dM, dF = max(dM, float(np.abs(Ms - A).max())), max(dF, float(np.abs(rs - rhs).max()))
         sM, sF = max(sM, float(np.abs(A).max())), max(sF, float(np.abs(rhs).max()))
-    mass, bias = dM / max(sM, 1e-300), dF / max(sF, 1e-300)
+    # G + Q relative to its own size or, where that is smaller, to the force of a unit acceleration
+    # (max|A| x 1): a file whose gravity is along every joint axis (a wheeled base) has G + Q of
+    # round-off size, and round-off relative to round-off is no measure of agreement
+    mass, bias = dM / max(sM, 1e-300), dF / max(sF, sM, 1e-300)
     return {"status": "ok", "mass": mass, "bias": bias, "worst": max(mass, bias), "states": n}
 
 
-def mujoco_refusal(kind: str, path: Path) -> str | None:
+def mujoco_refusal(kind: str, path: Path, root_joint: str | None = None) -> str | None:
     """MuJoCo's own compiler on the file (a URDF through the faithful copy the check reads:
     ``robot_file.urdf_for_mujoco``): None when it compiles, else its error's first line. Asked of
     every refused import, so the table tells a defect of the file that MuJoCo refuses too (an
     inertia with a negative eigenvalue, moments against the triangle inequality, a massless moving
-    body) from a refusal of progmo's alone."""
+    body) from a refusal of progmo's alone. ``root_joint = "free"``: with the free root the import
+    adds (as the check adds it: ``robot_file.mujoco_model``)."""
     import mujoco
 
-    from .simulators.robot_file import urdf_for_mujoco
+    from .simulators.robot_file import ROOT_JOINT, urdf_for_mujoco
 
     try:
         if kind == "urdf":
-            mujoco.MjModel.from_xml_string(urdf_for_mujoco(path))
+            spec = mujoco.MjSpec.from_string(urdf_for_mujoco(path))
+            if root_joint == "free" and spec.worldbody.first_body() is not None:
+                spec.worldbody.first_body().add_freejoint(name=ROOT_JOINT)
+            spec.compile()
         else:
             mujoco.MjModel.from_xml_path(str(path))
     except Exception as e:
@@ -315,7 +331,7 @@ def check_file(kind: str, path: Path, folder: Path, *, n_states: int = STATES,
             scene = load(kind, path, rj, folder)
         except Exception as e:  # SceneError (located), or anything else the import raises
             rec["error"] = error_record(e)
-            rec["mujoco_refuses"] = mujoco_refusal(kind, path)
+            rec["mujoco_refuses"] = mujoco_refusal(kind, path, rj)
             out.append(rec)
             continue
         rec.update(imported=True, nq=len(scene.q_names), nv=len(scene.v_names),

@@ -8,6 +8,7 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from progmo import corpus, data
@@ -153,3 +154,51 @@ def test_bench_targets_judge_the_rates_and_parity():
     assert rate.met and parity.verdict == "MISSED: 2 outside"
     assert all(t.status == "not measured" for t in tg.corpus_targets([full], "a sample of 2 files"))
     assert all(t.status == "not measured" for t in tg.corpus_targets([]))
+
+
+def test_pybullet_and_robosuite_layouts_are_found(tmp_path):
+    """pybullet_data's generated objects (random_urdfs) are their own collection, not hidden in the
+    robots' rate; robosuite's robots are each folder's robot.xml."""
+    pb = tmp_path / "pybullet_data"
+    (pb / "random_urdfs" / "000").mkdir(parents=True)
+    (pb / "kuka").mkdir()
+    urdf = _ur5().read_text()
+    (pb / "kuka" / "arm.urdf").write_text(urdf)
+    (pb / "random_urdfs" / "000" / "000.urdf").write_text(urdf)
+    rs = tmp_path / "robosuite" / "models" / "assets" / "robots" / "arm"
+    rs.mkdir(parents=True)
+    (rs / "robot.xml").write_text(PENDULUM)
+    (rs / "other.xml").write_text(PENDULUM)
+    by = {c.name: c for c in corpus.COLLECTIONS}
+    _, robots, _ = corpus.find(by["pybullet_data"], tmp_path, installed=False)
+    _, objects, _ = corpus.find(by["pybullet_data/random_urdfs"], tmp_path, installed=False)
+    _, suite, _ = corpus.find(by["robosuite"], tmp_path, installed=False)
+    assert [f.relative_to(pb).as_posix() for f in robots] == ["kuka/arm.urdf"]
+    assert [f.relative_to(pb).as_posix() for f in objects] == ["random_urdfs/000/000.urdf"]
+    assert [f.name for f in suite] == ["robot.xml"]
+
+
+class _Flat:
+    """A scene and back-end stub whose G + Q is of round-off size (a wheel turning about its axis)."""
+    t0 = 0.0
+    q0 = [0.0]
+    v_names = ["wheel"]
+
+    def __init__(self, sim_rhs: float):
+        self.sim_rhs = sim_rhs
+        self.cm = type("cm", (), {"quats": []})()
+
+    def dynamics(self, t, q, v):
+        return {"mass": [[2.0]], "velocity_terms": [1e-20], "applied_forces": [0.0]}
+
+    def model_terms(self, t, q, v):
+        return np.array([[2.0]]), np.array([self.sim_rhs])
+
+
+def test_bias_of_round_off_size_is_judged_against_a_unit_acceleration():
+    """Round-off against round-off (1e-20 vs -1e-18) is agreement: the bias is relative to max|A| x
+    1 m/s^2 where G + Q is smaller; a real disagreement of that force's size still fails."""
+    agree = corpus._compare(_Flat(1e-20), _Flat(-1e-18), 2, 0)
+    assert agree["bias"] <= 1e-18
+    differ = corpus._compare(_Flat(1e-20), _Flat(0.02), 2, 0)
+    assert differ["bias"] == pytest.approx(0.01)

@@ -80,8 +80,8 @@ class PinocchioBackend:
         self._withhold = withhold
         model = self.model
         model.gravity.linear = np.array(report["gravity"], float)
-        if model.nq != self.cm.nq or model.nv != self.cm.nv:
-            raise ValueError(f"URDF has nq={model.nq}, nv={model.nv}; report {self.cm.nq}, {self.cm.nv}")
+        if model.nq != self.cm.nq_sim or model.nv != self.cm.nv:
+            raise ValueError(f"URDF has nq={model.nq}, nv={model.nv}; report {self.cm.nq_sim}, {self.cm.nv}")
         self.lie = model.nq != model.nv
         self._harness_forces(doc, report, robot, withhold)
         self.data = model.createData()
@@ -104,6 +104,7 @@ class PinocchioBackend:
             self.model = self.file.model
             report = name_report(report, self.file.addr)
             report["sim_q_offset"] = self.file.q_offset
+            report["sim_unbounded"] = self.file.unbounded
             return report
         fd, path = tempfile.mkstemp(suffix=".urdf")
         try:
@@ -429,6 +430,7 @@ class PinocchioBackend:
         vs = cm.v_to_sim(q0, v0)
         times = ref.t[::2][start: stop + 1]
         self._fast = self._u_only()
+        self._q_start = np.asarray(q0, float)
         try:
             return self._steps(ref, frame_every, Q, V, A, frames, qs, vs, start, times)
         except BlowUp as e:  # keep the evidence: the samples stored before the blow-up
@@ -449,7 +451,7 @@ class PinocchioBackend:
             if not (np.isfinite(qs).all() and np.isfinite(vs).all()):
                 raise BlowUp(tk, "non-finite state")
             a1 = self._acc(tk, qs, vs, ref)
-            qo = cm.q_from_sim(qs)
+            qo = cm.q_from_sim(qs, Q[j - 1] if j else self._q_start)
             Q[j], V[j] = qo, cm.v_from_sim(qo, vs)
             A[j] = cm.a_from_sim(qo, V[j], a1)
             self._stored = j + 1

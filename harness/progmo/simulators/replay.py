@@ -75,23 +75,41 @@ class CoordMap:
         #: (simulator qpos index, offset): q_sim = q - offset there (``sim_q_offset`` of a robot
         #: file read by Pinocchio: MJCF joint ``ref``)
         self.q_offset = [(int(i), float(o)) for i, o in report.get("sim_q_offset", [])]
+        #: simulator qpos index of each unbounded revolute joint (Pinocchio's reading of a URDF
+        #: ``continuous`` joint: q_sim = (cos θ, sin θ) there, θ ours; v alike)
+        self.unbounded = sorted(int(i) for i in report.get("sim_unbounded", []))
+        #: the simulator's number of position coordinates
+        self.nq_sim = self.nq + len(self.unbounded)
 
     # -- positions
     def q_to_sim(self, q: np.ndarray) -> np.ndarray:
-        qs = np.zeros(self.nq)
+        qs = np.zeros(self.nq_sim)
         qs[self.q_sim] = q[self.q_idx]
         for i, o in self.q_offset:
             qs[i] -= o
+        for i in self.unbounded:
+            qs[i], qs[i + 1] = np.cos(qs[i]), np.sin(qs[i])
         return qs
 
-    def q_from_sim(self, qs: np.ndarray) -> np.ndarray:
-        if self.q_offset:
+    def q_from_sim(self, qs: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
+        """Our q of the simulator's; an unbounded joint's angle atan2(sin, cos) taken within π of
+        ``near`` (our q of the step before: the angle stays continuous over turns)."""
+        if self.q_offset or self.unbounded:
             qs = np.array(qs, float)
+            for i in self.unbounded:
+                qs[i] = np.arctan2(qs[i + 1], qs[i])
             for i, o in self.q_offset:
                 qs[i] += o
         q = np.zeros(self.nq)
         q[self.q_idx] = qs[self.q_sim]
+        if self.unbounded and near is not None:
+            for k in self._unbounded_ours():
+                q[k] += 2.0 * np.pi * np.round((near[k] - q[k]) / (2.0 * np.pi))
         return q
+
+    def _unbounded_ours(self) -> list[int]:
+        by_sim = dict(zip(self.q_sim.tolist(), self.q_idx.tolist()))
+        return [by_sim[i] for i in self.unbounded]
 
     # -- velocity map
     def P(self, q: np.ndarray) -> np.ndarray:

@@ -17,7 +17,10 @@ coordinate and attractor forces) and u.
   ``armature`` enters ``crba``, ``rnea`` and ``aba``; its ``damping`` does not: the harness applies
   ``-damping * v``). Its MJCF reader has no joint springs and no gravcomp: those the harness applies
   from MuJoCo's compilation of the same file (``jnt_stiffness``, ``qpos_spring``,
-  ``body_gravcomp``), said in the notes. Locked joints: ``buildReducedModel`` at q = 0.
+  ``body_gravcomp``), said in the notes. Locked joints: ``buildReducedModel`` at q = 0. A URDF
+  ``continuous`` joint is an unbounded revolute joint there, q = (cos θ, sin θ) with one velocity:
+  the check's ``CoordMap`` maps progmo's angle θ to that pair and back (atan2, kept within π of the
+  step before so θ stays continuous over whole turns).
 
 Coordinates are matched by joint name (:func:`name_report`): the export report's q/v entries keep
 their names and conversions, their simulator addresses come from the simulator's model of the file.
@@ -268,6 +271,8 @@ class PinFile:
     #: (qpos index, ref) of MJCF joints with a nonzero ``ref``: Pinocchio's reader puts the file's
     #: pose at q = 0, MuJoCo (and progmo) at q = ref, so q_pin = q - ref
     q_offset: list[tuple[int, float]] = field(default_factory=list)
+    #: qpos index of each unbounded revolute joint (a URDF ``continuous`` joint: (cos θ, sin θ))
+    unbounded: list[int] = field(default_factory=list)
 
 
 #: what an ``<include>``d file may hold for Pinocchio 4.1's MJCF reader to read the model right
@@ -362,12 +367,7 @@ def pinocchio_model(rf: RobotFile, gravity: list[float], root: dict | None) -> P
     if rf.locked:
         model = _pin_locked(model, rf, notes)
     addr = _pin_addresses(model, mj, rf)
-    for jid in range(1, model.njoints):
-        if model.joints[jid].nq != model.joints[jid].nv and model.joints[jid].shortname() not in (
-                "JointModelFreeFlyer", "JointModelSpherical"):
-            raise Unsupported(f"Pinocchio reads joint {model.names[jid]!r} of {rf.path.name} as "
-                              f"{model.joints[jid].shortname()} (nq {model.joints[jid].nq}, nv "
-                              f"{model.joints[jid].nv}): no coordinate map to progmo's q")
+    unbounded = _pin_unbounded(model, rf.path.name)
     model.gravity.linear = np.asarray(gravity, float)
     damping = np.asarray(model.damping, float).copy()
     springs: list[tuple[int, int, float, float]] = []
@@ -391,7 +391,28 @@ def pinocchio_model(rf: RobotFile, gravity: list[float], root: dict | None) -> P
                      "location": rf.path.name} for i in range(mj.ntendon)]
         skipped += [{"kind": "equality", "element": f"equality {mujoco.mj_id2name(mj, mujoco.mjtObj.mjOBJ_EQUALITY, i) or i}",
                      "location": rf.path.name} for i in range(mj.neq)]
-    return PinFile(model, addr, damping, springs, grav, notes, skipped, q_offset)
+    if unbounded:
+        notes.append(f"{len(unbounded)} continuous joint(s) read by Pinocchio as unbounded revolute "
+                     "(q = (cos θ, sin θ)): mapped to and from progmo's angle")
+    return PinFile(model, addr, damping, springs, grav, notes, skipped, q_offset, unbounded)
+
+
+
+def _pin_unbounded(model: Any, name: str) -> list[int]:
+    """The qpos index of each unbounded revolute joint of Pinocchio's model (a URDF continuous
+    joint: q = (cos θ, sin θ), mapped by the check's CoordMap); any other joint whose nq differs
+    from its nv, except free and ball joints, has no map to progmo's q."""
+    unbounded = []
+    for jid in range(1, model.njoints):
+        kind = model.joints[jid].shortname()
+        if kind.startswith("JointModelRUB") or kind == "JointModelRevoluteUnboundedUnaligned":
+            unbounded.append(int(model.idx_qs[jid]))
+        elif model.joints[jid].nq != model.joints[jid].nv and kind not in (
+                "JointModelFreeFlyer", "JointModelSpherical"):
+            raise Unsupported(f"Pinocchio reads joint {model.names[jid]!r} of {name} as "
+                              f"{kind} (nq {model.joints[jid].nq}, nv "
+                              f"{model.joints[jid].nv}): no coordinate map to progmo's q")
+    return unbounded
 
 
 def _pin_locked(model: Any, rf: RobotFile, notes: list[str]) -> Any:
