@@ -656,6 +656,7 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         pose: ([0.0; 3], [1.0, 0.0, 0.0, 0.0]),
         body_name: String::new(),
         sites: vec![],
+        mass_unknown: vec![],
     };
     // depth-first, parents first: (element, parent body name, inherited childclass)
     let mut stack = top_bodies(src, &c, &worldbodies)?;
@@ -692,6 +693,7 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         keyframes: keyframes(src, root, &w.layout)?,
         sites: w.sites,
         body_at: w.body_at,
+        mass_unknown: w.mass_unknown,
     })
 }
 
@@ -871,6 +873,8 @@ struct Walk<'s, 'd, 'a, 'i> {
     body_name: String,
     /// The named `<site>`s, in file order.
     sites: Vec<Site>,
+    /// Static bodies' geoms whose mass progmo does not compute ([`super::urdf::Robot::mass_unknown`]).
+    mass_unknown: Vec<SceneError>,
 }
 
 impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
@@ -1039,7 +1043,7 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
                     chain,
                     what: gwhat,
                 };
-                parts.extend(geom_mass(src, c, &a, moving)?);
+                parts.extend(geom_mass(src, c, &a, moving, &mut self.mass_unknown)?);
             }
             if let Some(p) = gi::combine(&parts) {
                 props = Some(p);
@@ -1472,7 +1476,12 @@ impl<'a, 'i> GeomAttrs<'_, 'a, 'i> {
                 let asset = self
                     .get(if kind == "hfield" { "hfield" } else { "mesh" })
                     .map_or("?", |x| x.1);
-                Err(err(src, g, what, format!("the inertia of {kind} geom (`{asset}`) is not supported (give the body an <inertial>, or the geom mass=\"0\")")))
+                let msg = if moving {
+                    format!("the inertia of {kind} geom (`{asset}`) is not supported (give the body an <inertial>, or the geom mass=\"0\")")
+                } else {
+                    format!("the mass of {kind} geom (`{asset}`) of a static body is not computed (MuJoCo's {kind} inertia is not modelled); the motion does not need it, `com.` signals do: give the body an <inertial>, or the geom mass=\"0\"")
+                };
+                Err(err(src, g, what, msg))
             }
             other => Err(err(
                 src,
@@ -1485,15 +1494,26 @@ impl<'a, 'i> GeomAttrs<'_, 'a, 'i> {
 }
 
 /// One geom's share of its body's mass properties (`None` for a geom outside
-/// `inertiagrouprange` or without volume).
-fn geom_mass(src: &Source, c: &Compiler, a: &GeomAttrs, moving: bool) -> R<Option<GeomMass>> {
+/// `inertiagrouprange` or without volume). A mesh, sdf or height field of a static body, whose
+/// mass does not enter the motion, is left out and its error kept in `unknown` (raised only if the
+/// scene needs every body's mass: `com.` signals).
+fn geom_mass(
+    src: &Source,
+    c: &Compiler,
+    a: &GeomAttrs,
+    moving: bool,
+    unknown: &mut Vec<SceneError>,
+) -> R<Option<GeomMass>> {
     let group = a.num::<1>("group", [0.0])?[0];
     if group < c.groups[0] || group > c.groups[1] {
         return Ok(None);
     }
     let kind = a.get("type").map_or("sphere", |x| x.1);
     let Some(shape) = Shape::parse(kind) else {
-        a.no_shape(kind, moving)?;
+        match a.no_shape(kind, moving) {
+            Err(e) if !moving => unknown.push(e),
+            r => r?,
+        }
         return Ok(None);
     };
     let shell = a.get("shellinertia").is_some_and(|x| x.1 == "true");

@@ -40,6 +40,10 @@ pub struct Robot {
     /// the element they come from), as an error located there: a check of the assembled tree
     /// (the triangle inequality of a rigid body) is reported at that line of the file.
     pub body_at: Vec<(String, SceneError)>,
+    /// Geoms of static bodies whose mass progmo does not compute (an MJCF mesh: MuJoCo's mesh
+    /// inertia is not modelled), as errors located at the geom: the motion does not need a static
+    /// body's mass; the scene's `com.` signals do, and are refused with the first of these.
+    pub mass_unknown: Vec<SceneError>,
 }
 
 /// Body `name`'s place for errors of its mass properties: `n`, field `what`.
@@ -388,6 +392,7 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
         keyframes: vec![],
         sites: vec![],
         body_at: w.body_at,
+        mass_unknown: vec![],
     })
 }
 

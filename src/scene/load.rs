@@ -1138,6 +1138,12 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
         .collect();
     frames(src, m, &robot.joints, &mut specs, &mut sites)?;
     site_frames(src, &robot.sites, &robot.joints, &mut specs, &mut sites)?;
+    // a static body's mass progmo does not compute: refused where the scene needs it (`com.`)
+    if let Some(e) = robot.mass_unknown.first() {
+        if !sites.iter().any(|s| s == "com") && dotted_words(&src.text).contains("com") {
+            return Err(e.clone());
+        }
+    }
     let hints = locked_hints(src, m, &robot.locked);
     for j in &robot.joints {
         if params.iter().any(|p| &p.0 == j) {
@@ -1312,6 +1318,23 @@ fn push_frame(
     sites.push(name.to_string());
 }
 
+/// Every word of `text` that a `.` follows (`NAME.` names a signal source), in one forward pass.
+fn dotted_words(text: &str) -> std::collections::HashSet<&str> {
+    let mut named = std::collections::HashSet::new();
+    let mut start = None;
+    for (i, c) in text.char_indices() {
+        if c.is_alphanumeric() || c == '_' {
+            start.get_or_insert(i);
+        } else {
+            if let (Some(s), '.') = (start, c) {
+                named.insert(&text[s..i]);
+            }
+            start = None;
+        }
+    }
+    named
+}
+
 /// The MJCF file's `<site>`s the scene names (`NAME.` in its text: model only what a scene needs),
 /// appended as massless bodies welded where the site is, like `[[model.frames]]`. A site whose
 /// name is a link's, a joint's or a `frames` entry's, or not an identifier, is not added (that
@@ -1325,19 +1348,7 @@ fn site_frames(
     sites: &mut Vec<String>,
 ) -> R<()> {
     use std::collections::HashSet;
-    // every word of the scene's text that a `.` follows, in one forward pass
-    let mut named: HashSet<&str> = HashSet::new();
-    let mut start = None;
-    for (i, c) in src.text.char_indices() {
-        if c.is_alphanumeric() || c == '_' {
-            start.get_or_insert(i);
-        } else {
-            if let (Some(s), '.') = (start, c) {
-                named.insert(&src.text[s..i]);
-            }
-            start = None;
-        }
-    }
+    let named = dotted_words(&src.text);
     let mut taken: HashSet<String> = specs.iter().map(|b| b.name.clone()).collect();
     taken.extend(joints.iter().cloned());
     for site in file_sites {

@@ -574,3 +574,34 @@ def test_pinocchio_is_not_given_frames_it_cannot_read(tmp_path):
     assert r.status == "not_checked" and "<frame>" in r.reason, (r.status, r.reason)
     r = checks.run_check(str(p), "mujoco")
     assert r.status == "pass", (r.status, r.reason, r.metrics)
+
+
+def _box_stl(path: pathlib.Path, a: float, b: float, c: float) -> None:
+    """A binary STL of the box [0, a] x [0, b] x [0, c] (12 outward triangles)."""
+    import struct
+    v = [(x, y, z) for x in (0, a) for y in (0, b) for z in (0, c)]
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    tris = [t for q in quads for t in ((q[0], q[1], q[2]), (q[0], q[2], q[3]))]
+    out = bytearray(80) + struct.pack("<I", len(tris))
+    for t in tris:
+        out += struct.pack("<12fH", 0, 0, 0, *v[t[0]], *v[t[1]], *v[t[2]], 0)
+    path.write_bytes(bytes(out))
+
+
+def test_a_static_bodys_mesh_leaves_the_motion_as_mujoco_computes_it(tmp_path):
+    """A base welded to the world whose mass is a mesh geom's (robosuite's iiwa, kinova3, ur5e):
+    progmo does not compute the mesh's mass, which no motion needs. A and G + Q equal MuJoCo's
+    reading of the same file, which does compute it (it weighs the base: mass > 0 there); a 1 %
+    heavier arm in MuJoCo's copy must fail."""
+    xml = tmp_path / "static_mesh.xml"
+    xml.write_text((ROOT / "tests" / "robots" / "mjcf" / "static_mesh.xml").read_text())
+    _box_stl(tmp_path / "plate.stl", 0.4, 0.3, 0.05)
+    scene = mjcf_scene(tmp_path, xml, dict(gravity=[0.0, 0.0, -9.81]))
+    model = mujoco.MjModel.from_xml_path(str(xml))
+    assert model.body("base").mass[0] == pytest.approx(1000 * 0.4 * 0.3 * 0.05, rel=1e-6)
+    wa, wf = worst(scene, model, 12)
+    assert wa <= TOL and wf <= TOL, (wa, wf)
+    heavier = mujoco.MjModel.from_xml_string(xml.read_text().replace('mass="1.5"', 'mass="1.515"'),
+                                             {"plate.stl": (tmp_path / "plate.stl").read_bytes()})
+    wa, wf = worst(scene, heavier, 12)
+    assert max(wa, wf) > 1e-4
