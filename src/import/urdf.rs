@@ -595,10 +595,20 @@ impl Walk<'_, '_> {
             }
             None => false,
         };
-        let spec = joint_spec(src, j, name, &what, kind)?;
-        if let Some(s) = spec.filter(|_| !is_locked) {
-            b = b.joint(self.coordinate(j, name, &what, kind, s)?);
-            self.joints.push(name.to_string());
+        let specs = joint_spec(src, j, name, &what, kind)?;
+        if !is_locked {
+            let mut damping = None;
+            for s in specs {
+                let jname = s.name.clone();
+                // a planar joint's three: the records and damping of its element once
+                let s = match damping {
+                    None => self.coordinate(j, name, &what, kind, s)?,
+                    Some(d) => s.with_damping(d),
+                };
+                damping = Some(s.damping);
+                b = b.joint(s);
+                self.joints.push(jname);
+            }
         }
         self.bodies.push(b);
         Ok(())
@@ -675,8 +685,12 @@ impl Walk<'_, '_> {
     }
 }
 
-/// The tree joint of URDF joint `j` of type `kind` (`None`: fixed).
-fn joint_spec(src: &Source, j: Node, name: &str, what: &str, kind: &str) -> R<Option<JointSpec>> {
+/// The tree joints of URDF joint `j` of type `kind` (none: fixed). A `planar` joint moves in
+/// the plane normal to its axis: slides along e1 and e2, then a hinge about the axis n, named
+/// `NAME_TX`, `NAME_TY`, `NAME_RZ` as MuJoCo's URDF compiler names them, with (e1, e2, n) its
+/// frame: the rotation taking z to n by the shortest arc (MuJoCo's `mju_quatZ2Vec`; n = -z:
+/// half a turn about x), applied to x and y.
+fn joint_spec(src: &Source, j: Node, name: &str, what: &str, kind: &str) -> R<Vec<JointSpec>> {
     let axis = || -> R<[f64; 3]> {
         let a = match child(j, "axis") {
             None => [1.0, 0.0, 0.0], // the URDF default
@@ -688,27 +702,85 @@ fn joint_spec(src: &Source, j: Node, name: &str, what: &str, kind: &str) -> R<Op
         Ok(a)
     };
     Ok(match kind {
-        "revolute" | "continuous" => Some(JointSpec::hinge(name, axis()?)),
-        "prismatic" => Some(JointSpec::slide(name, axis()?)),
-        "floating" => Some(JointSpec::free(name)),
-        "fixed" => None,
+        "revolute" | "continuous" => vec![JointSpec::hinge(name, axis()?)],
+        "prismatic" => vec![JointSpec::slide(name, axis()?)],
+        "floating" => vec![JointSpec::free(name)],
+        "fixed" => vec![],
         "planar" => {
-            return Err(err(src, j, &format!("{what}.type"), "planar joints are not supported (no tree joint has their 3 dof in one)"))
+            for part in ["_TX", "_TY", "_RZ"] {
+                if let Some(why) = super::unusable_name(&format!("{name}{part}")) {
+                    return Err(err(src, j, what, format!("joint name `{name}{part}` {why}")));
+                }
+            }
+            let [e1, e2, n] = planar_frame(axis()?);
+            vec![
+                JointSpec::slide(&format!("{name}_TX"), e1),
+                JointSpec::slide(&format!("{name}_TY"), e2),
+                JointSpec::hinge(&format!("{name}_RZ"), n),
+            ]
         }
         other => {
             return Err(err(
                 src,
                 j,
                 &format!("{what}.type"),
-                format!("unknown joint type `{other}`: expected revolute, continuous, prismatic, fixed or floating"),
+                format!("unknown joint type `{other}`: expected revolute, continuous, prismatic, planar, fixed or floating"),
             ))
         }
     })
 }
 
+/// The frame (e1, e2, n) of a planar joint with axis `a` (nonzero): R x, R y and n = a / |a|,
+/// R the shortest rotation taking z to n (half a turn about x when n = -z).
+fn planar_frame(a: [f64; 3]) -> [[f64; 3]; 3] {
+    use nalgebra::{Rotation3, Unit, Vector3};
+    let n = Vector3::from(a).normalize();
+    let cross = Vector3::z().cross(&n);
+    let sin = cross.norm();
+    let r = if sin < 1e-15 {
+        if n.z < 0.0 {
+            Rotation3::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+        } else {
+            Rotation3::identity()
+        }
+    } else {
+        Rotation3::from_axis_angle(&Unit::new_unchecked(cross / sin), sin.atan2(n.z))
+    };
+    let (e1, e2) = (r * Vector3::x(), r * Vector3::y());
+    [[e1.x, e1.y, e1.z], [e2.x, e2.y, e2.z], [n.x, n.y, n.z]]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A planar joint's frame: (e1, e2, n) orthonormal and right-handed with n the axis; the
+    /// slide axes MuJoCo 4.0's URDF compiler gives (its jnt_axis, measured): axis x -> e1 = -z,
+    /// e2 = y; axis -z -> e1 = x, e2 = -y; axis (0, -1, 1) -> x, (0, 1, 1)/√2; axis z -> x, y.
+    #[test]
+    fn planar_frame_is_mujocos() {
+        let close = |a: [f64; 3], b: [f64; 3]| {
+            let d = (0..3).map(|k| (a[k] - b[k]).abs()).fold(0.0, f64::max);
+            assert!(d < 1e-15, "{a:?} vs {b:?}");
+        };
+        let [e1, e2, n] = planar_frame([2.0, 0.0, 0.0]);
+        close(e1, [0.0, 0.0, -1.0]);
+        close(e2, [0.0, 1.0, 0.0]);
+        close(n, [1.0, 0.0, 0.0]);
+        let [e1, e2, _] = planar_frame([0.0, 0.0, -1.0]);
+        close(e1, [1.0, 0.0, 0.0]);
+        close(e2, [0.0, -1.0, 0.0]);
+        let [e1, e2, _] = planar_frame([0.0, 0.0, 3.0]);
+        close(e1, [1.0, 0.0, 0.0]);
+        close(e2, [0.0, 1.0, 0.0]);
+        let [e1, e2, n] = planar_frame([0.0, -1.0, 1.0]);
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        close(e1, [1.0, 0.0, 0.0]);
+        close(e2, [0.0, h, h]);
+        let v = |a: [f64; 3]| nalgebra::Vector3::from(a);
+        close(v(e1).cross(&v(e2)).into(), n);
+        assert!((v(e1).dot(&v(n))).abs() < 1e-15 && (v(e2).dot(&v(n))).abs() < 1e-15);
+    }
 
     /// rpy_quat against the product of the three axis rotations (URDF: fixed axes x, y, z).
     #[test]

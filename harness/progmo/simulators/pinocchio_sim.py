@@ -105,6 +105,7 @@ class PinocchioBackend:
             report = name_report(report, self.file.addr)
             report["sim_q_offset"] = self.file.q_offset
             report["sim_unbounded"] = self.file.unbounded
+            report["sim_planar"] = self.file.planar
             return report
         fd, path = tempfile.mkstemp(suffix=".urdf")
         try:

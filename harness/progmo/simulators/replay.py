@@ -43,7 +43,16 @@ class CoordMap:
         self.nv = len(report["v_map"])
         self.q_idx = np.array([c["index"] for c in report["q_map"]], dtype=int)
         self.q_sim = np.array([c["sim_index"] for c in report["q_map"]], dtype=int)
-        self.same = [c for c in report["v_map"] if c["conversion"] == "same"]
+        #: planar joints whose simulator velocity is in the moving frame (Pinocchio's reading of a
+        #: URDF planar joint, ``sim_planar``: its first (qpos, dof)): (our θ position index, our x,
+        #: y, θ velocity indices, simulator rows x, y, θ); v_sim[x, y] = R(θ)^T (x', y')
+        self.planar: list[tuple[int, list[int], list[int]]] = []
+        byq = {c["sim_index"]: c["index"] for c in report["q_map"]}
+        byv = {c["sim_index"]: c["index"] for c in report["v_map"]}
+        for iq, iv in report.get("sim_planar", []):
+            self.planar.append((byq[iq + 2], [byv[iv], byv[iv + 1], byv[iv + 2]], [iv, iv + 1, iv + 2]))
+        turned = {r for _, _, rows in self.planar for r in rows[:2]}
+        self.same = [c for c in report["v_map"] if c["conversion"] == "same" and c["sim_index"] not in turned]
         self.same_idx = np.array([c["index"] for c in self.same], dtype=int)
         self.same_sim = np.array([c["sim_index"] for c in self.same], dtype=int)
         # free joints whose linear velocity is body-frame in the simulator
@@ -120,6 +129,10 @@ class CoordMap:
             R = rot_wxyz(*q[qi])
             for a, r in enumerate(rows):
                 P[r, lin] = R.T[a]
+        for th, xyw, rows in self.planar:
+            c, s = np.cos(q[th]), np.sin(q[th])
+            P[rows[0], xyw[:2]] = (c, s)
+            P[rows[1], xyw[:2]] = (-s, c)
         return P
 
     def Pdot_v(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -129,17 +142,22 @@ class CoordMap:
             R = rot_wxyz(*q[qi])
             w = v[ang]
             out[rows] = -np.cross(w, R.T @ v[lin])
+        for th, (ix, iy, iw), rows in self.planar:
+            c, s = np.cos(q[th]), np.sin(q[th])
+            wz, vx, vy = v[iw], v[ix], v[iy]
+            out[rows[0]] = wz * (-s * vx + c * vy)
+            out[rows[1]] = wz * (-c * vx - s * vy)
         return out
 
     def v_to_sim(self, q, v):
-        if not self.frames:
+        if not self.frames and not self.planar:
             vs = np.zeros(self.nv)
             vs[self.same_sim] = v[self.same_idx]
             return vs
         return self.P(q) @ v
 
     def v_from_sim(self, q, vs):
-        if not self.frames:
+        if not self.frames and not self.planar:
             v = np.zeros(self.nv)
             v[self.same_idx] = vs[self.same_sim]
             return v
@@ -152,12 +170,12 @@ class CoordMap:
         return self.v_from_sim(q, fs)  # P^T
 
     def a_from_sim(self, q, v, a_sim):
-        if not self.frames:
+        if not self.frames and not self.planar:
             return self.v_from_sim(q, a_sim)
         return self.P(q).T @ (a_sim - self.Pdot_v(q, v))
 
     def a_to_sim(self, q, v, a):
-        if not self.frames:
+        if not self.frames and not self.planar:
             return self.v_to_sim(q, a)
         return self.P(q) @ a + self.Pdot_v(q, v)
 

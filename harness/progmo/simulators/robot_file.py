@@ -273,6 +273,8 @@ class PinFile:
     q_offset: list[tuple[int, float]] = field(default_factory=list)
     #: qpos index of each unbounded revolute joint (a URDF ``continuous`` joint: (cos θ, sin θ))
     unbounded: list[int] = field(default_factory=list)
+    #: (first qpos, first dof) of each planar joint (x, y, cos θ, sin θ; velocity in the moving frame)
+    planar: list[tuple[int, int]] = field(default_factory=list)
 
 
 #: what an ``<include>``d file may hold for Pinocchio 4.1's MJCF reader to read the model right
@@ -367,6 +369,7 @@ def pinocchio_model(rf: RobotFile, gravity: list[float], root: dict | None) -> P
     if rf.locked:
         model = _pin_locked(model, rf, notes)
     addr = _pin_addresses(model, mj, rf)
+    planar = _pin_planar(model, addr, rf.path) if rf.fmt == "urdf" else []
     unbounded = _pin_unbounded(model, rf.path.name)
     model.gravity.linear = np.asarray(gravity, float)
     damping = np.asarray(model.damping, float).copy()
@@ -394,8 +397,43 @@ def pinocchio_model(rf: RobotFile, gravity: list[float], root: dict | None) -> P
     if unbounded:
         notes.append(f"{len(unbounded)} continuous joint(s) read by Pinocchio as unbounded revolute "
                      "(q = (cos θ, sin θ)): mapped to and from progmo's angle")
-    return PinFile(model, addr, damping, springs, grav, notes, skipped, q_offset, unbounded)
+    if planar:
+        notes.append(f"{len(planar)} planar joint(s) read by Pinocchio as JointModelPlanar (q = (x, y, cos θ, "
+                     "sin θ), velocity in the moving frame): mapped to progmo's NAME_TX, NAME_TY, NAME_RZ")
+    return PinFile(model, addr, damping, springs, grav, notes, skipped, q_offset,
+                   unbounded + [iq + 2 for iq, _ in planar], planar)
 
+
+
+def _pin_planar(model: Any, addr: dict[str, tuple[int, int]], path: Path) -> list[tuple[int, int]]:
+    """Pinocchio's planar joints (URDF ``planar``): their addresses under progmo's three names
+    (``NAME_TX``, ``NAME_TY``, ``NAME_RZ``, MuJoCo's) in ``addr``; (first qpos, first dof) each.
+    Pinocchio 4.1 moves a planar joint in the x-y plane of its frame whatever the file's axis:
+    another axis is a misreading, not checked; it does not read the joint's damping: the file's
+    is set on its three dofs (applied by the harness as every damping is)."""
+    out = []
+    joints = {j.get("name"): j for j in ET.parse(path).getroot().iter("joint")}
+    axes = {n: j.find("axis") for n, j in joints.items()}
+    for jid in range(1, model.njoints):
+        if model.joints[jid].shortname() != "JointModelPlanar":
+            continue
+        name = model.names[jid]
+        ax = axes.get(name)
+        a = np.array([float(x) for x in ax.get("xyz", "1 0 0").split()]) if ax is not None else np.array([1.0, 0, 0])
+        if np.linalg.norm(a / np.linalg.norm(a) - [0.0, 0.0, 1.0]) > 1e-12:
+            raise Unsupported(f"Pinocchio 4.1 moves planar joint {name!r} of {path.name} in its frame's x-y "
+                              f"plane, not normal to the file's axis {a.tolist()}: not checked in Pinocchio")
+        iq, iv = addr.pop(name)
+        dyn = joints[name].find("dynamics")
+        damping = float(dyn.get("damping", "0")) if dyn is not None else 0.0
+        if damping and not np.asarray(model.damping[iv:iv + 3]).any():
+            # Pinocchio 4.1 does not read a planar joint's damping: the file's, on its three dofs
+            # (the same on x and y: it does not depend on the frame the velocity is written in)
+            model.damping[iv:iv + 3] = damping
+        for k, part in enumerate(("_TX", "_TY", "_RZ")):
+            addr[name + part] = (iq + k, iv + k)
+        out.append((int(iq), int(iv)))
+    return out
 
 
 def _pin_unbounded(model: Any, name: str) -> list[int]:
@@ -408,7 +446,7 @@ def _pin_unbounded(model: Any, name: str) -> list[int]:
         if kind.startswith("JointModelRUB") or kind == "JointModelRevoluteUnboundedUnaligned":
             unbounded.append(int(model.idx_qs[jid]))
         elif model.joints[jid].nq != model.joints[jid].nv and kind not in (
-                "JointModelFreeFlyer", "JointModelSpherical"):
+                "JointModelFreeFlyer", "JointModelSpherical", "JointModelPlanar"):
             raise Unsupported(f"Pinocchio reads joint {model.names[jid]!r} of {name} as "
                               f"{kind} (nq {model.joints[jid].nq}, nv "
                               f"{model.joints[jid].nv}): no coordinate map to progmo's q")
