@@ -46,9 +46,21 @@ fn a_small_robot_loads_with_notes_and_link_signals() {
             ("joint_limit", "joint[shoulder].limit"),
             ("effort_limit", "joint[shoulder].limit.effort"),
             ("velocity_limit", "joint[shoulder].limit.velocity"),
-            ("mimic", "joint[slide].mimic"),
         ]
     );
+    // the <mimic> is modelled: a system row slide = elbow (multiplier 1, offset 0)
+    let mimic: Vec<_> = s
+        .rows()
+        .into_iter()
+        .filter(|r| r.name == "mimic_slide")
+        .collect();
+    assert_eq!(mimic.len(), 1);
+    assert_eq!(mimic[0].role, progmo::programme::Role::System);
+    assert_eq!(
+        (r.mimics[0].joint.as_str(), r.mimics[0].leader.as_str()),
+        ("slide", "elbow")
+    );
+    assert_eq!((r.mimics[0].multiplier, r.mimics[0].offset), (1.0, 0.0));
     assert_eq!(r.kind, "urdf");
     assert!(r.path.is_absolute() && r.path.ends_with("tests/robots/two_link.urdf"));
     // a link name that is not a signal source is refused in a row (located in the scene)
@@ -62,9 +74,22 @@ fn a_small_robot_loads_with_notes_and_link_signals() {
 
 #[test]
 fn locked_joints_are_welded_and_unknown_ones_refused() {
-    let s = load(&scene_text(
+    // the slide follows the elbow (<mimic>): welded alone only with the coupling declared ignored
+    let Err(e) = load(&scene_text(
         &robots().join("two_link.urdf"),
         "locked_joints = [\"slide\"]",
+        "",
+    )) else {
+        panic!("a follower locked alone")
+    };
+    assert_eq!(
+        (e.line, e.field.as_str()),
+        (38, "joint[slide].mimic"),
+        "{e}"
+    );
+    let s = load(&scene_text(
+        &robots().join("two_link.urdf"),
+        "locked_joints = [\"slide\"]\nignore = { mimic = \"the slide is welded alone\" }",
         "",
     ))
     .unwrap();
@@ -212,12 +237,12 @@ fn locked_joints_and_name_clashes_are_explained_where_they_are_used() {
     let row = |e: &str| format!("[[programme]]\nname = \"h\"\nexpr = \"{e}\"\n");
     let Err(e) = load(&scene_text(
         &urdf,
-        "locked_joints = [\"slide\"]",
+        "locked_joints = [\"slide\"]\nignore = { mimic = \"slide locked alone\" }",
         &row("slide - sin(t)"),
     )) else {
         panic!("a locked joint in a row")
     };
-    assert_eq!((e.line, e.field.as_str()), (9, "programme[0].expr"), "{e}");
+    assert_eq!((e.line, e.field.as_str()), (10, "programme[0].expr"), "{e}");
     assert!(
         e.message.contains(
             "`slide` is a locked joint, welded at q = 0 by model.locked_joints[0] (line 6)"

@@ -113,10 +113,17 @@ class Row(TypedDict):
     level: Literal["position", "velocity", "acceleration"]
     role: Literal["programme", "system"]
 
+class Mimic(TypedDict):
+    joint: str  # the follower: q_joint = multiplier * q_leader + offset (system row mimic_JOINT)
+    leader: str
+    multiplier: float
+    offset: float
+
 class RobotFile(TypedDict):
     kind: Literal["urdf", "mjcf"]
     path: str  # the resolved absolute path of the robot file
     locked_joints: list[tuple[str, float]]  # (joint, q value it is welded at)
+    mimics: list[Mimic]  # the URDF <mimic>s modelled as system rows
 
 class Unmodelled(TypedDict):
     kind: str  # one of Scene.unmodelled_kinds()
@@ -283,7 +290,8 @@ class Scene:
     @property
     def robot_file(self) -> RobotFile | None:
         """The robot file of a urdf/mjcf scene (kind, resolved absolute path, locked joints with
-        the q value each is welded at); None for other models."""
+        the q value each is welded at, the <mimic>s modelled as system rows); None for other
+        models."""
     @property
     def unmodelled(self) -> list[Unmodelled]:
         """Every element of the robot file read and not modelled, in file order; [] for other

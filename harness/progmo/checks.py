@@ -1145,10 +1145,12 @@ def _inverse_dynamics(c: _Check) -> None:
     # inverse dynamics along the trajectory
     stride = max(1, -(-len(ref.t) // INVERSE_SAMPLES))
     ks = np.arange(0, len(ref.t), stride)
-    # with loop closures the file's inverse dynamics needs u plus the closures' reactions B_c^T lambda_c
+    # with loop closures the file's inverse dynamics needs u plus the closures' reactions B_c^T lambda_c,
+    # and the reactions of the system rows progmo supplies (a URDF <mimic>: the file's coupling)
     closures = be.report.get("closures", [])
     names = [r["name"] for r in scene.rows]
     cidx = [names.index(r) for cl in closures for r in cl["rows"] if r not in cl["set_aside"]]
+    cidx += [names.index(r) for r in c.supplied if r in names and names.index(r) not in cidx]
 
     def needed(k: int) -> np.ndarray:
         if not cidx:

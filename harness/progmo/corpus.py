@@ -1,9 +1,11 @@
 """``progmo corpus``: import every robot file of public collections and judge the dynamics of each
 import against MuJoCo's and Pinocchio's own reading of the same file (issue 30, item 3).
 
-Collections: example-robot-data's URDFs (``robots/**/*.urdf``), gymnasium's MuJoCo environments
-(``gymnasium/envs/mujoco/assets/*.xml``), dm_control's suite (``dm_control/suite/*.xml``) and MuJoCo
-Menagerie (each robot folder's ``scene.xml`` and the model files it includes), found in ``--data
+Collections: example-robot-data's URDFs (``robots/**/*.urdf``), pybullet_data's URDFs (its 1000
+generated objects, ``random_urdfs/``, a collection of their own), gymnasium's MuJoCo environments
+(``gymnasium/envs/mujoco/assets/*.xml``), dm_control's suite (``dm_control/suite/*.xml``),
+robosuite's robots (``robosuite/models/assets/robots/*/robot.xml``) and MuJoCo Menagerie (each robot
+folder's ``scene.xml`` and the model files it includes), found in ``--data
 DIR`` (unzipped wheels: ``DIR/<package>/...``) or the installed packages. A collection not found is
 listed as not installed with the command that provides it.
 
@@ -233,10 +235,10 @@ def _backend(scene: Any, simulator: str, simulator_file: Path | None) -> Any:
         rf.path = Path(simulator_file)
     if simulator == "mujoco":
         from .simulators.mujoco_sim import MujocoBackend as cls
-        doc, report = scene.export("mjcf")
+        doc, report = scene.export("mjcf", supply_reactions=True)
     else:
         from .simulators.pinocchio_sim import PinocchioBackend as cls  # type: ignore[assignment]
-        doc, report = scene.export("urdf")
+        doc, report = scene.export("urdf", supply_reactions=True)
     be = cls(doc, report, scene, robot=rf)
     if simulator == "mujoco" and "fluid" in rf.ignored:  # passive fluid forces: off as declared
         be.m.opt.density = be.m.opt.viscosity = 0.0
@@ -411,8 +413,8 @@ def table(rows: list[dict[str, Any]]) -> str:
 def parser() -> argparse.ArgumentParser:
     p = cliutil.parser(
         "progmo corpus",
-        "Import every robot file of public collections (example-robot-data, gymnasium, dm_control, "
-        "MuJoCo Menagerie) and compare each fixed-base import's A(q) and G + Q with MuJoCo's and "
+        "Import every robot file of public collections (example-robot-data, pybullet_data, gymnasium, "
+        "dm_control, robosuite, MuJoCo Menagerie) and compare each fixed-base import's A(q) and G + Q with MuJoCo's and "
         "Pinocchio's own reading of the file (also: python -m progmo.corpus).",
         "Outputs in --out: corpus.json (every file's result) and corpus.md (the table). A collection "
         "not found is listed as not installed with the command that provides it. Exit codes: 0 done, "

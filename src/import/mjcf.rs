@@ -694,6 +694,7 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         sites: w.sites,
         body_at: w.body_at,
         mass_unknown: w.mass_unknown,
+        mimics: vec![],
     })
 }
 

@@ -46,7 +46,11 @@ pub const KINDS: &[(&str, &str)] = &[
         "actuator models: MJCF `<actuator>` elements (gains, biases, dynamics, ranges), URDF \
          `<transmission>`",
     ),
-    ("mimic", "URDF `<mimic>`: a joint that follows another"),
+    (
+        "mimic",
+        "URDF `<mimic>`: a joint that follows another (modelled as a system row unless declared \
+         ignored: the joints are then independent)",
+    ),
     (
         "fluid",
         "fluid forces: MJCF `<option>` density, viscosity or wind nonzero",

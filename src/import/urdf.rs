@@ -44,6 +44,22 @@ pub struct Robot {
     /// inertia is not modelled), as errors located at the geom: the motion does not need a static
     /// body's mass; the scene's `com.` signals do, and are refused with the first of these.
     pub mass_unknown: Vec<SceneError>,
+    /// URDF `<mimic>` joints: follower = multiplier x leader + offset (none in an MJCF).
+    pub mimics: Vec<Mimic>,
+}
+
+/// A URDF `<mimic>`: joint `joint` follows `leader` as q = multiplier q_leader + offset.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Mimic {
+    pub joint: String,
+    pub leader: String,
+    pub multiplier: f64,
+    pub offset: f64,
+    /// Whether the follower is welded by `locked_joints`.
+    pub locked: bool,
+    /// The `<mimic>` element, as an error located there (a check of the scene is reported at it).
+    #[serde(skip)]
+    pub at: SceneError,
 }
 
 /// Body `name`'s place for errors of its mass properties: `n`, field `what`.
@@ -327,6 +343,7 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
         ranges: vec![],
         locked_values: vec![],
         body_at: vec![],
+        mimics: vec![],
     };
     record_collisions(&mut w.rec, &links, &link_order);
     for t in robot.children().filter(|c| c.has_tag_name("transmission")) {
@@ -393,6 +410,7 @@ pub fn import(src: &Source, root_joint: RootJoint, locked: &[String]) -> R<Robot
         sites: vec![],
         body_at: w.body_at,
         mass_unknown: vec![],
+        mimics: w.mimics,
     })
 }
 
@@ -571,6 +589,7 @@ struct Walk<'s, 'l> {
     locked_values: Vec<(String, f64)>,
     notes: Vec<String>,
     body_at: Vec<(String, SceneError)>,
+    mimics: Vec<Mimic>,
 }
 
 impl Walk<'_, '_> {
@@ -596,6 +615,9 @@ impl Walk<'_, '_> {
             None => false,
         };
         let specs = joint_spec(src, j, name, &what, kind)?;
+        if let Some(m) = child(j, "mimic") {
+            self.mimic(m, name, &what, kind, is_locked)?;
+        }
         if !is_locked {
             let mut damping = None;
             for s in specs {
@@ -615,7 +637,7 @@ impl Walk<'_, '_> {
     }
 
     /// The joint of an unlocked coordinate: its name checked, its `<dynamics damping>`, and the
-    /// records of what is read and not modelled (mimic, limits, safety controller, friction).
+    /// records of what is read and not modelled (limits, safety controller, friction).
     fn coordinate(
         &mut self,
         j: Node,
@@ -629,9 +651,6 @@ impl Walk<'_, '_> {
             return Err(err(src, j, what, format!("joint name `{name}` {why}")));
         }
         let mut s = s;
-        if let Some(m) = child(j, "mimic") {
-            self.rec.push("mimic", format!("{what}.mimic"), m);
-        }
         if let Some(l) = child(j, "limit") {
             self.limit(l, name, what, kind)?;
         }
@@ -657,6 +676,40 @@ impl Walk<'_, '_> {
             }
         }
         Ok(s)
+    }
+
+    /// Joint `name`'s `<mimic joint multiplier offset>` (defaults 1 and 0) on a one-coordinate
+    /// joint (revolute, continuous, prismatic); on a fixed joint it couples nothing and is skipped.
+    fn mimic(&mut self, m: Node, name: &str, what: &str, kind: &str, locked: bool) -> R<()> {
+        let src = self.src;
+        let field = format!("{what}.mimic");
+        let Some(leader) = m.attribute("joint") else {
+            return Err(err(
+                src,
+                m,
+                &field,
+                "a <mimic> needs `joint`, the joint it follows",
+            ));
+        };
+        if kind == "fixed" {
+            return Ok(()); // no coordinate to couple (talos' gripper files): nothing follows
+        }
+        if !matches!(kind, "revolute" | "continuous" | "prismatic") {
+            return Err(err(src, m, &field, format!("a `{kind}` joint cannot follow another (<mimic> couples one-coordinate joints)")));
+        }
+        let [multiplier] = numbers::<1>(src, m, "multiplier", Some([1.0]))?;
+        let [offset] = numbers::<1>(src, m, "offset", Some([0.0]))?;
+        // recorded too: a scene that declares `mimic` ignored keeps the joints independent
+        self.rec.push("mimic", field.clone(), m);
+        self.mimics.push(Mimic {
+            joint: name.to_string(),
+            leader: leader.to_string(),
+            multiplier,
+            offset,
+            locked,
+            at: err(src, m, &field, ""),
+        });
+        Ok(())
     }
 
     /// A joint's `<limit>`: the range of a revolute or prismatic joint, effort and velocity.

@@ -768,7 +768,8 @@ fn tree_scene(
     let tree = Arc::new(build_tree(src, m, specs, body_at)?);
     let mut sites = link_sites_of(&tree, &link_sites, &joint_set, &mut hints);
     scene_sites(src, m, &tree, &joint_set, &mut sites)?;
-    let closures = super::closures::load(src, m, &tree, &joint_names, &mut sites)?;
+    let mut closures = super::closures::load(src, m, &tree, &joint_names, &mut sites)?;
+    closures.1.extend(mimic_rows(m, notes.1.as_ref())); // generated system rows, like a closure's
     let q_names = tree.q_names().to_vec();
     let v_names = tree.v_names().to_vec();
     let mut sym = symbols(
@@ -1154,7 +1155,14 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
             ));
         }
     }
-    let unmodelled = declared(src, m, &robot.unmodelled)?;
+    let (mimics, records) = mimic_rows_of(
+        m,
+        robot.mimics,
+        &robot.locked,
+        &robot.joints,
+        robot.unmodelled,
+    )?;
+    let unmodelled = declared(src, m, &records)?;
     let info = super::RobotFile {
         kind: kind.to_string(),
         path: std::path::absolute(&usrc_path).unwrap_or(usrc_path),
@@ -1163,8 +1171,90 @@ fn import_specs(src: &Source, m: &ModelFile, params: &[(String, f64)]) -> R<Impo
         unmodelled,
         keyframes: robot.keyframes,
         body_at: robot.body_at,
+        mimics,
     };
     Ok((specs, robot.joints, sites, (robot.notes, Some(info)), hints))
+}
+
+/// The URDF's `<mimic>` couplings the scene models (all, unless `[model] ignore` declares
+/// `mimic`: then none, and their records stay) and the records left: a coupling of two moving
+/// joints is a system row; of two locked joints, nothing (both welded); of a locked and a moving
+/// one, or with a leader the file lacks, an error at the `<mimic>`.
+fn mimic_rows_of(
+    m: &ModelFile,
+    mimics: Vec<crate::import::urdf::Mimic>,
+    locked: &[(String, f64)],
+    joints: &[String],
+    mut records: Vec<crate::import::unmodelled::Unmodelled>,
+) -> R<(
+    Vec<crate::import::urdf::Mimic>,
+    Vec<crate::import::unmodelled::Unmodelled>,
+)> {
+    if m.ignore.contains_key("mimic") || mimics.is_empty() {
+        return Ok((vec![], records));
+    }
+    records.retain(|r| r.kind != "mimic");
+    let is_locked = |j: &str| locked.iter().any(|(l, _)| l == j);
+    let mut out = vec![];
+    for mm in mimics {
+        let leader_locked = is_locked(&mm.leader);
+        let problem = if !leader_locked && !joints.contains(&mm.leader) {
+            Some(format!(
+                "joint `{}` follows `{}`, which is not a joint of the file",
+                mm.joint, mm.leader
+            ))
+        } else if mm.locked != leader_locked {
+            let (l, f) = if mm.locked {
+                (&mm.joint, &mm.leader)
+            } else {
+                (&mm.leader, &mm.joint)
+            };
+            Some(format!("`{l}` is locked and `{f}`, coupled to it by this <mimic>, moves: lock both or neither (or declare `mimic` ignored: the joints are then independent)"))
+        } else {
+            None
+        };
+        if let Some(msg) = problem {
+            let mut e = mm.at.clone();
+            e.message = msg;
+            return Err(e);
+        }
+        if !mm.locked {
+            out.push(mm);
+        }
+    }
+    Ok((out, records))
+}
+
+/// The system row of each modelled `<mimic>`: `mimic_JOINT` (`mimic_K`, the K-th, when the joint's
+/// name is not an identifier), q_joint - (multiplier q_leader + offset) = 0, spanned at `model.file`.
+fn mimic_rows(m: &ModelFile, rf: Option<&super::RobotFile>) -> Vec<(RowFile, String)> {
+    let Some((rf, file)) = rf.zip(m.file.as_ref()) else {
+        return vec![];
+    };
+    use crate::expr::written;
+    rf.mimics
+        .iter()
+        .enumerate()
+        .map(|(k, mm)| {
+            let name = if is_identifier(&mm.joint) {
+                format!("mimic_{}", mm.joint)
+            } else {
+                format!("mimic_{k}")
+            };
+            let expr = format!(
+                "{} - ({:?}*{} + {:?})",
+                written(&mm.joint),
+                mm.multiplier,
+                written(&mm.leader),
+                mm.offset
+            );
+            let row = RowFile {
+                name: Spanned::new(file.span(), name),
+                expr: Spanned::new(file.span(), expr),
+            };
+            (row, "model.file".to_string())
+        })
+        .collect()
 }
 
 /// The robot file of `file` (resolved beside the scene or in a package), read as text.

@@ -128,6 +128,9 @@ pub struct RobotFile {
     /// Where each body's mass properties are written in the file ([`crate::import::urdf::Robot::body_at`]).
     #[serde(skip)]
     pub body_at: Vec<(String, crate::located::SceneError)>,
+    /// The URDF's `<mimic>` couplings of moving joints, each a system row `mimic_JOINT` (none
+    /// when the scene declares `mimic` ignored: the joints are then independent).
+    pub mimics: Vec<crate::import::urdf::Mimic>,
 }
 
 /// One element of the robot file that is not modelled, and whether the scene declares its kind

@@ -651,7 +651,8 @@ impl PyScene {
     }
 
     /// The robot file of a `urdf`/`mjcf` scene as a dict {kind: "urdf" | "mjcf", path: the
-    /// resolved absolute path, locked_joints: [(joint, q value it is welded at)]}; None for
+    /// resolved absolute path, locked_joints: [(joint, q value it is welded at)], mimics: [{joint,
+    /// leader, multiplier, offset}] (the URDF `<mimic>`s modelled as system rows)}; None for
     /// other models.
     #[getter]
     fn robot_file<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
@@ -662,6 +663,16 @@ impl PyScene {
         d.set_item("kind", &r.kind)?;
         d.set_item("path", r.path.display().to_string())?;
         d.set_item("locked_joints", r.locked.clone())?;
+        let mimics = PyList::empty(py);
+        for m in &r.mimics {
+            let e = PyDict::new(py);
+            e.set_item("joint", &m.joint)?;
+            e.set_item("leader", &m.leader)?;
+            e.set_item("multiplier", m.multiplier)?;
+            e.set_item("offset", m.offset)?;
+            mimics.append(e)?;
+        }
+        d.set_item("mimics", mimics)?;
         Ok(Some(d))
     }
 

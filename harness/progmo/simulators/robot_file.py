@@ -55,6 +55,9 @@ class RobotFile:
     root_joint: str = "fixed"
     #: unmodelled elements the scene declares ignored: kinds ("frictionloss", "limit", ...)
     ignored: set[str] = field(default_factory=set)
+    #: the URDF's <mimic> couplings progmo models as system rows (the core's ``mimics``: joint,
+    #: leader, multiplier, offset); their reactions are supplied with u in the check
+    mimics: list[dict] = field(default_factory=list)
 
 
 def robot_file(scene: Any) -> RobotFile | None:
@@ -81,8 +84,9 @@ def robot_file(scene: Any) -> RobotFile | None:
         else:
             path = str(Path(scene.path).parent / rel)
     ignored = {str(u["kind"]) for u in getattr(scene, "unmodelled", []) or [] if u.get("declared")}
+    mimics = list(given.get("mimics", [])) if isinstance(given, dict) else []
     return RobotFile(Path(path), kind, list(model.get("locked_joints", [])),
-                     str(model.get("root_joint", "fixed")), ignored)
+                     str(model.get("root_joint", "fixed")), ignored, mimics)
 
 
 #: harness forces of the export report that stand for elements of the robot file itself (the file's
@@ -139,6 +143,7 @@ def mujoco_model(rf: RobotFile, gravity: list[float], closures: list[dict] | Non
         spec = mujoco.MjSpec.from_file(str(rf.path))
         notes.append(f"MuJoCo reads {rf.path.name} as given")
     _remove_locked(spec, rf, notes)
+    _remove_mimics(spec, rf, notes)
     if rf.root_joint == "free":
         root = spec.worldbody.first_body()
         root.add_freejoint(name=ROOT_JOINT)
@@ -211,6 +216,29 @@ def _add_closures(spec: Any, closures: list[dict], rf: RobotFile) -> None:
     spec.option.tolerance = 1e-15
     spec.option.ls_tolerance = 1e-15
     spec.option.jacobian = mujoco.mjtJacobian.mjJAC_DENSE
+
+
+def _remove_mimics(spec: Any, rf: RobotFile, notes: list[str]) -> None:
+    """The joint equalities MuJoCo's URDF compiler makes of the <mimic>s progmo models as system
+    rows, removed: the check supplies those rows' reactions with u (``supplied``), as for Pinocchio,
+    which has no coupling constraint. Each is first compared with progmo's law (MuJoCo's
+    polycoef: q_joint = c0 + c1 q_leader)."""
+    import mujoco
+
+    for mm in rf.mimics:
+        eq = next((e for e in spec.equalities if e.type == mujoco.mjtEq.mjEQ_JOINT
+                   and e.name1 == mm["joint"] and e.name2 == mm["leader"]), None)
+        if eq is None:
+            raise ValueError(f"MuJoCo's reading of {rf.path.name} has no joint equality for the <mimic> of "
+                             f"{mm['joint']!r} on {mm['leader']!r}")
+        c = np.asarray(eq.data[:5], float)
+        want = np.array([mm["offset"], mm["multiplier"], 0.0, 0.0, 0.0])
+        if np.abs(c - want).max() > 1e-12 * max(1.0, float(np.abs(want).max())):
+            raise ValueError(f"MuJoCo reads the <mimic> of {mm['joint']!r} as polycoef {c.tolist()}, progmo as "
+                             f"offset {mm['offset']!r}, multiplier {mm['multiplier']!r}")
+        spec.delete(eq)
+        notes.append(f"joint equality of the <mimic> {mm['joint']} = {mm['multiplier']!r} {mm['leader']} + "
+                     f"{mm['offset']!r} (equal to progmo's row) removed: its reaction is supplied with u")
 
 
 def _remove_locked(spec: Any, rf: RobotFile, notes: list[str]) -> None:
