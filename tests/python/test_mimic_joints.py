@@ -1,9 +1,10 @@
 """URDF ``<mimic>`` joints as system constraints (issue 30 item 2): the follower obeys
 q_joint = multiplier q_leader + offset as a system row ``mimic_JOINT`` (its reaction is an internal
-force of the mechanism, not a control). In the check neither simulator holds the coupling as progmo
+force of the mechanism, not a control). In the check no simulator holds the coupling as progmo
 does (MuJoCo's URDF compiler makes it a soft joint equality, compared with progmo's law and then
-removed; Pinocchio 4.1 has no coupling constraint), so its reaction is supplied with u and the row
-is measured on the open-loop replay. Negative controls: the replay without the supplied reactions
+removed; Pinocchio 4.1 has no coupling constraint; a continuous Drake plant holds no constraint:
+the <mimic> is removed from the file it reads), so its reaction is supplied with u and the row is
+measured on the open-loop replay. Negative controls: the replay without the supplied reactions
 fails; a multiplier MuJoCo reads otherwise is an error; a mimic declared ignored leaves the joints
 independent (the old reading); a locked leader with a moving follower is refused at the <mimic>."""
 
@@ -85,8 +86,10 @@ def test_the_mimic_is_a_system_row_and_holds_along_the_motion(tmp_path):
     assert max(abs(qk[b] - (-0.8 * qk[a] + 0.01)) for qk in q) < 1e-10
 
 
-@pytest.mark.parametrize("sim", ["mujoco", "pinocchio"])
+@pytest.mark.parametrize("sim", ["mujoco", "pinocchio", "drake"])
 def test_a_motion_with_a_mimic_passes_with_its_reaction_supplied(tmp_path, sim):
+    if sim == "drake":
+        pytest.importorskip("pydrake")
     p = _scene(tmp_path)
     r = run_check(str(p), sim, CheckOptions())
     assert r.route == "user's file", r.route

@@ -33,7 +33,9 @@
   and world-frame linear velocity: v_drake = P v with R on the angular rows, d(R w)/dt = R dw/dt
   (no (dP/dt) v term). A ball joint's rpy is converted from and to our quaternion.
 * **Refused** (:class:`~progmo.simulators.Unsupported`, the check becomes ``not_checked`` with the
-  reason): loop closures and URDF ``<mimic>`` on a moving joint: a continuous Drake plant holds no
+  reason): loop closures and a URDF ``<mimic>`` on a moving joint that the scene declares ignored
+  (one progmo models is a system row whose reaction the check supplies: removed from the file Drake
+  reads, as MuJoCo's equality is): a continuous Drake plant holds no
   constraint ("Continuous time does not support constraints"; its M, bias and inverse dynamics
   ignore them silently, drake#24957), and a discrete SAP plant holds them only softly.
 """
@@ -113,7 +115,10 @@ def _lock(j: ET.Element, value: float) -> None:
 
 def user_urdf(robot: RobotFile, locked: dict[str, float]) -> str:
     """The user's URDF as Drake reads it: no geometry (no inertia in it; mesh paths Drake cannot
-    resolve), locked joints fixed; ``<mimic>`` on a moving joint is refused (module doc)."""
+    resolve), locked joints fixed; a ``<mimic>`` progmo models as a system row is removed (its
+    reaction is supplied with u, as in MuJoCo and Pinocchio), one declared ignored on a moving
+    joint is refused (module doc)."""
+    modelled = {m["joint"] for m in robot.mimics}
     root = ET.fromstring(robot.path.read_text())
     for link in root.iter("link"):
         for tag in ("visual", "collision"):
@@ -123,6 +128,8 @@ def user_urdf(robot: RobotFile, locked: dict[str, float]) -> str:
         name = j.get("name", "")
         if name in locked:
             _lock(j, locked[name])
+        elif j.find("mimic") is not None and name in modelled:
+            j.remove(j.find("mimic"))  # the system row mimic_NAME: its reaction is supplied
         elif j.find("mimic") is not None:
             raise Unsupported(f"the <mimic> of joint {name!r}: Drake turns it into a coupler constraint, "
                               "which a continuous plant does not hold (\"Continuous time does not support "
