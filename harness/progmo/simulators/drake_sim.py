@@ -126,11 +126,12 @@ def user_urdf(robot: RobotFile, locked: dict[str, float]) -> str:
                 link.remove(e)
     for j in root.iter("joint"):
         name = j.get("name", "")
+        mimic = j.find("mimic")
         if name in locked:
             _lock(j, locked[name])
-        elif j.find("mimic") is not None and name in modelled:
-            j.remove(j.find("mimic"))  # the system row mimic_NAME: its reaction is supplied
-        elif j.find("mimic") is not None:
+        elif mimic is not None and name in modelled:
+            j.remove(mimic)  # the system row mimic_NAME: its reaction is supplied
+        elif mimic is not None:
             raise Unsupported(f"the <mimic> of joint {name!r}: Drake turns it into a coupler constraint, "
                               "which a continuous plant does not hold (\"Continuous time does not support "
                               "constraints\"; its M and bias ignore it, drake#24957)")
