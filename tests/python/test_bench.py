@@ -402,6 +402,57 @@ def test_robot_part_check_fails_on_a_wrong_circle_law(tmp_path):
             robot.agreement(scene, model, proc, states)
 
 
+def test_humanoid_on_welded_soles_agrees_with_pinocchios_cpp_and_is_timed(tmp_path):
+    """Issue 31 item 3: TALOS with both soles welded beside constraintDynamics and lcaba. Agreement
+    with progmo's kkt dv/dt (mapped to Pinocchio's coordinates) at states of talos_com_shift's
+    solution; negative controls: the left weld on the shin instead of the sole in the C++ model, and
+    lcaba's dv/dt 1e-8 off, fail the check."""
+    from progmo.bench import anchor, humanoid, robot
+
+    _anchor_toolchain()
+    exe, _ = anchor.build()
+    h = humanoid.run(tmp_path, common.Provenance(["--only", "robot"]), exe, rounds=1, budget_s=0.002,
+                     check_states=3)
+    assert (h["n"], h["closure_rows"], h["agreement_states"]) == (18, 12, 3)
+    assert set(h["agreement_by_variant"]) == {"aba", *humanoid.WELD}
+    assert h["agreement"] <= h["agreement_tol"] == anchor.AGREEMENT, h
+    assert h["weld_best"] in ("weld_cd", "weld_lcaba")
+    for k in ("aba_s", "weld_cd_s", "weld_lcaba_s", "weld_kkt_s", "progmo_auto_s", "progmo_programmed_s"):
+        assert np.isfinite(h[k]) and h[k] > 0, k
+    rows = list(csv.DictReader(line for line in open(tmp_path / "humanoid.csv") if not line.startswith("#")))
+    assert rows[0]["what"] == "standing_null_space_vs_best_weld" and len(rows) == 9
+
+    programmed = Scene(str(common.scene_path(humanoid.SCENE)))
+    sp = tmp_path / "talos_standing.toml"
+    sp.write_text(humanoid.standing_text(common.scene_path(humanoid.SCENE)))
+    standing = Scene(str(sp))
+    assert len(standing.rows) == 12 and all(r["role"] == "system" for r in standing.rows)
+    be = humanoid.backend(standing)
+    states = robot.trajectory_states(programmed, 2)
+    good = humanoid.model_text(be)
+    # the left sole's weld moved to the shin (joint 6 instead of the ankle's 7): a point offset on
+    # the sole itself would not do, the sole being at rest (its whole spatial acceleration is held)
+    assert "\nweld 7 " in good
+    bad_text = good.replace("\nweld 7 ", "\nweld 6 ", 1)
+    assert bad_text != good
+    with humanoid.Process(exe, be, tmp_path) as proc:
+        worst, _ = humanoid.agreement(standing, be, proc, states)
+        assert max(worst.values()) < 1e-10
+
+        check = proc.check
+
+        def off(t, q, v):
+            got = check(t, q, v)
+            got[("a", "weld_lcaba")] = got[("a", "weld_lcaba")] * (1 + 1e-8)
+            return got
+        proc.check = off  # type: ignore[method-assign]
+        with pytest.raises(anchor.AnchorFailed, match="weld_lcaba"):
+            humanoid.agreement(standing, be, proc, states)
+    with humanoid.Process(exe, be, tmp_path, text=bad_text) as proc, \
+            pytest.raises(anchor.AnchorFailed, match="weld_cd"):
+        humanoid.agreement(standing, be, proc, states)
+
+
 def test_bench_robot_part_on_the_page(tmp_path, monkeypatch):
     from progmo.bench import anchor
 

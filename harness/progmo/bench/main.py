@@ -129,6 +129,7 @@ class _Bench:
     ts: dict | None = None
     testset_why: str = "the testset part did not run (--only)"
     robot_rhs: dict | None = None
+    robot_humanoid: dict | None = None
     robot_why: str = "the robot part did not run (--only)"
     servo: dict | None = None
     servo_why: str = "the servo part did not run (--only)"
@@ -434,6 +435,7 @@ def _part_robot(b: _Bench) -> None:
         b.sections.append((title, page.doc(robot.__doc__) + inner))
         b.summary += lines
         b.robot_rhs = rb["rhs"]
+        b.robot_humanoid = rb.get("humanoid")
         if "rhs_skipped" in rb:
             b.omissions.append(f"robot: the C++ RHS comparison skipped: {rb['rhs_skipped']}")
             b.robot_why = f"the C++ RHS comparison skipped: {rb['rhs_skipped']}"
@@ -601,6 +603,7 @@ def _finish(b: _Bench, t_start: float) -> int:
     b.targets.append(tg.small_problem_target(b.anchor_rows, b.anchor_why))
     # issue 31's targets
     b.targets += tg.robot_targets(b.robot_rhs, b.robot_why)
+    b.targets.append(tg.humanoid_target(b.robot_humanoid, b.robot_why))
     b.targets.append(tg.servo_target(b.servo, b.servo_why))
     b.targets.append(tg.nightly_target(b.nightly if b.nightly and b.nightly["whole_catalog"] else None,
                                        b.nightly_why))
@@ -667,6 +670,28 @@ def _robot_section(rb: dict, page, anchor) -> tuple[str, list[str]]:
                      f"C++ same work {us(r['same_best_s'])} us ({r['same_best']}), KKT (J, gamma given) {us(r['kkt_s'])} us, "
                      f"ABA {us(r['aba_s'])} us; progmo/C++ same work {r['ratio_null_space']:.2f} (null_space); "
                      f"agreement {r['agreement']:.1e} at {r['agreement_states']} states")
+    h = rb.get("humanoid")
+    if h is not None:
+        from . import humanoid
+
+        inner += (f"<p>The humanoid ({humanoid.SCENE}: TALOS, n = {h['n']}, free base) standing on both soles welded "
+                  f"to the world ({h['closure_rows']} closure rows, no programme) beside Pinocchio's C++ constrained "
+                  "dynamics on the check's own model and welds (bench/humanoid.py; agreement with progmo's kkt "
+                  "dv/dt checked first), us per call:</p>"
+                  + page.table(["C++ ABA", "C++ weld_kkt (dense KKT)", "C++ constraintDynamics", "C++ lcaba",
+                                "progmo null_space", "progmo kkt", "progmo articulated_body", f"progmo {tg.DEFAULT}",
+                                f"progmo {tg.DEFAULT} / best C++", "programmed motion (s = n), progmo auto",
+                                "max rel. disagreement (tolerance, states)"],
+                               [[us(h["aba_s"]), us(h["weld_kkt_s"]), us(h["weld_cd_s"]), us(h["weld_lcaba_s"]),
+                                 us(h["progmo_null_space_s"]), us(h["progmo_kkt_s"]), us(h["progmo_articulated_body_s"]),
+                                 us(h[f"progmo_{tg.DEFAULT}_s"]), f"{h[f'ratio_{tg.DEFAULT}_weld']:.2f}",
+                                 us(h["progmo_programmed_s"]),
+                                 f"{h['agreement']:.1e} ({h['agreement_tol']:.0e}, {h['agreement_states']})"]])
+                  + "<p>Data: <a href='humanoid.csv'>humanoid.csv</a>.</p>")
+        lines.append(f"robot {humanoid.SCENE} on welded soles: Pinocchio C++ constraintDynamics {us(h['weld_cd_s'])} us, "
+                     f"lcaba {us(h['weld_lcaba_s'])} us, dense KKT {us(h['weld_kkt_s'])} us, ABA {us(h['aba_s'])} us; "
+                     f"progmo {tg.DEFAULT} {us(h[f'progmo_{tg.DEFAULT}_s'])} us ({h[f'ratio_{tg.DEFAULT}_weld']:.2f}x the "
+                     f"best); agreement {h['agreement']:.1e} at {h['agreement_states']} states")
     s = rb["solve"]
     inner += page.table(
         ["solver", "CPU (s)", "RHS evaluations", "final-state error vs reference"],

@@ -26,6 +26,9 @@ Pinocchio on the same URDF, in the same run (issue 13, item 6).
   the RHS share such a solve would pay.
 - URDF load time: `progmo.load` of a scene holding only the [model] table (URDF import, tree build)
   against `pin.buildModelFromUrdf` (+ buildReducedModel) of the same file; best of several.
+- A humanoid (bench/humanoid.py, issue 31 item 3): TALOS of talos_com_shift standing on both soles
+  welded to the world, progmo's RHS against the anchor's constraintDynamics and lcaba on the check's
+  own Pinocchio model and welds, agreement first (the anchor's binary, same run).
 """
 
 from __future__ import annotations
@@ -245,6 +248,10 @@ def run(out: Path, prov: Provenance, rounds: int = 7, budget_s: float = 0.05, ch
     else:
         res["build_cached"] = cached
         res["rhs"] = rhs_comparison(scene, model, exe, rounds, budget_s, check_states)
+        from . import humanoid  # the humanoid on welded soles beside constraintDynamics / lcaba
+
+        log(f"[robot] {humanoid.SCENE} on welded soles beside Pinocchio's C++ constrained dynamics")
+        res["humanoid"] = humanoid.run(out, prov, exe, rounds, budget_s, check_states)
 
     log(f"[robot] {SCENE}: whole solve (progmo, scipy DOP853 + Pinocchio's Python binding, reference)")
     st = scene.settings

@@ -23,6 +23,9 @@ targets of the scipy and drift parts), puts them in a table at the top of the pa
 Issue 31 (speed on real robots and in servo-constraints) adds, each from this run's figures:
 - the Panda of panda_circle (robot part): RHS <= 0.7x Pinocchio's C++ same work, and <= 1.0x the
   faster of Pinocchio's C++ constraintDynamics / lcaba on the TCP welded (the anchor's weld_*);
+- the humanoid (TALOS of talos_com_shift, both soles welded, no programme; robot part,
+  bench/humanoid.py): progmo's RHS <= 1.0x the faster of Pinocchio's C++ constraintDynamics / lcaba
+  (issue 31 item 3 asks these anchors on the targets table; the bound is the Panda's);
 - the n = 128 chain's RHS <= 1.2x C++ ABA alone (anchor part; it replaces issue 15's 60 us);
 - the servo crane's RHS <= 20x its ideal realization (servo part: CPU per RHS, median over tolerances);
 - the car axis at 8 digits in <= 2 ms CPU (issue 15 asked 5 ms);
@@ -165,6 +168,16 @@ def robot_targets(rhs: dict | None, why: str = "") -> list[Target]:
     else:
         out.append(not_measured(weld, "the anchor did not time a welded frame (rows without a six-row frame task)"))
     return out
+
+
+def humanoid_target(res: dict | None, why: str = "") -> Target:
+    """The humanoid on welded soles against Pinocchio's C++ constrained dynamics (robot part)."""
+    name = (f"humanoid (TALOS, n = 18, both soles welded) RHS <= {PANDA_WELD_MAX}x the faster of Pinocchio's "
+            "C++ constraintDynamics / lcaba")
+    if res is None:
+        return not_measured(name, why or "the robot part did not run")
+    return _ratio_target(name, res[f"progmo_{DEFAULT}_s"], res["weld_best_s"], PANDA_WELD_MAX,
+                         f"progmo {DEFAULT}", f"C++ {res['weld_best']}")
 
 
 def servo_target(res: dict | None, why: str = "") -> Target:

@@ -4,9 +4,9 @@
 // anchor.py for the protocol, the build command and the cache.
 //
 // Usage: anchor MODEL_FILE, then commands on stdin, one per line; answers on stdout:
-//   check t q[nv] v[nv] J[s*nv] gamma[s]    ->  "a <variant> x1 .. xn" and "u <variant> ..." lines,
+//   check t q[nq] v[nv] J[s*nv] gamma[s]    ->  "a <variant> x1 .. xn" and "u <variant> ..." lines,
 //                                               then "end"
-//   bench iters t q[nv] v[nv] J[s*nv] gamma[s] -> "time <variant> seconds_per_call" lines (thread
+//   bench iters t q[nq] v[nv] J[s*nv] gamma[s] -> "time <variant> seconds_per_call" lines (thread
 //                                               CPU time of one loop of iters calls), then "end"
 //   quit
 // J and gamma are the programme rows in Pinocchio's convention (J a + gamma = 0) at (t, q, v); only
@@ -41,6 +41,11 @@
 // Pinocchio 4.1's lcaba adds into data.oa without clearing it first: a second call on the same Data
 // returns a different (wrong) dv/dt (measured: alternately right and 7x off). weld_lcaba clears
 // data.oa before each call, inside the timed work.
+// Welded frames given by the model file ("welds M" after the rows, then M lines "weld J1 R1[9] P1[3]":
+// the frame (R1, P1) of joint J1 welded to the world; a humanoid's soles) take the place of the
+// six-row frame task: the weld_* variants hold all of them (weld_kkt stacks their Jacobians). A
+// model file may then have "rows 0": the kkt and same_* variants (programme rows) are left out.
+// Joint types: JointModelRX/RY/RZ, JointModelPX/PY/PZ and JointModelFreeFlyer (a floating base).
 // Rows (model file, after the joints): "row joint K LAW AMP W" (coordinate K) or "row tip JOINT
 // PX PY PZ AXIS LAW AMP W": component AXIS of the frame at P on JOINT, LOCAL_WORLD_ALIGNED (0-2 the
 // origin's world position, 3-5 the world angular velocity: orientation rows held at acceleration
@@ -119,13 +124,13 @@ struct Anchor {
   Eigen::LLT<MatrixXd> llt;
   // the welded frame of a six-row frame task (weld_* variants), when the rows hold one
   bool weld = false;
-  JointIndex weld_joint = 0;
-  SE3 weld_place = SE3::Identity();
+  std::vector<JointIndex> weld_joints;
+  PINOCCHIO_STD_VECTOR_WITH_EIGEN_ALLOCATOR(SE3) weld_places;
   PINOCCHIO_STD_VECTOR_WITH_EIGEN_ALLOCATOR(RigidConstraintModel) cmodels;
   PINOCCHIO_STD_VECTOR_WITH_EIGEN_ALLOCATOR(RigidConstraintData) cdatas, cdatas_l;
   Data data_cd, data_l;
   ProximalSettings prox{1e-12, 1e-4, 10};
-  MatrixXd Jw;
+  MatrixXd Jw, Jf6;
   VectorXd gw;
 
   // tau = -damping v: the joint dampers' force, which Pinocchio's aba and forwardDynamics leave
@@ -171,6 +176,7 @@ struct Anchor {
       else if (type == "JointModelPX") id = model.addJoint(parent, JointModelPX(), M, name);
       else if (type == "JointModelPY") id = model.addJoint(parent, JointModelPY(), M, name);
       else if (type == "JointModelPZ") id = model.addJoint(parent, JointModelPZ(), M, name);
+      else if (type == "JointModelFreeFlyer") id = model.addJoint(parent, JointModelFreeFlyer(), M, name);
       else fail("unsupported joint type " + type);
       model.appendBodyToJoint(id, Inertia(mass, c, Symmetric3(I)), SE3::Identity());
     }
@@ -182,7 +188,7 @@ struct Anchor {
       in >> tag;
     }
     in >> s;
-    if (tag != "rows" || s < 1) fail("expected 'rows S'");
+    if (tag != "rows" || s < 0) fail("expected 'rows S'");
     for (int i = 0; i < s; ++i) {
       Row r;
       std::string kind, law;
@@ -211,6 +217,24 @@ struct Anchor {
       rows.push_back(r);
     }
     if (!in) fail("truncated row records");
+    std::vector<std::pair<JointIndex, SE3>> given;
+    if (in >> tag) {  // optional: welded frames
+      int m = 0;
+      in >> m;
+      if (tag != "welds" || m < 1) fail("expected 'welds M'");
+      for (int i = 0; i < m; ++i) {
+        long joint = 0;
+        Eigen::Matrix3d R;
+        Eigen::Vector3d p;
+        in >> tag >> joint;
+        for (int r = 0; r < 3; ++r)
+          for (int cc = 0; cc < 3; ++cc) in >> R(r, cc);
+        in >> p[0] >> p[1] >> p[2];
+        if (!in || tag != "weld" || joint < 1 || joint >= model.njoints) fail("bad weld record");
+        given.emplace_back(JointIndex(joint), SE3(R, p));
+      }
+    }
+    if (s == 0 && given.empty()) fail("a model file with no rows needs welds");
     nv = model.nv;
     for (const Row &r : rows)
       if (!r.tip && (r.k < 0 || r.k >= nv)) fail("joint row index out of range");
@@ -230,7 +254,9 @@ struct Anchor {
     lambda.setZero(s);
     tmp.setZero(nv);
     llt = Eigen::LLT<MatrixXd>(s);
-    find_weld();
+    if (given.empty()) find_weld();
+    for (const auto &w : given) add_weld(w.first, w.second);
+    if (weld) init_welds();
   }
 
   // Six consecutive tip rows of one frame with axes 0-5: that frame can be welded (weld_*).
@@ -241,23 +267,29 @@ struct Anchor {
         const Row &r = rows[k];
         if (r.tip && r.joint == rows[i].joint && r.placement.isEqual(rows[i].placement)) axes |= 1 << r.axis;
       }
-      if (axes == 63) {
-        weld = true;
-        weld_joint = rows[i].joint;
-        weld_place = rows[i].placement;
-      }
+      if (axes == 63) add_weld(rows[i].joint, rows[i].placement);
     }
-    if (!weld) return;
-    cmodels.push_back(RigidConstraintModel(CONTACT_6D, model, weld_joint, weld_place, LOCAL));
+  }
+
+  // One more frame welded to the world (RigidConstraintModel CONTACT_6D, LOCAL).
+  void add_weld(JointIndex joint, const SE3 &place) {
+    weld = true;
+    weld_joints.push_back(joint);
+    weld_places.push_back(place);
+    cmodels.push_back(RigidConstraintModel(CONTACT_6D, model, joint, place, LOCAL));
     cdatas.push_back(RigidConstraintData(cmodels.back()));
     cdatas_l.push_back(RigidConstraintData(cmodels.back()));
+  }
+
+  void init_welds() {
     data_cd = Data(model);
     data_l = Data(model);
     initConstraintDynamics(model, data_cd, cmodels, cdatas);
     initConstraintDynamics(model, data_l, cmodels, cdatas_l);
     computeJointMinimalOrdering(model, data_l, cmodels);
-    Jw.setZero(6, nv);
-    gw.setZero(6);
+    Jw.setZero(6 * cmodels.size(), nv);
+    gw.setZero(6 * cmodels.size());
+    Jf6.setZero(6, nv);
   }
 
   // J a + gamma = 0 on the welded frame's LOCAL spatial acceleration (what CONTACT_6D holds).
@@ -267,9 +299,12 @@ struct Anchor {
     computeJointJacobians(model, data);
     crba(model, data, q, Convention::WORLD);
     nonLinearEffects(model, data, q, v);
-    Jw.setZero();
-    getFrameJacobian(model, data, weld_joint, weld_place, LOCAL, Jw);
-    gw = getFrameAcceleration(model, data, weld_joint, weld_place, LOCAL).toVector();
+    for (size_t k = 0; k < weld_joints.size(); ++k) {
+      Jf6.setZero();
+      getFrameJacobian(model, data, weld_joints[k], weld_places[k], LOCAL, Jf6);
+      Jw.middleRows(6 * k, 6) = Jf6;
+      gw.segment(6 * k, 6) = getFrameAcceleration(model, data, weld_joints[k], weld_places[k], LOCAL).toVector();
+    }
     a = forwardDynamics(model, data, tau, Jw, gw, 0.0);
   }
 
@@ -396,12 +431,12 @@ int main(int argc, char **argv) {
   if (argc != 2) fail("usage: anchor MODEL_FILE (commands on stdin)");
   Anchor an;
   an.load(argv[1]);
-  const int n = an.nv, s = an.s;
+  const int n = an.nv, nq = an.model.nq, s = an.s;  // nq > nv with a floating base (quaternion)
   std::printf("ready nv %d rows %d pinocchio %s eigen %d.%d.%d\n", n, s, PINOCCHIO_VERSION,
               EIGEN_WORLD_VERSION, EIGEN_MAJOR_VERSION, EIGEN_MINOR_VERSION);
   std::fflush(stdout);
   std::string line;
-  VectorXd q(n), v(n), gg(s);
+  VectorXd q(nq), v(n), gg(s);
   MatrixXd Jg(s, n);
   while (std::getline(std::cin, line)) {
     std::istringstream in(line);
@@ -414,7 +449,7 @@ int main(int argc, char **argv) {
     else if (cmd != "check") fail("unknown command " + cmd);
     double t = 0;
     in >> t;
-    for (int i = 0; i < n; ++i) in >> q[i];
+    for (int i = 0; i < nq; ++i) in >> q[i];
     for (int i = 0; i < n; ++i) in >> v[i];
     for (int i = 0; i < s; ++i)
       for (int j = 0; j < n; ++j) in >> Jg(i, j);
@@ -422,6 +457,8 @@ int main(int argc, char **argv) {
     if (!in) fail("truncated command " + cmd);
     if (cmd == "check") {
       print_vec("a", "aba", aba(an.model, an.data, q, v, an.passive(v)));
+    }
+    if (cmd == "check" && s > 0) {
       an.kkt(q, v, Jg, gg);
       print_vec("a", "kkt", an.a);
       print_vec("u", "kkt", an.u);
@@ -437,6 +474,8 @@ int main(int argc, char **argv) {
       an.same_abaunit(t, q, v);
       print_vec("a", "same_abaunit", an.a);
       print_vec("u", "same_abaunit", an.u);
+    }
+    if (cmd == "check") {
       if (an.weld) {
         an.weld_kkt(q, v);
         print_vec("a", "weld_kkt", an.a);
@@ -451,6 +490,9 @@ int main(int argc, char **argv) {
         const VectorXd &r = aba(an.model, an.data, x, v, an.passive(v));
         asm volatile("" : : "g"(r.data()) : "memory");
       });
+      std::printf("time aba %.9e\n", t_aba);
+    }
+    if (cmd == "bench" && s > 0) {
       const double t_kkt = time_loop(iters, q, [&](const VectorXd &x) {
         an.kkt(x, v, Jg, gg);
         asm volatile("" : : "g"(an.u.data()) : "memory");
@@ -471,9 +513,11 @@ int main(int argc, char **argv) {
         an.same_abaunit(t, x, v);
         asm volatile("" : : "g"(an.u.data()) : "memory");
       });
-      std::printf("time aba %.9e\ntime kkt %.9e\ntime same_cat %.9e\ntime same_sep %.9e\n"
+      std::printf("time kkt %.9e\ntime same_cat %.9e\ntime same_sep %.9e\n"
                   "time same_minv %.9e\ntime same_abaunit %.9e\n",
-                  t_aba, t_kkt, t_cat, t_sep, t_minv, t_unit);
+                  t_kkt, t_cat, t_sep, t_minv, t_unit);
+    }
+    if (cmd == "bench") {
       if (an.weld) {
         const double t_wcd = time_loop(iters, q, [&](const VectorXd &x) {
           an.weld_cd(x, v);
@@ -483,7 +527,11 @@ int main(int argc, char **argv) {
           an.weld_lcaba(x, v);
           asm volatile("" : : "g"(an.a.data()) : "memory");
         });
-        std::printf("time weld_cd %.9e\ntime weld_lcaba %.9e\n", t_wcd, t_wl);
+        const double t_wk = time_loop(iters, q, [&](const VectorXd &x) {
+          an.weld_kkt(x, v);
+          asm volatile("" : : "g"(an.a.data()) : "memory");
+        });
+        std::printf("time weld_cd %.9e\ntime weld_lcaba %.9e\ntime weld_kkt %.9e\n", t_wcd, t_wl, t_wk);
       }
     }
     std::printf("end\n");
