@@ -1200,7 +1200,7 @@ fn mimic_rows_of(
         let leader_locked = is_locked(&mm.leader);
         let problem = if !leader_locked && !joints.contains(&mm.leader) {
             Some(format!(
-                "joint `{}` follows `{}`, which is not a joint of the file",
+                "joint `{}` follows `{}`, which is not a joint of the file (declare `mimic` ignored to read the joints as independent)",
                 mm.joint, mm.leader
             ))
         } else if mm.locked != leader_locked {
