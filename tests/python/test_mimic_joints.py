@@ -123,3 +123,6 @@ def test_a_locked_leader_with_a_moving_follower_is_refused_at_the_mimic(tmp_path
     arm = ARM.replace('joint="finger_a_joint" multiplier', 'joint="nowhere" multiplier')
     with pytest.raises(progmo.SceneError, match="follows `nowhere`, which is not a joint of the file"):
         progmo.load(str(_scene(tmp_path, arm=arm)))
+    # declared ignored, the joints are independent and the file loads (the old reading)
+    scene = progmo.load(str(_scene(tmp_path, arm=arm, ignore='mimic = "the file names a joint it lacks"')))
+    assert "finger_b_joint" in scene.q_names and not scene.robot_file["mimics"]
