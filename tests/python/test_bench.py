@@ -364,6 +364,15 @@ def test_robot_part_agrees_with_pinocchio_and_reports_every_figure(tmp_path):
                                          "urdf_load"]
 
 
+def _lcaba_off(check):
+    """A negative control's anchor answer: lcaba's dv/dt 1e-8 relative off."""
+    def off(t, q, v):
+        got = check(t, q, v)
+        got[("a", "weld_lcaba")] = got[("a", "weld_lcaba")] * (1 + 1e-8)
+        return got
+    return off
+
+
 def test_robot_part_check_fails_on_a_wrong_circle_law(tmp_path):
     # negative control: the C++ rows with the circle's radius flipped (a wrong gamma away from t0
     # and t1, where the law's derivatives vanish) must fail the agreement check
@@ -386,12 +395,7 @@ def test_robot_part_check_fails_on_a_wrong_circle_law(tmp_path):
     # the welded variants are judged too: lcaba's dv/dt off by 1e-8 relative, or missing, fails
     with anchor.Process(exe, scene, tmp_path, text=good) as proc:
         check = proc.check
-
-        def off(t, q, v):
-            got = check(t, q, v)
-            got[("a", "weld_lcaba")] = got[("a", "weld_lcaba")] * (1 + 1e-8)
-            return got
-        proc.check = off  # type: ignore[method-assign]
+        proc.check = _lcaba_off(check)  # type: ignore[method-assign]
         with pytest.raises(anchor.AnchorFailed, match="weld_lcaba"):
             robot.agreement(scene, model, proc, states)
 
@@ -439,13 +443,7 @@ def test_humanoid_on_welded_soles_agrees_with_pinocchios_cpp_and_is_timed(tmp_pa
         worst, _ = humanoid.agreement(standing, be, proc, states)
         assert max(worst.values()) < 1e-10
 
-        check = proc.check
-
-        def off(t, q, v):
-            got = check(t, q, v)
-            got[("a", "weld_lcaba")] = got[("a", "weld_lcaba")] * (1 + 1e-8)
-            return got
-        proc.check = off  # type: ignore[method-assign]
+        proc.check = _lcaba_off(proc.check)  # type: ignore[method-assign]
         with pytest.raises(anchor.AnchorFailed, match="weld_lcaba"):
             humanoid.agreement(standing, be, proc, states)
     with humanoid.Process(exe, be, tmp_path, text=bad_text) as proc, \
