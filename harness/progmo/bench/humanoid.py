@@ -22,10 +22,12 @@ from __future__ import annotations
 
 import tempfile
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 
+from . import anchor
 from .common import Provenance, log, scene_path, write_csv
 
 SCENE = "talos_com_shift"
@@ -80,30 +82,19 @@ def model_text(be) -> str:
     return "\n".join(lines) + "\n"
 
 
-class Process:
-    """The anchor on the humanoid: states sent in Pinocchio's coordinates, no rows."""
+class Process(anchor.Process):
+    """The anchor on the humanoid: states sent in Pinocchio's coordinates (the check's CoordMap),
+    no rows."""
 
     def __init__(self, exe: Path, be, workdir: Path, text: str | None = None):
         """`text`: the model file (default model_text(be))."""
-        from .anchor import Process as Base
+        self.cm = be.cm
+        super().__init__(exe, SimpleNamespace(name="talos_standing"), workdir,
+                         text=model_text(be) if text is None else text)
 
-        class _P(Base):
-            def _state(self, t, q, v) -> str:
-                qs, vs = be.cm.q_to_sim(np.asarray(q, float)), be.cm.v_to_sim(np.asarray(q, float), np.asarray(v, float))
-                return f"{float(t)!r} " + " ".join(repr(float(x)) for x in [*qs, *vs])
-
-        self.p = _P(exe, _Named("talos_standing"), workdir, text=model_text(be) if text is None else text)
-
-    def __enter__(self):
-        return self.p
-
-    def __exit__(self, *exc):
-        self.p.close()
-
-
-class _Named:
-    def __init__(self, name: str):
-        self.name = name
+    def _state(self, t, q, v) -> str:
+        q, v = np.asarray(q, float), np.asarray(v, float)
+        return f"{float(t)!r} " + " ".join(repr(float(x)) for x in [*self.cm.q_to_sim(q), *self.cm.v_to_sim(q, v)])
 
 
 def agreement(standing, be, proc, states) -> tuple[dict[str, float], float]:

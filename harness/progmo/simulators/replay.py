@@ -89,6 +89,9 @@ class CoordMap:
         self.unbounded = sorted(int(i) for i in report.get("sim_unbounded", []))
         #: the simulator's number of position coordinates
         self.nq_sim = self.nq + len(self.unbounded)
+        by_sim = dict(zip(self.q_sim.tolist(), self.q_idx.tolist()))
+        #: our q index of each unbounded angle
+        self.unbounded_ours = [by_sim[i] for i in self.unbounded]
 
     # -- positions
     def q_to_sim(self, q: np.ndarray) -> np.ndarray:
@@ -112,13 +115,9 @@ class CoordMap:
         q = np.zeros(self.nq)
         q[self.q_idx] = qs[self.q_sim]
         if self.unbounded and near is not None:
-            for k in self._unbounded_ours():
+            for k in self.unbounded_ours:
                 q[k] += 2.0 * np.pi * np.round((near[k] - q[k]) / (2.0 * np.pi))
         return q
-
-    def _unbounded_ours(self) -> list[int]:
-        by_sim = dict(zip(self.q_sim.tolist(), self.q_idx.tolist()))
-        return [by_sim[i] for i in self.unbounded]
 
     # -- velocity map
     def P(self, q: np.ndarray) -> np.ndarray:
