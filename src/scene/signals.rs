@@ -11,7 +11,7 @@ use crate::programme::Level;
 use crate::scalar::Scalar;
 use crate::tree::spatial::{cross, quat_from_rot};
 use crate::tree::{self, TreeData};
-use nalgebra::{DMatrix, Vector3};
+use nalgebra::{DMatrix, Matrix3, Vector3};
 use std::sync::Arc;
 
 /// What a signal measures.
@@ -97,13 +97,13 @@ pub struct Signals {
     sites: Vec<Site>,
     /// (site index, quantity) per signal slot.
     list: Vec<(usize, Quantity)>,
-    /// The centre of mass c = sum_i m_i p_i / M over the bodies with mass: (body, p_i its CoM in
-    /// the body frame, m_i / M). c, its rates and its Jacobian are the same weighted sums of the
-    /// bodies' point kinematics.
+    /// The centre of mass c = sum_i m_i p_i / M over the rigid bodies with mass (a body with the
+    /// bodies welded to it): (body, p_i its CoM in the body frame, m_i / M). c, its rates and its
+    /// Jacobian are the same weighted sums of the bodies' point kinematics.
     com: Vec<(usize, [f64; 3], f64)>,
-    /// Per entry of `com` (and bodies of mass 0 with a rotational inertia, weight 0): m_i and the
-    /// inertia about the CoM in the body frame, for the angular momentum about c.
-    com_inertia: Vec<(f64, nalgebra::Matrix3<f64>)>,
+    /// Per entry of `com` (a rigid body of mass 0 with a rotational inertia has weight 0): m_i
+    /// and the inertia about its CoM in the body frame, for the angular momentum about c.
+    com_inertia: Vec<(f64, Matrix3<f64>)>,
 }
 
 /// Scratch for computing signals.
@@ -142,20 +142,42 @@ impl Signals {
     pub fn new(tree: Arc<tree::Model>, sites: Vec<Site>) -> Self {
         let bodies = tree.bodies();
         let total: f64 = bodies.iter().map(|b| b.mass).sum();
-        let with_mass: Vec<usize> = (0..bodies.len())
-            .filter(|&i| bodies[i].mass > 0.0 || bodies[i].inertia.iter().any(|x| *x != 0.0))
-            .collect();
-        let com = with_mass
-            .iter()
-            .map(|&i| {
-                let b = &bodies[i];
-                (i, [b.com.x, b.com.y, b.com.z], b.mass / total)
-            })
-            .collect();
-        let com_inertia = with_mass
-            .iter()
-            .map(|&i| (bodies[i].mass, bodies[i].inertia))
-            .collect();
+        // The bodies welded to one link move as one rigid body: one entry each (mass, CoM and
+        // inertia about it in the link's own body, parallel-axis theorem), so the sums over the
+        // bodies below run over the moving links (a humanoid: 19 entries, not 60).
+        // (mass, CoM, inertia about it) of each body, in the frame of its link's own body
+        type Part = (f64, Vector3<f64>, Matrix3<f64>);
+        let mut owners: Vec<(usize, Vec<Part>)> = vec![];
+        for (i, b) in bodies.iter().enumerate() {
+            if b.mass <= 0.0 && b.inertia.iter().all(|x| *x == 0.0) {
+                continue;
+            }
+            let (o, r, p) =
+                (tree.welded_into(i)).unwrap_or((i, Matrix3::identity(), Vector3::zeros()));
+            let part = (b.mass, p + r * b.com, r * b.inertia * r.transpose());
+            match owners.iter_mut().find(|e| e.0 == o) {
+                Some(e) => e.1.push(part),
+                None => owners.push((o, vec![part])),
+            }
+        }
+        let mut com = vec![];
+        let mut com_inertia = vec![];
+        for (o, parts) in owners {
+            let m: f64 = parts.iter().map(|x| x.0).sum();
+            let moment: Vector3<f64> = parts.iter().map(|x| x.1 * x.0).sum();
+            let c = if m > 0.0 {
+                moment / m
+            } else {
+                Vector3::zeros()
+            };
+            let mut inertia = Matrix3::zeros();
+            for (mi, ci, ii) in parts {
+                let d = ci - c;
+                inertia += ii + (Matrix3::identity() * d.dot(&d) - d * d.transpose()) * mi;
+            }
+            com.push((o, [c.x, c.y, c.z], m / total));
+            com_inertia.push((m, inertia));
+        }
         Signals {
             tree: Some(tree),
             sites,

@@ -3,7 +3,7 @@
 
 use super::model::{JointKind, Model};
 use super::spatial::{
-    cross, lift3, quat_from_rot, rot_axis_angle, rot_quat, Force, Inertia, Motion, Xform,
+    cross, lift3, lift33, quat_from_rot, rot_axis_angle, rot_quat, Force, Inertia, Motion, Xform,
 };
 use crate::scalar::{c, Scalar};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
@@ -368,8 +368,7 @@ pub fn body_pose<S: Scalar>(
     body: usize,
 ) -> (Matrix3<S>, Vector3<S>) {
     forward_kinematics(model, data, q);
-    let ld = &data.links[model.body_link[body]];
-    (ld.rot, ld.pos)
+    body_frame(model, data, body)
 }
 
 /// Orientation of a body as a unit quaternion (w, x, y, z), w >= 0 (body -> world).
@@ -407,7 +406,8 @@ pub fn point_velocity<S: Scalar>(
     forward_kinematics(model, data, q);
     forward_velocity(model, data, v);
     let ld = &data.links[model.body_link[body]];
-    ld.rot * (ld.v.lin + cross(&ld.v.ang, point))
+    let p = point_in_link(model, body, point);
+    ld.rot * (ld.v.lin + cross(&ld.v.ang, &p))
 }
 
 /// Angular velocity of a body, world frame (body frame: `R^T ω`).
@@ -452,7 +452,23 @@ pub fn body_frame<S: Scalar>(
     body: usize,
 ) -> (Matrix3<S>, Vector3<S>) {
     let ld = &data.links[model.body_link[body]];
-    (ld.rot, ld.pos)
+    match &model.body_offset[body] {
+        None => (ld.rot, ld.pos),
+        Some((r, p)) => (ld.rot * lift33(r), ld.pos + ld.rot * lift3(p)),
+    }
+}
+
+/// A body point in the coordinates of the link that carries the body (a welded body is folded
+/// into its moving ancestor's link, model.rs `fold_welded`).
+pub(crate) fn point_in_link<S: Scalar>(
+    model: &Model,
+    body: usize,
+    point: &Vector3<S>,
+) -> Vector3<S> {
+    match &model.body_offset[body] {
+        None => *point,
+        Some((r, p)) => lift3(p) + lift33(r) * point,
+    }
 }
 
 /// Everything about a body point the forward passes give, world frame.
@@ -481,11 +497,12 @@ pub fn point_kinematics<S: Scalar>(
     point: &Vector3<S>,
 ) -> PointKinematics<S> {
     let ld = &data.links[model.body_link[body]];
+    let point = &point_in_link(model, body, point);
     let w = ld.v.ang;
     let vp = ld.v.lin + cross(&w, point);
     let ap = ld.a.lin + cross(&ld.a.ang, point) + cross(&w, &vp);
     PointKinematics {
-        rot: ld.rot,
+        rot: body_frame(model, data, body).0,
         pos: ld.pos + ld.rot * point,
         vel: ld.rot * vp,
         acc: ld.rot * ap,
@@ -534,7 +551,7 @@ pub fn point_jacobian<S: Scalar>(
     ensure_mat(jac, 6, model.nv());
     jac.fill(c(0.0));
     let ld = &data.links[model.body_link[body]];
-    let pw = ld.pos + ld.rot * point;
+    let pw = ld.pos + ld.rot * point_in_link(model, body, point);
     for_each_point_column(model, data, body, &pw, |k, w, lin| {
         for r in 0..3 {
             jac[(r, k)] = w[r];

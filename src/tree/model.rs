@@ -324,8 +324,12 @@ pub struct Model {
     pub(crate) bodies: Vec<Body>,
     pub(crate) joints: Vec<Joint>,
     pub(crate) links: Vec<Link>,
-    /// Link index of each body's frame (its last link).
+    /// Link index of each body's frame: its last link, or for a welded body (no joints, parent not
+    /// the world) the link of its nearest moving ancestor, into which it is folded.
     pub(crate) body_link: Vec<usize>,
+    /// Per body folded into an ancestor's link: its fixed placement there, `x_link = R x_body + p`
+    /// as (R, p).
+    pub(crate) body_offset: Vec<Option<(Matrix3<f64>, Vector3<f64>)>>,
     /// Per dof: the previous dof on its path to the root (Featherstone's lambda over dofs), so the
     /// CRBA walks ancestors without touching links.
     pub(crate) dof_parent: Vec<Option<usize>>,
@@ -710,12 +714,14 @@ impl Model {
             m.add_body(s)?;
         }
         check_rigid_bodies(&m.bodies, &m.links, &m.body_link)?;
-        let (dof_parent, dof_link) = dof_tree(&m.links, &m.joints, m.nv);
+        let folded = fold_welded(&m.links, &m.body_link);
+        let (dof_parent, dof_link) = dof_tree(&folded.links, &m.joints, m.nv);
         Ok(Model {
             bodies: m.bodies,
             joints: m.joints,
-            links: m.links,
-            body_link: m.body_link,
+            links: folded.links,
+            body_link: folded.body_link,
+            body_offset: folded.body_offset,
             dof_parent,
             dof_link,
             fields,
@@ -775,11 +781,79 @@ impl Model {
     pub fn data<S: crate::scalar::Scalar>(&self) -> super::TreeData<S> {
         super::TreeData::new(self)
     }
+    /// The body whose link carries welded body `b` (its nearest ancestor with joints, or the first
+    /// world-welded body of its chain) and b's placement in that body, `x_owner = R x_b + p` as
+    /// (owner, R, p); `None` for a body that is its link's own.
+    pub fn welded_into(&self, b: usize) -> Option<(usize, Matrix3<f64>, Vector3<f64>)> {
+        let (r, p) = self.body_offset[b]?;
+        let link = self.body_link[b];
+        let owner = (0..self.bodies.len())
+            .find(|&o| self.body_link[o] == link && self.body_offset[o].is_none())
+            .expect("every link has its own body");
+        Some((owner, r, p))
+    }
     /// Whether any joint is a ball or free joint (q is then not a plain vector space chart).
     pub fn has_quaternions(&self) -> bool {
         self.joints
             .iter()
             .any(|j| matches!(j.kind, JointKind::Ball | JointKind::Free))
+    }
+}
+
+/// The links after [`fold_welded`].
+struct Folded {
+    links: Vec<Link>,
+    body_link: Vec<usize>,
+    body_offset: Vec<Option<(Matrix3<f64>, Vector3<f64>)>>,
+}
+
+/// Fold every fixed link below a moving link into that link: its inertia joins the link's
+/// (`X^T I X`, Featherstone Table 2.5, exact: a welded body moves with it) and its children hang
+/// from the link with the placements composed. The passes (CRBA, RNEA, ABA, kinematics) then run
+/// over the moving links only, as Pinocchio merges fixed joints into frames; a welded body is read
+/// through its placement in the link. Fixed links on the world (no moving ancestor) stay.
+fn fold_welded(links: &[Link], body_link: &[usize]) -> Folded {
+    // per old link: its new link and ^old X_new (None: the link itself)
+    let mut to: Vec<(usize, Option<Xform<f64>>)> = Vec::with_capacity(links.len());
+    let mut out: Vec<Link> = Vec::with_capacity(links.len());
+    for link in links {
+        let parent = link.parent.map(|p| to[p]);
+        match (link.joint, parent) {
+            (None, Some((tp, xp))) => {
+                let x = match xp {
+                    Some(xp) => link.place.compose(&xp),
+                    None => link.place,
+                };
+                if let Some(inr) = &link.inertia {
+                    let moved = inr.transform_to_parent(&x);
+                    let target = &mut out[tp].inertia;
+                    *target = Some(target.map_or(moved, |t| t.add(&moved)));
+                }
+                to.push((tp, Some(x)));
+            }
+            _ => {
+                let (parent, place) = match parent {
+                    Some((tp, Some(xp))) => (Some(tp), link.place.compose(&xp)),
+                    Some((tp, None)) => (Some(tp), link.place),
+                    None => (None, link.place),
+                };
+                to.push((out.len(), None));
+                out.push(Link {
+                    parent,
+                    place,
+                    joint: link.joint,
+                    inertia: link.inertia,
+                });
+            }
+        }
+    }
+    Folded {
+        links: out,
+        body_link: body_link.iter().map(|&l| to[l].0).collect(),
+        body_offset: body_link
+            .iter()
+            .map(|&l| to[l].1.map(|x| (x.e.transpose(), x.r)))
+            .collect(),
     }
 }
 

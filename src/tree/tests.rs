@@ -1175,3 +1175,195 @@ fn reference_position_closed_form() {
         .joint(JointSpec::hinge("j", [0.0, 0.0, 1.0]).with_armature(-1.0));
     assert!(Model::new(&[bad], Fields::default()).is_err());
 }
+
+/// [`zoo_extras`]' bodies plus welded bodies in every position a robot file puts them: a weld on
+/// a weld (rotated, with gravity compensation), a moving body below welds, a massless and a point
+/// mass weld, and a weld on a body welded to the world.
+fn welded_specs() -> Vec<BodySpec> {
+    let mut specs = zoo_specs();
+    specs.extend([
+        BodySpec::new(
+            "weld2",
+            "weld",
+            0.4,
+            [0.02, 0.0, 0.1],
+            inr(0.02, 0.03, 0.02, 0.004),
+        )
+        .at([0.1, -0.2, 0.05])
+        .rotated([0.6, -0.2, 0.5, 0.1])
+        .with_gravcomp(0.7),
+        BodySpec::new(
+            "below",
+            "weld2",
+            0.6,
+            [0.1, 0.05, 0.0],
+            inr(0.05, 0.04, 0.06, 0.0),
+        )
+        .at([0.0, 0.3, 0.1])
+        .rotated([0.9, 0.0, 0.3, -0.2])
+        .joint(JointSpec::hinge("knee", [0.3, 0.2, 1.0]).with_anchor([0.05, 0.0, 0.0])),
+        BodySpec::point_mass("toe", "below", 0.2, [0.0, 0.1, -0.05]).at([0.2, 0.0, 0.0]),
+        BodySpec::massless("frame", "tip")
+            .at([0.0, 0.1, 0.2])
+            .rotated([0.5, 0.5, -0.5, 0.5]),
+        BodySpec::new(
+            "table",
+            WORLD,
+            5.0,
+            [0.0, 0.0, 0.4],
+            inr(0.5, 0.5, 0.6, 0.0),
+        )
+        .at([2.0, 0.0, 0.0]),
+        BodySpec::point_mass("lamp", "table", 0.3, [0.0, 0.0, 0.2]).at([0.1, 0.1, 0.8]),
+    ]);
+    specs
+}
+
+/// `specs` with a hinge at each welded body (not on the world): a tree whose links are not folded.
+fn hinged_welds(specs: &[BodySpec]) -> Vec<BodySpec> {
+    specs
+        .iter()
+        .map(|b| {
+            if b.joints.is_empty() && b.parent != WORLD {
+                let h = JointSpec::hinge(&format!("{}_hold", b.name), [0.3, -0.5, 0.8]);
+                b.clone().joint(h)
+            } else {
+                b.clone()
+            }
+        })
+        .collect()
+}
+
+/// Every body's pose, point velocity, acceleration and Jacobian equal in `f` at (q, v, a) and
+/// in `r` at the same state lifted by `vix` (r's entries of f's velocities; the others 0).
+fn same_point_kinematics(
+    f: &Model,
+    r: &Model,
+    state: [&[f64]; 3],
+    lifted: [&[f64]; 3],
+    vix: &[usize],
+) {
+    let ([q, v, a], [qr, vr, ar]) = (state, lifted);
+    let (mut df, mut dr) = (f.data::<f64>(), r.data::<f64>());
+    let (mut jf, mut jr) = (DMatrix::zeros(0, 0), DMatrix::zeros(0, 0));
+    let p = Vector3::new(0.05, -0.1, 0.2);
+    for b in 0..f.bodies().len() {
+        let name = &f.bodies()[b].name;
+        let br = r.body_id(name).unwrap();
+        let (pa, alpha) = point_acceleration(f, &mut df, q, v, a, b, &p);
+        let (pra, ralpha) = point_acceleration(r, &mut dr, qr, vr, ar, br, &p);
+        assert!(
+            (pa - pra).amax() <= 256.0 * EPS * pra.amax().max(1.0),
+            "{name}: acceleration"
+        );
+        assert!(
+            (alpha - ralpha).amax() <= 256.0 * EPS * ralpha.amax().max(1.0),
+            "{name}: alpha"
+        );
+        let (rf, pf) = body_pose(f, &mut df, q, b);
+        let (rr, pr) = body_pose(r, &mut dr, qr, br);
+        assert!(
+            (rf - rr).amax() <= 16.0 * EPS && (pf - pr).amax() <= 16.0 * EPS,
+            "{name}: pose"
+        );
+        let vp = point_velocity(f, &mut df, q, v, b, &p);
+        let vpr = point_velocity(r, &mut dr, qr, vr, br, &p);
+        assert!(
+            (vp - vpr).amax() <= 64.0 * EPS * vpr.amax().max(1.0),
+            "{name}: velocity"
+        );
+        point_jacobian(f, &mut df, q, b, &p, &mut jf);
+        point_jacobian(r, &mut dr, qr, br, &p, &mut jr);
+        for (k, &i) in vix.iter().enumerate() {
+            for row in 0..6 {
+                assert!(
+                    (jf[(row, k)] - jr[(row, i)]).abs() <= 16.0 * EPS,
+                    "{name}: J[{row}, {k}]"
+                );
+            }
+        }
+    }
+}
+
+/// Folding the welded bodies into their moving ancestor's link (model.rs `fold_welded`) leaves A,
+/// G + Q, T, V and every body's point kinematics as the unfolded tree computes them. The
+/// reference is the same tree with a hinge at each welded body, held at q = 0, v = 0, dv/dt = 0:
+/// its links are not folded. Negative control: a weld placed 1 mm off moves the bodies.
+#[test]
+fn folded_welds_match_the_unfolded_tree() {
+    let fields = zoo_fields();
+    let specs = welded_specs();
+    let folded = Model::new(&specs, fields.clone()).unwrap();
+    let reference = Model::new(&hinged_welds(&specs), fields.clone()).unwrap();
+    let mut shifted_specs = specs.clone();
+    shifted_specs
+        .iter_mut()
+        .find(|b| b.name == "weld2")
+        .unwrap()
+        .pos[1] += 1e-3;
+    let shifted = Model::new(&shifted_specs, fields).unwrap();
+    // every welded body with a moving ancestor is folded; the world's welds (table, lamp) are one link
+    assert_eq!(folded.links.len(), folded.joints().len() + 1);
+    assert!(reference.links.len() > folded.links.len());
+    let index = |names: &[String], of: &[String]| -> Vec<usize> {
+        (names.iter())
+            .map(|n| of.iter().position(|m| m == n).unwrap())
+            .collect()
+    };
+    let qix = index(folded.q_names(), reference.q_names());
+    let vix = index(folded.v_names(), reference.v_names());
+    let lift = |x: &[f64], ix: &[usize], n: usize| {
+        let mut y = vec![0.0; n];
+        for (k, &i) in ix.iter().enumerate() {
+            y[i] = x[k];
+        }
+        y
+    };
+    let (mut df, mut dr, mut ds) = (
+        folded.data::<f64>(),
+        reference.data::<f64>(),
+        shifted.data(),
+    );
+    let (mut af, mut ar) = (DMatrix::zeros(0, 0), DMatrix::zeros(0, 0));
+    let (mut ff, mut fr) = (DVector::zeros(0), DVector::zeros(0));
+    let mut rng = Rng(0xf01d_5eed);
+    let mut control = 0.0f64;
+    for _ in 0..5 {
+        let (q, v, a) = random_state(&folded, &mut rng);
+        let (qr, vr) = (
+            lift(&q, &qix, reference.nq()),
+            lift(&v, &vix, reference.nv()),
+        );
+        let acc_r = lift(&a, &vix, reference.nv());
+        crba(&folded, &mut df, &q, &mut af);
+        crba(&reference, &mut dr, &qr, &mut ar);
+        let sub = DMatrix::from_fn(vix.len(), vix.len(), |i, j| ar[(vix[i], vix[j])]);
+        assert!((&af - &sub).amax() <= 64.0 * EPS * max_abs(&sub), "A");
+        natural_forces(&folded, &mut df, &q, &v, &mut ff);
+        natural_forces(&reference, &mut dr, &qr, &vr, &mut fr);
+        for (k, &i) in vix.iter().enumerate() {
+            assert!(
+                (ff[k] - fr[i]).abs() <= 256.0 * EPS * fr.amax(),
+                "G + Q[{k}]"
+            );
+        }
+        let tf = kinetic_energy(&folded, &mut df, &q, &v);
+        let tr = kinetic_energy(&reference, &mut dr, &qr, &vr);
+        assert!((tf - tr).abs() <= 64.0 * EPS * tr.abs(), "T");
+        let vf = potential_energy(&folded, &mut df, &q);
+        let vrr = potential_energy(&reference, &mut dr, &qr);
+        assert!((vf - vrr).abs() <= 64.0 * EPS * vrr.abs().max(1.0), "V");
+        same_point_kinematics(&folded, &reference, [&q, &v, &a], [&qr, &vr, &acc_r], &vix);
+        for b in 0..folded.bodies().len() {
+            let (_, pf) = body_pose(&folded, &mut df, &q, b);
+            let (_, ps) = body_pose(&shifted, &mut ds, &q, b);
+            control = control.max((ps - pf).amax());
+        }
+    }
+    assert!(
+        control > 5e-4,
+        "a weld 1 mm off went unnoticed: {control:e}"
+    );
+    crba_matches_rnea_on(&folded);
+    aba_matches_crba_on(&folded);
+}
