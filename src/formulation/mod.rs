@@ -10,8 +10,9 @@
 //!   (2.19), which divide by velocities). The equations D A a = D F, B a = gamma are solved in the
 //!   QR's orthonormal basis: with B_hat^T P = Q R, Q = [Q1 Q2], D = Q2^T and a = Q1 y1 + Q2 y2,
 //!   R1^T y1 = P^T gamma_hat and (D A Q2) y2 = D F - (D A Q1) y1, where D A Q2 is the symmetric
-//!   positive definite reduced inertia (Cholesky). Q^T A Q costs O(s n^2) with the reflectors.
-//!   No inverse of A.
+//!   positive definite reduced inertia (Cholesky). Q^T A Q costs O(s n^2) with the reflectors;
+//!   when few directions are free (m = n - s small: a robot's task rows) Q2 is formed instead and
+//!   only D A Q2 and D (F - A Q1 y1) are computed (O(m n^2)). No inverse of A.
 //! - [`Formulation::NullSpaceStacked`]: the same equations as the paper writes them, the square
 //!   system [D A; B] a = [D F; gamma] (2.10), by LU of the stacked matrix (2/3 n^3 flops, and its
 //!   rows mix the scales of A and of B).
@@ -257,6 +258,9 @@ pub struct FormulationWork<S: Scalar> {
     inv: DMatrix<S>,
     x: DMatrix<S>,
     ainv_bt: DMatrix<S>,
+    /// D^T (columns 0..m) and A D^T (columns m..2m), m = nv - s: the null-space method when
+    /// D A D^T is cheaper than Q^T A Q.
+    dt: DMatrix<S>,
 }
 
 impl<S: Scalar> FormulationWork<S> {
@@ -278,6 +282,7 @@ impl<S: Scalar> FormulationWork<S> {
             inv: DMatrix::from_element(nv, nv, z),
             x: DMatrix::from_element(nv, s, z),
             ainv_bt: DMatrix::from_element(nv, s, z),
+            dt: DMatrix::from_element(nv, 2 * nv.saturating_sub(s), z),
         }
     }
 
@@ -549,6 +554,24 @@ impl<S: Scalar> FormulationWork<S> {
     ) -> Result<(), FormulationError> {
         let (nv, s) = (self.nv, self.s);
         let m = nv - s;
+        // flops: D A D^T and D (F - A a_p) against the whole Q^T A Q (two sweeps of s reflectors)
+        if nv * m * (2 * nv + m) < 4 * s * nv * nv {
+            return self.null_space_reduced(a, force, gamma, acc, diag);
+        }
+        self.null_space_whole(a, force, gamma, acc, diag)
+    }
+
+    /// [`Self::null_space`] through K = Q^T A Q.
+    fn null_space_whole(
+        &mut self,
+        a: &DMatrix<S>,
+        force: &[S],
+        gamma: &[S],
+        acc: &mut [S],
+        diag: &mut Diagnostics,
+    ) -> Result<(), FormulationError> {
+        let (nv, s) = (self.nv, self.s);
+        let m = nv - s;
         // K = (Q^T A) Q.
         self.load_mass(a);
         linalg::qr_apply_qt_mat(&self.bt, nv, s, &self.beta, &mut self.k, nv);
@@ -589,6 +612,97 @@ impl<S: Scalar> FormulationWork<S> {
         linalg::cholesky_solve(&self.inv, m, &mut self.rhs[s..nv]);
         linalg::qr_apply_q(&self.bt, nv, s, &self.beta, &mut self.rhs[..nv]);
         acc[..nv].copy_from_slice(&self.rhs[..nv]);
+        Ok(())
+    }
+
+    /// (2.8)-(2.10) with D^T = Q[:, s..] formed (few free directions, m = nv - s small): the
+    /// particular solution a_p = Q (y1, 0) of B_hat a = gamma_hat (R1^T y1 = P^T gamma_hat),
+    /// (D A D^T) y2 = D (F - A a_p) by Cholesky, a = a_p + D^T y2. The same solution as
+    /// [`Self::null_space`] (K21 y1 = D A a_p), without forming Q^T A Q.
+    fn null_space_reduced(
+        &mut self,
+        a: &DMatrix<S>,
+        force: &[S],
+        gamma: &[S],
+        acc: &mut [S],
+        diag: &mut Diagnostics,
+    ) -> Result<(), FormulationError> {
+        let (nv, s) = (self.nv, self.s);
+        let m = nv - s;
+        let z = S::zero();
+        for j in 0..s {
+            let row = self.perm[j];
+            self.rhs[j] = gamma[row] / self.norms[row];
+        }
+        linalg::solve_upper_t(&self.bt, s, &mut self.rhs[..s]);
+        self.rhs[s..nv].fill(z);
+        linalg::qr_apply_q(&self.bt, nv, s, &self.beta, &mut self.rhs[..nv]);
+        acc[..nv].copy_from_slice(&self.rhs[..nv]);
+        if m == 0 {
+            // as the Cholesky of the empty K22 in null_space
+            diag.factorizations += 1;
+            diag.system_rcond = 1.0;
+            return Ok(());
+        }
+        // D^T: Q applied to the unit vectors e_s.. e_nv-1; then A D^T.
+        for j in 0..m {
+            self.tmp[..nv].fill(z);
+            self.tmp[s + j] = S::one();
+            linalg::qr_apply_q(&self.bt, nv, s, &self.beta, &mut self.tmp[..nv]);
+            for i in 0..nv {
+                self.dt[(i, j)] = self.tmp[i];
+            }
+        }
+        for j in 0..m {
+            for i in 0..nv {
+                self.dt[(i, m + j)] = z;
+            }
+            for (k, col) in a.column_iter().enumerate() {
+                let d = self.dt[(k, j)];
+                for i in 0..nv {
+                    self.dt[(i, m + j)] += col[i] * d;
+                }
+            }
+        }
+        // r = F - A a_p, rhs2 = D r; K22 = D (A D^T), lower triangle.
+        self.tmp[..nv].copy_from_slice(&force[..nv]);
+        for (k, col) in a.column_iter().enumerate() {
+            let ak = acc[k];
+            for i in 0..nv {
+                self.tmp[i] -= col[i] * ak;
+            }
+        }
+        for j in 0..m {
+            let mut r = z;
+            for i in 0..nv {
+                r += self.dt[(i, j)] * self.tmp[i];
+            }
+            self.rhs[j] = r;
+            for c in 0..=j {
+                let mut k = z;
+                for i in 0..nv {
+                    k += self.dt[(i, j)] * self.dt[(i, m + c)];
+                }
+                self.inv[(j, c)] = k;
+            }
+        }
+        linalg::cholesky(&mut self.inv, m)
+            .map_err(|e| FormulationError::SingularSystem { rcond: e.rcond })?;
+        diag.factorizations += 1;
+        let (mut lmin, mut lmax) = (f64::INFINITY, 0.0f64);
+        for i in 0..m {
+            let l = re(self.inv[(i, i)]).abs();
+            lmin = lmin.min(l);
+            lmax = lmax.max(l);
+        }
+        diag.system_rcond = (lmin / lmax).powi(2);
+        linalg::cholesky_solve(&self.inv, m, &mut self.rhs[..m]);
+        for j in 0..m {
+            let y = self.rhs[j];
+            for i in 0..nv {
+                acc[i] += self.dt[(i, j)] * y;
+            }
+        }
         Ok(())
     }
 
@@ -823,6 +937,88 @@ impl<S: Scalar> FormulationWork<S> {
         let nv = self.nv;
         for j in 0..nv {
             self.k.column_mut(j).rows_mut(0, nv).copy_from(&a.column(j));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One of the methods, run on a workspace whose rows are factored.
+    type Method<'a> = &'a dyn Fn(&mut FormulationWork<f64>, &mut Diagnostics, &mut [f64]);
+
+    /// xorshift64* in [-1, 1).
+    fn rand(state: &mut u64) -> f64 {
+        *state ^= *state >> 12;
+        *state ^= *state << 25;
+        *state ^= *state >> 27;
+        let x = state.wrapping_mul(0x2545F4914F6CDD1D);
+        (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    }
+
+    /// The null-space method with D^T formed (few free directions) and with K = Q^T A Q give the
+    /// same dv/dt, as does the KKT system, for every split of nv = 7 into s rows and m = nv - s
+    /// free directions (m = 0: the rows alone fix dv/dt). Negative control: a row of B changed
+    /// by 1e-6 moves dv/dt beyond the tolerance.
+    #[test]
+    fn reduced_null_space_matches_the_whole_q_and_kkt() {
+        let nv = 7;
+        let mut seed = 0x5eed_0fd7_u64;
+        let tol = RankTolerances::default();
+        for s in 1..=nv {
+            let g = DMatrix::from_fn(nv, nv, |_, _| rand(&mut seed));
+            let a = &g * g.transpose() + DMatrix::identity(nv, nv);
+            let b = DMatrix::from_fn(s, nv, |_, _| rand(&mut seed));
+            let force: Vec<f64> = (0..nv).map(|_| 3.0 * rand(&mut seed)).collect();
+            let gamma: Vec<f64> = (0..s).map(|_| rand(&mut seed)).collect();
+            let scale = vec![1.0; s];
+            let solve = |f: Method, b: &DMatrix<f64>| {
+                let mut w = FormulationWork::<f64>::new(nv, s);
+                let mut diag = w.factor_rows(b, &gamma, &scale, &tol).unwrap();
+                let mut acc = vec![0.0; nv];
+                f(&mut w, &mut diag, &mut acc);
+                (acc, diag)
+            };
+            let (reduced, dr) = solve(
+                &|w, d, acc| w.null_space_reduced(&a, &force, &gamma, acc, d).unwrap(),
+                &b,
+            );
+            let (whole, dw) = solve(
+                &|w, d, acc| {
+                    // the Q^T A Q branch, whatever the flop count picks
+                    w.null_space_whole(&a, &force, &gamma, acc, d).unwrap()
+                },
+                &b,
+            );
+            let (kkt, _) = solve(
+                &|w, d, acc| w.kkt(&a, &force, &b, &gamma, acc, d).unwrap(),
+                &b,
+            );
+            let big = reduced.iter().fold(1.0f64, |m, x| m.max(x.abs()));
+            for k in 0..nv {
+                assert!(
+                    (reduced[k] - whole[k]).abs() <= 1e3 * f64::EPSILON * big,
+                    "s = {s}: {k}"
+                );
+                assert!(
+                    (reduced[k] - kkt[k]).abs() <= 1e3 * f64::EPSILON * big,
+                    "s = {s}: {k}"
+                );
+            }
+            assert_eq!(dr.factorizations, dw.factorizations);
+            assert!((dr.system_rcond - dw.system_rcond).abs() <= 1e-8 * dw.system_rcond);
+            let mut moved = b.clone();
+            moved[(0, 0)] += 1e-6;
+            let (off, _) = solve(
+                &|w, d, acc| w.null_space_reduced(&a, &force, &gamma, acc, d).unwrap(),
+                &moved,
+            );
+            let diff = (0..nv).fold(0.0f64, |m, k| m.max((off[k] - reduced[k]).abs()));
+            assert!(
+                diff > 1e6 * f64::EPSILON * big,
+                "s = {s}: a moved row went unnoticed"
+            );
         }
     }
 }
