@@ -120,6 +120,9 @@ pub struct SignalJets<S: Scalar> {
     /// Row k: d(signal k^(m))/d(dv/dt) where m = 2 - (derivative order of signal k): the signal's
     /// linear or angular Jacobian (orientation: d(quat')/dv). Filled for signals flagged in `needs`.
     pub jac: DMatrix<S>,
+    /// The world angular (rows 0..3) and linear (rows 3..6) Jacobian of the site read last: the
+    /// signals of one site share it (a frame task reads up to seven).
+    site_jac: DMatrix<S>,
 }
 
 impl<S: Scalar> SignalJets<S> {
@@ -128,6 +131,7 @@ impl<S: Scalar> SignalJets<S> {
         SignalJets {
             taylor: vec![[S::zero(); 3]; n],
             jac: DMatrix::from_element(n, nv, S::zero()),
+            site_jac: DMatrix::from_element(6, nv, S::zero()),
         }
     }
 }
@@ -352,13 +356,22 @@ impl Signals {
         tree::forward_acceleration(tree, data, &zero_a, &Vector3::zeros());
         data.zero_v = zero_a;
         let z = S::zero();
+        // (site, its kinematics, whether site_jac holds its Jacobian) of the site read last
+        let mut last: Option<(usize, tree::PointKinematics<S>, bool)> = None;
         for (k, &(si, quantity)) in self.list.iter().enumerate() {
             if si == COM {
                 self.com_jet(tree, data, quantity, needs[k], k, out);
                 continue;
             }
             let site = &self.sites[si];
-            let pk = tree::point_kinematics(tree, data, site.body, &lift(&site.pos));
+            let (pk, has_jac) = match last {
+                Some((s, pk, j)) if s == si => (pk, j),
+                _ => {
+                    let pk = tree::point_kinematics(tree, data, site.body, &lift(&site.pos));
+                    (pk, false)
+                }
+            };
+            last = Some((si, pk, has_jac));
             let (quat, dquat) = if let Quantity::Orientation { .. } = quantity {
                 let qb = quat_from_rot(&pk.rot);
                 let d = omega_times(&pk.omega, &qb);
@@ -382,16 +395,28 @@ impl Signals {
             if !needs[k] {
                 continue;
             }
+            if !has_jac {
+                let jac = &mut out.site_jac;
+                jac.fill(z);
+                tree::for_each_point_column(tree, data, site.body, &pk.pos, |j, wc, lin| {
+                    for r in 0..3 {
+                        jac[(r, j)] = wc[r];
+                        jac[(r + 3, j)] = lin[r];
+                    }
+                });
+                last = Some((si, pk, true));
+            }
+            let jac = &out.site_jac;
             let mut row = out.jac.row_mut(k);
-            row.fill(z);
-            tree::for_each_point_column(tree, data, site.body, &pk.pos, |j, wc, lin| {
+            for j in 0..jac.ncols() {
+                let wc = Vector3::new(jac[(0, j)], jac[(1, j)], jac[(2, j)]);
                 row[j] = match quantity {
-                    Quantity::Position { axis, .. } => lin[axis],
+                    Quantity::Position { axis, .. } => jac[(3 + axis, j)],
                     Quantity::Angular { axis, .. } => wc[axis],
                     Quantity::Orientation { k: c } => omega_times(&wc, &quat)[c],
                     Quantity::Momentum { .. } => unreachable!("the centre of mass's only"),
                 };
-            });
+            }
         }
     }
 }
