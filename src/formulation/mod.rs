@@ -117,6 +117,22 @@ pub trait MassOperator<S: Scalar> {
 }
 
 /// The dense A with its Cholesky factor L (the lower triangle of `l`, as `linalg::cholesky` leaves it).
+/// (min / max)^2 of the diagonal of a Cholesky factor L of the leading `n x n` block: the pivot
+/// ratio of L L^T, a reciprocal condition estimate (1 for n = 0).
+fn cholesky_rcond<S: Scalar>(l: &DMatrix<S>, n: usize) -> f64 {
+    let (mut lmin, mut lmax) = (f64::INFINITY, 0.0f64);
+    for i in 0..n {
+        let d = re(l[(i, i)]).abs();
+        lmin = lmin.min(d);
+        lmax = lmax.max(d);
+    }
+    if n == 0 {
+        1.0
+    } else {
+        (lmin / lmax).powi(2)
+    }
+}
+
 struct DenseCholesky<'a, S: Scalar> {
     a: &'a DMatrix<S>,
     l: &'a DMatrix<S>,
@@ -125,17 +141,7 @@ struct DenseCholesky<'a, S: Scalar> {
 
 impl<S: Scalar> MassOperator<S> for DenseCholesky<'_, S> {
     fn factor(&mut self) -> Result<f64, Singular> {
-        let (mut lmin, mut lmax) = (f64::INFINITY, 0.0f64);
-        for i in 0..self.n {
-            let l = re(self.l[(i, i)]).abs();
-            lmin = lmin.min(l);
-            lmax = lmax.max(l);
-        }
-        Ok(if self.n == 0 {
-            1.0
-        } else {
-            (lmin / lmax).powi(2)
-        })
+        Ok(cholesky_rcond(self.l, self.n))
     }
     fn solve(&mut self, x: &mut [S]) {
         linalg::cholesky_solve(self.l, self.n, x);
@@ -525,13 +531,7 @@ impl<S: Scalar> FormulationWork<S> {
         linalg::cholesky(&mut self.inv, s)
             .map_err(|e| FormulationError::SingularSystem { rcond: e.rcond })?;
         diag.factorizations += 1;
-        let (mut lmin, mut lmax) = (f64::INFINITY, 0.0f64);
-        for i in 0..s {
-            let l = re(self.inv[(i, i)]).abs();
-            lmin = lmin.min(l);
-            lmax = lmax.max(l);
-        }
-        diag.system_rcond = rcond.min((lmin / lmax).powi(2));
+        diag.system_rcond = rcond.min(cholesky_rcond(&self.inv, s));
         linalg::cholesky_solve(&self.inv, s, &mut self.rhs[..s]);
         for r in 0..s {
             let lr = self.rhs[r];
@@ -577,11 +577,7 @@ impl<S: Scalar> FormulationWork<S> {
         linalg::qr_apply_qt_mat(&self.bt, nv, s, &self.beta, &mut self.k, nv);
         linalg::qr_apply_q_right(&self.bt, nv, s, &self.beta, &mut self.k, nv, &mut self.tmp2);
         // y1 from the programme rows in pivot order.
-        for j in 0..s {
-            let row = self.perm[j];
-            self.rhs[j] = gamma[row] / self.norms[row];
-        }
-        linalg::solve_upper_t(&self.bt, s, &mut self.rhs[..s]);
+        self.programme_coordinates(gamma);
         // (Q^T F)_2 - K21 y1, then the reduced inertia K22 = D A D^T by Cholesky.
         self.tmp[..nv].copy_from_slice(&force[..nv]);
         linalg::qr_apply_qt(&self.bt, nv, s, &self.beta, &mut self.tmp[..nv]);
@@ -599,16 +595,7 @@ impl<S: Scalar> FormulationWork<S> {
                 .rows_mut(0, m)
                 .copy_from(&self.k.column(j).rows(s, m));
         }
-        linalg::cholesky(&mut self.inv, m)
-            .map_err(|e| FormulationError::SingularSystem { rcond: e.rcond })?;
-        diag.factorizations += 1;
-        let (mut lmin, mut lmax) = (f64::INFINITY, 0.0f64);
-        for i in 0..m {
-            let l = re(self.inv[(i, i)]).abs();
-            lmin = lmin.min(l);
-            lmax = lmax.max(l);
-        }
-        diag.system_rcond = if m == 0 { 1.0 } else { (lmin / lmax).powi(2) };
+        self.factor_reduced_inertia(m, diag)?;
         linalg::cholesky_solve(&self.inv, m, &mut self.rhs[s..nv]);
         linalg::qr_apply_q(&self.bt, nv, s, &self.beta, &mut self.rhs[..nv]);
         acc[..nv].copy_from_slice(&self.rhs[..nv]);
@@ -630,19 +617,12 @@ impl<S: Scalar> FormulationWork<S> {
         let (nv, s) = (self.nv, self.s);
         let m = nv - s;
         let z = S::zero();
-        for j in 0..s {
-            let row = self.perm[j];
-            self.rhs[j] = gamma[row] / self.norms[row];
-        }
-        linalg::solve_upper_t(&self.bt, s, &mut self.rhs[..s]);
+        self.programme_coordinates(gamma);
         self.rhs[s..nv].fill(z);
         linalg::qr_apply_q(&self.bt, nv, s, &self.beta, &mut self.rhs[..nv]);
         acc[..nv].copy_from_slice(&self.rhs[..nv]);
         if m == 0 {
-            // as the Cholesky of the empty K22 in null_space
-            diag.factorizations += 1;
-            diag.system_rcond = 1.0;
-            return Ok(());
+            return self.factor_reduced_inertia(0, diag);
         }
         // D^T: Q applied to the unit vectors e_s.. e_nv-1; then A D^T.
         for j in 0..m {
@@ -686,16 +666,7 @@ impl<S: Scalar> FormulationWork<S> {
                 self.inv[(j, c)] = k;
             }
         }
-        linalg::cholesky(&mut self.inv, m)
-            .map_err(|e| FormulationError::SingularSystem { rcond: e.rcond })?;
-        diag.factorizations += 1;
-        let (mut lmin, mut lmax) = (f64::INFINITY, 0.0f64);
-        for i in 0..m {
-            let l = re(self.inv[(i, i)]).abs();
-            lmin = lmin.min(l);
-            lmax = lmax.max(l);
-        }
-        diag.system_rcond = (lmin / lmax).powi(2);
+        self.factor_reduced_inertia(m, diag)?;
         linalg::cholesky_solve(&self.inv, m, &mut self.rhs[..m]);
         for j in 0..m {
             let y = self.rhs[j];
@@ -703,6 +674,31 @@ impl<S: Scalar> FormulationWork<S> {
                 acc[i] += self.dt[(i, j)] * y;
             }
         }
+        Ok(())
+    }
+
+    /// y1 of R1^T y1 = P^T gamma_hat into `rhs[..s]`: the coordinates of a along Q1 that the
+    /// programme rows fix.
+    fn programme_coordinates(&mut self, gamma: &[S]) {
+        let s = self.s;
+        for j in 0..s {
+            let row = self.perm[j];
+            self.rhs[j] = gamma[row] / self.norms[row];
+        }
+        linalg::solve_upper_t(&self.bt, s, &mut self.rhs[..s]);
+    }
+
+    /// Cholesky of the reduced inertia D A D^T (the leading `m x m` block of `inv`) and its
+    /// pivot ratio as the system's reciprocal condition.
+    fn factor_reduced_inertia(
+        &mut self,
+        m: usize,
+        diag: &mut Diagnostics,
+    ) -> Result<(), FormulationError> {
+        linalg::cholesky(&mut self.inv, m)
+            .map_err(|e| FormulationError::SingularSystem { rcond: e.rcond })?;
+        diag.factorizations += 1;
+        diag.system_rcond = cholesky_rcond(&self.inv, m);
         Ok(())
     }
 
