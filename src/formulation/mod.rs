@@ -116,7 +116,6 @@ pub trait MassOperator<S: Scalar> {
     fn mul(&mut self, x: &[S], out: &mut [S]);
 }
 
-/// The dense A with its Cholesky factor L (the lower triangle of `l`, as `linalg::cholesky` leaves it).
 /// (min / max)^2 of the diagonal of a Cholesky factor L of the leading `n x n` block: the pivot
 /// ratio of L L^T, a reciprocal condition estimate (1 for n = 0).
 fn cholesky_rcond<S: Scalar>(l: &DMatrix<S>, n: usize) -> f64 {
@@ -133,6 +132,7 @@ fn cholesky_rcond<S: Scalar>(l: &DMatrix<S>, n: usize) -> f64 {
     }
 }
 
+/// The dense A with its Cholesky factor L (the lower triangle of `l`, as `linalg::cholesky` leaves it).
 struct DenseCholesky<'a, S: Scalar> {
     a: &'a DMatrix<S>,
     l: &'a DMatrix<S>,
