@@ -112,6 +112,13 @@ pub trait MassOperator<S: Scalar> {
     fn factor(&mut self) -> Result<f64, Singular>;
     /// `x <- A^-1 x`.
     fn solve(&mut self, x: &mut [S]);
+    /// `x <- A^-1 x` for `cols` right-hand sides (x column-major, `n x cols`).
+    fn solve_block(&mut self, x: &mut [S], cols: usize) {
+        let n = x.len() / cols.max(1);
+        for col in x.chunks_mut(n.max(1)).take(cols) {
+            self.solve(col);
+        }
+    }
     /// `out = A x`.
     fn mul(&mut self, x: &[S], out: &mut [S]);
 }
@@ -267,6 +274,8 @@ pub struct FormulationWork<S: Scalar> {
     /// D^T (columns 0..m) and A D^T (columns m..2m), m = nv - s: the null-space method when
     /// D A D^T is cheaper than Q^T A Q.
     dt: DMatrix<S>,
+    /// F and B_hat^T (nv x (1 + s), column-major): the range-space solves as one block.
+    block: Vec<S>,
 }
 
 impl<S: Scalar> FormulationWork<S> {
@@ -289,6 +298,7 @@ impl<S: Scalar> FormulationWork<S> {
             x: DMatrix::from_element(nv, s, z),
             ainv_bt: DMatrix::from_element(nv, s, z),
             dt: DMatrix::from_element(nv, 2 * nv.saturating_sub(s), z),
+            block: vec![z; nv * (1 + s)],
         }
     }
 
@@ -498,19 +508,21 @@ impl<S: Scalar> FormulationWork<S> {
             .map_err(|e| FormulationError::SingularSystem { rcond: e.rcond })?;
         diag.factorizations += 1;
         diag.system_rcond = rcond;
-        acc[..nv].copy_from_slice(&force[..nv]);
-        op.solve(&mut acc[..nv]);
+        // a0 = A^-1 F and X = A^-1 B_hat^T (column r of `x` is B_hat_r^T) in one block
+        self.block[..nv].copy_from_slice(&force[..nv]);
+        for r in 0..s {
+            for j in 0..nv {
+                self.block[(1 + r) * nv + j] = self.x[(j, r)];
+            }
+        }
+        op.solve_block(&mut self.block, 1 + s);
+        acc[..nv].copy_from_slice(&self.block[..nv]);
         if s == 0 {
             return Ok(());
         }
-        // X = A^-1 B_hat^T, one solve per row (column r of `x` is B_hat_r^T)
         for r in 0..s {
             for j in 0..nv {
-                self.tmp[j] = self.x[(j, r)];
-            }
-            op.solve(&mut self.tmp[..nv]);
-            for j in 0..nv {
-                self.ainv_bt[(j, r)] = self.tmp[j];
+                self.ainv_bt[(j, r)] = self.block[(1 + r) * nv + j];
             }
         }
         // K = B_hat X (s x s, SPD; lower triangle) in `inv`, rhs = gamma_hat - B_hat a0

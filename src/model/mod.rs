@@ -121,6 +121,14 @@ pub trait Model: Send + Sync {
         unreachable!("mass_solve on a model without has_mass_factor")
     }
 
+    /// `x <- A(q)^-1 x` for `cols` right-hand sides (x column-major, `nv x cols`).
+    fn mass_solve_block<S: Scalar>(&self, ws: &mut Self::Workspace<S>, x: &mut [S], cols: usize) {
+        let n = x.len() / cols.max(1);
+        for col in x.chunks_mut(n.max(1)).take(cols) {
+            self.mass_solve(ws, col);
+        }
+    }
+
     /// `out = A(q) x` at the q of the last [`Model::mass_factor`].
     fn mass_mul<S: Scalar>(&self, _ws: &mut Self::Workspace<S>, _x: &[S], _out: &mut [S]) {
         unreachable!("mass_mul on a model without has_mass_factor")

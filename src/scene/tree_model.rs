@@ -214,6 +214,9 @@ impl Model for TreeSceneModel {
     fn mass_solve<S: Scalar>(&self, ws: &mut TreeWork<S>, x: &mut [S]) {
         tree::aba_solve(&self.tree, &mut ws.data, x)
     }
+    fn mass_solve_block<S: Scalar>(&self, ws: &mut TreeWork<S>, x: &mut [S], cols: usize) {
+        tree::aba_solve_block(&self.tree, &mut ws.data, x, cols)
+    }
     fn mass_mul<S: Scalar>(&self, ws: &mut TreeWork<S>, x: &[S], out: &mut [S]) {
         tree::mass_mul(&self.tree, &mut ws.data, x, out)
     }

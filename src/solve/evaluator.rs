@@ -307,6 +307,9 @@ impl<M: Model, S: Scalar> MassOperator<S> for ModelMass<'_, '_, '_, M, S> {
     fn solve(&mut self, x: &mut [S]) {
         self.model.mass_solve(self.ws, x)
     }
+    fn solve_block(&mut self, x: &mut [S], cols: usize) {
+        self.model.mass_solve_block(self.ws, x, cols)
+    }
     fn mul(&mut self, x: &[S], out: &mut [S]) {
         self.model.mass_mul(self.ws, x, out)
     }

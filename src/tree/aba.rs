@@ -302,6 +302,87 @@ pub fn aba_solve<S: Scalar>(model: &Model, data: &mut TreeData<S>, x: &mut [S]) 
     }
 }
 
+/// `x <- A(q)^-1 x` for `cols` right-hand sides at once (x column-major, `nv x cols`): the same
+/// arithmetic as [`aba_solve`] per column, in one pair of sweeps, so each link's factor is read once
+/// for all of them (the formulation's 1 + s solves). Scratch grows on the first call with more
+/// columns than before, never afterwards.
+pub fn aba_solve_block<S: Scalar>(model: &Model, data: &mut TreeData<S>, x: &mut [S], cols: usize) {
+    let z = S::zero();
+    let nv = model.nv();
+    let nl = model.links.len();
+    if data.aba_block.len() < 3 * nl * cols {
+        data.aba_block.resize(3 * nl * cols, [z; 6]);
+    }
+    // per (link, column): p at [i * cols + c], u_j at [(nl + i) * cols + c], a at [(2 nl + i) * cols + c]
+    let (p_all, rest) = data.aba_block.split_at_mut(nl * cols);
+    let (uj_all, a_all) = rest.split_at_mut(nl * cols);
+    for p in p_all.iter_mut() {
+        *p = [z; 6];
+    }
+    for i in (0..nl).rev() {
+        let link = &model.links[i];
+        let ab = &data.aba[i];
+        if let Some(j) = link.joint {
+            let jt = &model.joints[j];
+            let k = jt.nv;
+            for c in 0..cols {
+                let (p, uj) = (&mut p_all[i * cols + c], &mut uj_all[i * cols + c]);
+                for m in 0..k {
+                    uj[m] = x[c * nv + jt.iv + m] - dot6(&ab.s[m], p);
+                }
+                // p^a = p^A + U D^-1 u
+                for m in 0..k {
+                    let mut w = z;
+                    for l in 0..k {
+                        w += ab.dinv[l][m] * uj[l];
+                    }
+                    for r in 0..6 {
+                        p[r] += ab.u[m][r] * w;
+                    }
+                }
+            }
+        }
+        if let Some(par) = link.parent {
+            for c in 0..cols {
+                let pa = p_all[i * cols + c];
+                for (t, &f) in p_all[par * cols + c].iter_mut().zip(pa.iter()) {
+                    *t += f;
+                }
+            }
+        }
+    }
+    for (i, link) in model.links.iter().enumerate() {
+        let ab = &data.aba[i];
+        for c in 0..cols {
+            let a = match link.parent {
+                Some(par) => a_all[par * cols + c],
+                None => [z; 6],
+            };
+            let mut ai = a;
+            if let Some(j) = link.joint {
+                let jt = &model.joints[j];
+                let k = jt.nv;
+                let uj = &uj_all[i * cols + c];
+                let mut r = [z; 6];
+                for m in 0..k {
+                    r[m] = uj[m] - dot6(&ab.u[m], &a);
+                }
+                for m in 0..k {
+                    let mut qdd = z;
+                    for l in 0..k {
+                        qdd += ab.dinv[l][m] * r[l];
+                    }
+                    x[c * nv + jt.iv + m] = qdd;
+                    for t in 0..6 {
+                        ai[t] += ab.s[m][t] * qdd;
+                    }
+                }
+            }
+            a_all[i * cols + c] = ai;
+        }
+    }
+}
+
 /// `out = A(q) x` in O(n): inverse dynamics with v = 0 and no gravity (Table 5.1) on the inertias and
 /// motion subspaces of the last [`aba_factor`].
 pub fn mass_mul<S: Scalar>(model: &Model, data: &mut TreeData<S>, x: &[S], out: &mut [S]) {

@@ -71,6 +71,8 @@ pub struct TreeData<S: Scalar> {
     pub(crate) sw_dof: Vec<Motion<S>>,
     /// The articulated-body factorization's per-link scratch ([`super::aba_factor`]).
     pub(crate) aba: Vec<super::aba::AbaLink<S>>,
+    /// [`super::aba_solve_block`]'s per-link, per-column forces, u_j and accelerations.
+    pub(crate) aba_block: Vec<[S; 6]>,
 }
 
 impl<S: Scalar> TreeData<S> {
@@ -86,6 +88,7 @@ impl<S: Scalar> TreeData<S> {
             passes: SweepPasses::default(),
             sw_dof: vec![Motion::zero(); model.nv()],
             aba: vec![super::aba::AbaLink::new(); model.links.len()],
+            aba_block: Vec::new(),
         }
     }
 }

@@ -52,7 +52,7 @@ mod kinematics;
 mod model;
 pub mod spatial;
 
-pub use aba::{aba_factor, aba_solve, mass_mul};
+pub use aba::{aba_factor, aba_solve, aba_solve_block, mass_mul};
 pub use config::{difference_configuration, integrate_configuration, quat_exp, quat_log};
 pub use dynamics::{
     applied_forces, bias, body_point_force, body_torque, crba, gravity_forces, kinetic_energy,

@@ -948,6 +948,16 @@ fn aba_matches_crba_on(m: &Model) {
         aba_solve(&m, &mut d, &mut z);
         let err = (DVector::from_column_slice(&z) - &dense).amax();
         assert!(err <= 64.0 * EPS * cond * dense.amax(), "A^-1 x: {err:e}");
+        // the block solve (the formulation's 1 + s solves in one sweep): per column the
+        // arithmetic of aba_solve, bit for bit
+        let cols = 1 + trial % 3;
+        let mut block: Vec<f64> = (0..nv * cols).map(|_| rng.next()).collect();
+        let mut each = block.clone();
+        aba_solve_block(&m, &mut d, &mut block, cols);
+        for col in each.chunks_mut(nv) {
+            aba_solve(&m, &mut d, col);
+        }
+        assert_eq!(block, each, "block solve, {cols} columns");
         if trial == 0 {
             // negative control: the factorization of another q does not invert this A
             let (q2, _, _) = random_state(&m, &mut rng);
