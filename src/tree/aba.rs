@@ -43,11 +43,9 @@ pub(crate) struct AbaLink<S: Scalar> {
     u: M6<S>,
     /// `D_i^-1` (k x k).
     dinv: M6<S>,
-    /// Solve: `u_i` (k entries); product: unused.
-    uj: V6<S>,
-    /// Solve: the force `p_i`; product: the force `f_i`.
+    /// Product: the force `f_i`.
     p: V6<S>,
-    /// Solve and product: the acceleration `a_i`.
+    /// Product: the acceleration `a_i`.
     a: V6<S>,
 }
 
@@ -60,7 +58,6 @@ impl<S: Scalar> AbaLink<S> {
             ia: [[z; 6]; 6],
             u: [[z; 6]; 6],
             dinv: [[z; 6]; 6],
-            uj: [z; 6],
             p: [z; 6],
             a: [z; 6],
         }
@@ -241,71 +238,16 @@ fn mul_k<S: Scalar>(dinv: &M6<S>, u: &M6<S>, c: usize, k: usize) -> V6<S> {
     w
 }
 
-/// `x <- A(q)^-1 x` by the articulated-body factorization of the last [`aba_factor`] (O(n)).
+/// `x <- A(q)^-1 x` by the articulated-body factorization of the last [`aba_factor`] (O(n)):
+/// [`aba_solve_block`] with one column.
 pub fn aba_solve<S: Scalar>(model: &Model, data: &mut TreeData<S>, x: &mut [S]) {
-    let z = S::zero();
-    for ab in data.aba.iter_mut() {
-        ab.p = [z; 6];
-    }
-    for i in (0..model.links.len()).rev() {
-        let link = &model.links[i];
-        let ab = &mut data.aba[i];
-        if let Some(j) = link.joint {
-            let jt = &model.joints[j];
-            let k = jt.nv;
-            for c in 0..k {
-                ab.uj[c] = x[jt.iv + c] - dot6(&ab.s[c], &ab.p);
-            }
-            // p^a = p^A + U D^-1 u
-            for c in 0..k {
-                let mut w = z;
-                for p in 0..k {
-                    w += ab.dinv[p][c] * ab.uj[p];
-                }
-                for r in 0..6 {
-                    ab.p[r] += ab.u[c][r] * w;
-                }
-            }
-        }
-        if let Some(p) = link.parent {
-            let pa = data.aba[i].p;
-            for (t, &f) in data.aba[p].p.iter_mut().zip(pa.iter()) {
-                *t += f;
-            }
-        }
-    }
-    for (i, link) in model.links.iter().enumerate() {
-        let a = match link.parent {
-            Some(p) => data.aba[p].a,
-            None => [z; 6],
-        };
-        let ab = &mut data.aba[i];
-        ab.a = a;
-        if let Some(j) = link.joint {
-            let jt = &model.joints[j];
-            let k = jt.nv;
-            let mut r = [z; 6];
-            for c in 0..k {
-                r[c] = ab.uj[c] - dot6(&ab.u[c], &a);
-            }
-            for c in 0..k {
-                let mut qdd = z;
-                for p in 0..k {
-                    qdd += ab.dinv[p][c] * r[p];
-                }
-                x[jt.iv + c] = qdd;
-                for t in 0..6 {
-                    ab.a[t] += ab.s[c][t] * qdd;
-                }
-            }
-        }
-    }
+    aba_solve_block(model, data, x, 1);
 }
 
-/// `x <- A(q)^-1 x` for `cols` right-hand sides at once (x column-major, `nv x cols`): the same
-/// arithmetic as [`aba_solve`] per column, in one pair of sweeps, so each link's factor is read once
-/// for all of them (the formulation's 1 + s solves). Scratch grows on the first call with more
-/// columns than before, never afterwards.
+/// `x <- A(q)^-1 x` for `cols` right-hand sides at once (x column-major, `nv x cols`; Table 7.1's
+/// backward pass for the forces p, forward pass for the accelerations), in one pair of sweeps, so
+/// each link's factor is read once for all of them (the formulation's 1 + s solves). Scratch grows
+/// on the first call with more columns than before, never afterwards.
 pub fn aba_solve_block<S: Scalar>(model: &Model, data: &mut TreeData<S>, x: &mut [S], cols: usize) {
     let z = S::zero();
     let nv = model.nv();

@@ -948,8 +948,8 @@ fn aba_matches_crba_on(m: &Model) {
         aba_solve(&m, &mut d, &mut z);
         let err = (DVector::from_column_slice(&z) - &dense).amax();
         assert!(err <= 64.0 * EPS * cond * dense.amax(), "A^-1 x: {err:e}");
-        // the block solve (the formulation's 1 + s solves in one sweep): per column the
-        // arithmetic of aba_solve, bit for bit
+        // the block solve (the formulation's 1 + s solves in one sweep): each column as a solve
+        // of its own, bit for bit (the columns' scratch kept apart)
         let cols = 1 + trial % 3;
         let mut block: Vec<f64> = (0..nv * cols).map(|_| rng.next()).collect();
         let mut each = block.clone();
