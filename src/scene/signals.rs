@@ -350,11 +350,9 @@ impl Signals {
             Some(s) if std::ptr::eq(s.model, &**tree) => s.data,
             _ => own,
         };
-        let zero_a = std::mem::take(&mut data.zero_v);
         tree::forward_kinematics(tree, data, q);
         tree::forward_velocity(tree, data, v);
-        tree::forward_acceleration(tree, data, &zero_a, &Vector3::zeros());
-        data.zero_v = zero_a;
+        tree::forward_bias_acceleration(tree, data);
         let z = S::zero();
         // (site, its kinematics, whether site_jac holds its Jacobian) of the site read last
         let mut last: Option<(usize, tree::PointKinematics<S>, bool)> = None;

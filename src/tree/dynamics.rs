@@ -6,7 +6,7 @@ use super::kinematics::{
     forward_velocity, point_in_link, TreeData,
 };
 use super::model::{JointKind, Model};
-use super::spatial::{lift3, Inertia, Xform};
+use super::spatial::{lift3, Inertia, Motion, Xform};
 use crate::scalar::{c, Scalar};
 use nalgebra::{DMatrix, DVector, Vector3};
 
@@ -25,14 +25,17 @@ pub fn rnea<'d, S: Scalar>(
 ) -> &'d DVector<S> {
     forward_kinematics(model, data, q);
     forward_velocity(model, data, v);
-    forward_acceleration(model, data, a, gravity);
-    // body forces f_i = I_i a_i + v_i x* I_i v_i
+    forward_acceleration(model, data, a, &Vector3::zeros());
+    // body forces f_i = I_i (a_i - (0, R_i^T g)) + v_i x* I_i v_i: gravity as the base's upward
+    // acceleration, which enters a_i as (0, -R_i^T g) (Featherstone 5.3; X_i (0, l) = (0, E_i l)),
+    // added here so that a_i stay gravity-free for the point kinematics that read them
     for (i, link) in model.links.iter().enumerate() {
         let ld = &mut data.links[i];
         ld.f = match &link.inertia {
             Some(inr) => {
                 let inr = Inertia::<S>::lift(inr);
-                inr.mul_motion(&ld.a)
+                let ag = Motion::new(ld.a.ang, ld.a.lin - ld.rot.tr_mul(gravity));
+                inr.mul_motion(&ag)
                     .add(&ld.v.cross_force(&inr.mul_motion(&ld.v)))
             }
             None => super::spatial::Force::zero(),
@@ -132,6 +135,7 @@ pub fn bias<S: Scalar>(
     let zero = std::mem::take(&mut data.zero_v);
     rnea(model, data, q, v, &zero, gravity);
     data.zero_v = zero;
+    data.acc_bias = true;
     ensure_vec(out, model.nv());
     out.copy_from(&data.tau);
 }

@@ -66,6 +66,9 @@ pub struct TreeData<S: Scalar> {
     fk_valid: bool,
     fv_v: Vec<S>,
     fv_valid: bool,
+    /// The links' accelerations `a` are those at dv/dt = 0 without gravity at the q and v of the
+    /// passes above (left by [`forward_bias_acceleration`] or by the RNEA of [`super::bias`]).
+    pub(crate) acc_bias: bool,
     passes: SweepPasses,
     /// World-frame motion subspace column of each dof (CRBA).
     pub(crate) sw_dof: Vec<Motion<S>>,
@@ -85,6 +88,7 @@ impl<S: Scalar> TreeData<S> {
             fk_valid: false,
             fv_v: vec![c(0.0); model.nv()],
             fv_valid: false,
+            acc_bias: false,
             passes: SweepPasses::default(),
             sw_dof: vec![Motion::zero(); model.nv()],
             aba: vec![super::aba::AbaLink::new(); model.links.len()],
@@ -159,6 +163,7 @@ pub fn forward_kinematics<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &
     data.passes.positions += 1;
     data.fk_valid = false;
     data.fv_valid = false;
+    data.acc_bias = false;
     let zero = Vector3::<S>::zeros();
     for (i, link) in model.links.iter().enumerate() {
         let place = Xform::<S>::lift(&link.place);
@@ -235,6 +240,7 @@ pub fn forward_velocity<S: Scalar>(model: &Model, data: &mut TreeData<S>, v: &[S
         return;
     }
     data.passes.velocities += 1;
+    data.acc_bias = false;
     for (i, link) in model.links.iter().enumerate() {
         let vp = match link.parent {
             Some(p) => data.links[p].v,
@@ -269,6 +275,7 @@ pub fn forward_acceleration<S: Scalar>(
     gravity: &Vector3<S>,
 ) {
     check_len("a", a.len(), model.nv());
+    data.acc_bias = false;
     let a0 = Motion::new(Vector3::zeros(), -gravity);
     for (i, link) in model.links.iter().enumerate() {
         let ap = match link.parent {
@@ -288,6 +295,20 @@ pub fn forward_acceleration<S: Scalar>(
         }
         ld.a = acc;
     }
+}
+
+/// The links' accelerations at dv/dt = 0 without gravity (the velocity-product accelerations
+/// behind J'v of every point), after [`forward_kinematics`] and [`forward_velocity`] at (q, v).
+/// Reused when the RNEA of [`super::bias`] ran last at this (q, v): it keeps its accelerations
+/// gravity-free (gravity enters its forces only), so they are this pass's bit for bit.
+pub fn forward_bias_acceleration<S: Scalar>(model: &Model, data: &mut TreeData<S>) {
+    if data.acc_bias {
+        return;
+    }
+    let zero = std::mem::take(&mut data.zero_v);
+    forward_acceleration(model, data, &zero, &Vector3::zeros());
+    data.zero_v = zero;
+    data.acc_bias = true;
 }
 
 /// Time derivative of q: hinge/slide `dq/dt = v`; ball `d quat/dt = ½ quat ⊗ (0, ω_body)`; free

@@ -624,6 +624,56 @@ fn point_kinematics_consistency() {
     }
 }
 
+/// The velocity-product accelerations the point kinematics read after the forces' RNEA
+/// ([`bias`], then [`forward_bias_acceleration`] without a pass of its own) are a gravity-free
+/// pass's bit for bit, and the second derivative of each point's position along dv/dt = 0 (a
+/// dual number through the velocity). Control: a pass with the base accelerating by -g (the
+/// RNEA's former accelerations) is off by g at every point.
+#[test]
+fn bias_accelerations_reuse_the_inverse_dynamics_pass() {
+    let model = zoo(zoo_fields());
+    let (mut d, mut own) = (TreeData::<f64>::new(&model), TreeData::<f64>::new(&model));
+    let mut dd = TreeData::<Dual64>::new(&model);
+    let g = Vector3::from(model.fields.gravity);
+    let p = Vector3::new(0.1, -0.2, 0.3);
+    let pd = p.map(Dual64::from_re);
+    let (mut out, mut qd) = (DVector::zeros(0), DVector::zeros(0));
+    let zero = vec![0.0; model.nv()];
+    let mut rng = Rng(0xacce1);
+    for _ in 0..5 {
+        let (q, v, _) = random_state(&model, &mut rng);
+        bias(&model, &mut d, &q, &v, &g, &mut out);
+        forward_bias_acceleration(&model, &mut d);
+        forward_kinematics(&model, &mut own, &q);
+        forward_velocity(&model, &mut own, &v);
+        forward_bias_acceleration(&model, &mut own);
+        qdot(&model, &q, &v, &mut qd);
+        let (qs, vs) = (seeded(&q, qd.as_slice()), seeded(&v, &zero));
+        let mut with_g = TreeData::<f64>::new(&model);
+        forward_kinematics(&model, &mut with_g, &q);
+        forward_velocity(&model, &mut with_g, &v);
+        forward_acceleration(&model, &mut with_g, &zero, &g);
+        for b in 0..model.bodies().len() {
+            let (pk, po) = (
+                point_kinematics(&model, &d, b, &p),
+                point_kinematics(&model, &own, b, &p),
+            );
+            assert!(pk.acc == po.acc && pk.alpha == po.alpha, "body {b}");
+            let vps = point_velocity(&model, &mut dd, &qs, &vs, b, &pd);
+            assert!(
+                (vps.map(|x| x.eps) - po.acc).amax() <= 256.0 * EPS,
+                "body {b}"
+            );
+            let kept = point_kinematics(&model, &with_g, b, &p).acc;
+            assert!(
+                (kept - po.acc + g).amax() <= 64.0 * EPS * g.norm(),
+                "body {b}"
+            );
+            assert!((kept - po.acc).amax() > 9.0, "body {b}: the control");
+        }
+    }
+}
+
 /// The free-joint quaternion rate ½ q ⊗ (0, ω_body) agrees with the body rotation's derivative.
 #[test]
 fn qdot_matches_rotation_rate() {
