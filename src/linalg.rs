@@ -196,31 +196,36 @@ pub fn qr_colpiv<S: Scalar>(
     }
     let mut rank = k;
     let mut r00 = 0.0f64;
+    // column-major storage: column c is d[c * nr..(c + 1) * nr] (slices, not (i, j) indexing)
+    let nr = a.nrows();
+    let d = a.as_mut_slice();
     for j in 0..k {
         // Pivot: the remaining column of largest norm (real parts).
         let mut best = -1.0;
         let mut p = j;
         for col in j..k {
-            let mut s = 0.0;
-            for i in j..m {
-                let x = re(a[(i, col)]);
-                s += x * x;
-            }
+            let s: f64 = d[col * nr + j..col * nr + m]
+                .iter()
+                .map(|&x| re(x) * re(x))
+                .sum();
             if s > best {
                 best = s;
                 p = col;
             }
         }
         if p != j {
-            a.swap_columns(j, p);
+            let (left, right) = d.split_at_mut(p * nr);
+            left[j * nr..(j + 1) * nr].swap_with_slice(&mut right[..nr]);
             perm.swap(j, p);
         }
+        let (left, right) = d.split_at_mut((j + 1) * nr);
+        let cj = &mut left[j * nr..];
         // Householder vector for column j, rows j..m.
         let mut sigma = S::zero();
-        for i in j + 1..m {
-            sigma += a[(i, j)] * a[(i, j)];
+        for &x in &cj[j + 1..m] {
+            sigma += x * x;
         }
-        let x0 = a[(j, j)];
+        let x0 = cj[j];
         let norm_re = (re(x0) * re(x0) + re(sigma)).sqrt();
         if j == 0 {
             r00 = norm_re;
@@ -238,22 +243,22 @@ pub fn qr_colpiv<S: Scalar>(
         let v0 = x0 - alpha;
         // Scale w = v / v0 so that w_0 = 1; beta = -v0 / alpha.
         let inv_v0 = v0.recip();
-        for i in j + 1..m {
-            a[(i, j)] *= inv_v0;
+        for x in &mut cj[j + 1..m] {
+            *x *= inv_v0;
         }
         beta[j] = -v0 / alpha;
-        a[(j, j)] = alpha;
+        cj[j] = alpha;
         // Apply H_j to the remaining columns.
-        for col in j + 1..k {
-            let mut s = a[(j, col)];
-            for i in j + 1..m {
-                s += a[(i, j)] * a[(i, col)];
+        let w = &cj[j + 1..m];
+        for cc in right.chunks_exact_mut(nr).take(k - j - 1) {
+            let mut s = cc[j];
+            for (&wi, &x) in w.iter().zip(&cc[j + 1..m]) {
+                s += wi * x;
             }
             s *= beta[j];
-            a[(j, col)] -= s;
-            for i in j + 1..m {
-                let w = a[(i, j)];
-                a[(i, col)] -= s * w;
+            cc[j] -= s;
+            for (&wi, x) in w.iter().zip(&mut cc[j + 1..m]) {
+                *x -= s * wi;
             }
         }
     }
@@ -263,36 +268,34 @@ pub fn qr_colpiv<S: Scalar>(
 /// y <- Q^T y for the leading `m` entries of a vector, with the reflectors of [`qr_colpiv`].
 pub fn qr_apply_qt<S: Scalar>(qr: &DMatrix<S>, m: usize, k: usize, beta: &[S], y: &mut [S]) {
     for j in 0..k {
-        if beta[j] == S::zero() {
-            continue;
-        }
-        let mut s = y[j];
-        for i in j + 1..m {
-            s += qr[(i, j)] * y[i];
-        }
-        s *= beta[j];
-        y[j] -= s;
-        for i in j + 1..m {
-            y[i] -= s * qr[(i, j)];
-        }
+        reflect(qr, m, j, beta[j], y);
+    }
+}
+
+/// y <- H_j y = y - beta_j w_j (w_j . y), w_j = (1, column j of `qr` below the diagonal).
+#[inline]
+fn reflect<S: Scalar>(qr: &DMatrix<S>, m: usize, j: usize, beta: S, y: &mut [S]) {
+    if beta == S::zero() {
+        return;
+    }
+    let ld = qr.nrows();
+    let w = &qr.as_slice()[j * ld + j + 1..j * ld + m];
+    let (head, tail) = y[j..m].split_at_mut(1);
+    let mut s = head[0];
+    for (&wi, &yi) in w.iter().zip(tail.iter()) {
+        s += wi * yi;
+    }
+    s *= beta;
+    head[0] -= s;
+    for (&wi, yi) in w.iter().zip(tail.iter_mut()) {
+        *yi -= s * wi;
     }
 }
 
 /// y <- Q y (the inverse of [`qr_apply_qt`]).
 pub fn qr_apply_q<S: Scalar>(qr: &DMatrix<S>, m: usize, k: usize, beta: &[S], y: &mut [S]) {
     for j in (0..k).rev() {
-        if beta[j] == S::zero() {
-            continue;
-        }
-        let mut s = y[j];
-        for i in j + 1..m {
-            s += qr[(i, j)] * y[i];
-        }
-        s *= beta[j];
-        y[j] -= s;
-        for i in j + 1..m {
-            y[i] -= s * qr[(i, j)];
-        }
+        reflect(qr, m, j, beta[j], y);
     }
 }
 
@@ -362,23 +365,26 @@ pub fn qr_apply_q_right<S: Scalar>(
 
 /// Solve R x = b (R the leading `k x k` upper triangle of `qr`) in place.
 pub fn solve_upper<S: Scalar>(qr: &DMatrix<S>, k: usize, b: &mut [S]) {
+    let (ld, r) = (qr.nrows(), qr.as_slice());
     for i in (0..k).rev() {
         let mut s = b[i];
         for j in i + 1..k {
-            s -= qr[(i, j)] * b[j];
+            s -= r[j * ld + i] * b[j];
         }
-        b[i] = s / qr[(i, i)];
+        b[i] = s / r[i * ld + i];
     }
 }
 
 /// Solve R^T x = b (R the leading `k x k` upper triangle of `qr`) in place.
 pub fn solve_upper_t<S: Scalar>(qr: &DMatrix<S>, k: usize, b: &mut [S]) {
+    let (ld, r) = (qr.nrows(), qr.as_slice());
     for i in 0..k {
+        let col = &r[i * ld..i * ld + i];
         let mut s = b[i];
-        for j in 0..i {
-            s -= qr[(j, i)] * b[j];
+        for (&rj, &bj) in col.iter().zip(&b[..i]) {
+            s -= rj * bj;
         }
-        b[i] = s / qr[(i, i)];
+        b[i] = s / r[i * ld + i];
     }
 }
 
