@@ -5,9 +5,10 @@
 //!    generic AD passes over the whole evaluation (`Jet::compute_generic`: nv `Dual` passes through
 //!    the tree's forward kinematics): two independent ways to the same B, gamma, values and dg/dt.
 //!
-//! Scenes: every bundled scene, the generated chains, and tests/scenes/all_signals.toml (every slot
+//! Scenes: every bundled scene, the generated chains, tests/scenes/all_signals.toml (every slot
 //! kind at every level: hinge, ball and free joints, quasi-velocities, accelerations, body-point
-//! positions, velocities, accelerations, orientation, angular velocity and acceleration).
+//! positions, velocities, accelerations, orientation, angular velocity and acceleration) and
+//! tests/scenes/affine_signals.toml (rows affine in signals at every level, with and without t).
 //! 2. `Model::natural_forces` of tree scenes (one inverse-dynamics sweep for G and gravity) against
 //!    `velocity_terms + applied_forces` (two sweeps), and the cached forward kinematics against a
 //!    fresh workspace per call.
@@ -17,6 +18,9 @@
 //!    sweep not shared), bit for bit, over f64 and dual numbers, on every scene and on random
 //!    chains; and the pass counts that show the sweep is shared (one position and one velocity
 //!    pass per state).
+//! 5. Rows affine in signals (frame tasks, welds: `ExprConstraints` fast rows, B from the
+//!    signals' Jacobian rows, and without t no pass over the expression) against the expression
+//!    route of the same rows (`set_plain_passes`), on every scene.
 //! 4. Lagrangian scenes: G (dA/dt and dA/dq_k of the mass entries) and -dV/dq from one gradient
 //!    per expression (a reverse sweep over its tape) against one dual pass per direction, and B of
 //!    the rows from one gradient per row against one dual pass per slot; over f64 and duals. Scenes:
@@ -61,9 +65,11 @@ fn scenes() -> Vec<Scene> {
         .filter(|p| p.extension().is_some_and(|e| e == "toml"))
         .map(|p| Scene::load(&p).unwrap_or_else(|e| panic!("{e}")))
         .collect();
-    out.push(
-        Scene::load(root.join("tests/scenes/all_signals.toml")).unwrap_or_else(|e| panic!("{e}")),
-    );
+    for name in ["all_signals.toml", "affine_signals.toml"] {
+        out.push(
+            Scene::load(root.join("tests/scenes").join(name)).unwrap_or_else(|e| panic!("{e}")),
+        );
+    }
     for name in ["caraxis.toml", "crank_rigid.toml"] {
         out.push(
             Scene::load(root.join("references/testset").join(name))
@@ -631,4 +637,62 @@ fn lagrangian_gradients_match_the_dual_passes() {
     }
     // the mass entries of the cranks and the pendulum depend on q: G is not zero there
     assert!(nontrivial_g >= 3 * 20, "G nonzero at {nontrivial_g} states");
+}
+
+/// Fast rows (B = sum c_k J_k; value and derivatives from the signals' jets when the row reads no
+/// t) against the expression route of the same rows, on every scene at random states, over f64
+/// and dual numbers; the rows that take the fast route are counted where the scene says which
+/// (the Panda's six frame-task rows, four without t; the humanoid's 12 weld rows and six
+/// centre-of-mass and level rows, all affine, two with t; the test
+/// scene's four affine rows at three levels, three without t, and its product row not).
+#[test]
+fn fast_rows_equal_the_expression_route() {
+    type D = Dual<f64>;
+    let mut counted = std::collections::BTreeMap::new();
+    for scene in scenes() {
+        with_problem!(&scene.system, p => {
+            let (m, fast) = (&p.model, &p.constraints);
+            counted.insert(scene.name.clone(), fast.fast_rows());
+            let mut plain = fast.clone();
+            plain.set_plain_passes(true);
+            let (nq, nv) = (m.nq(), m.nv());
+            let mut jf = Jet::<_, f64>::new(fast, m.segments(), nq, nv);
+            let mut jp = Jet::<_, f64>::new(&plain, m.segments(), nq, nv);
+            let mut jfd = Jet::<_, D>::new(fast, m.segments(), nq, nv);
+            let mut jpd = Jet::<_, D>::new(&plain, m.segments(), nq, nv);
+            let mut rng = Rng(0xfa57);
+            for (t, q, v) in states(m, &p.q0, &p.v0, 4, 17) {
+                jf.compute(fast, m.segments(), t, &q, &v);
+                jp.compute(&plain, m.segments(), t, &q, &v);
+                let td = D::new(t, rng.next());
+                let qd: Vec<D> = q.iter().map(|&x| D::new(x, rng.next())).collect();
+                let vd: Vec<D> = v.iter().map(|&x| D::new(x, rng.next())).collect();
+                jfd.compute(fast, m.segments(), td, &qd, &vd);
+                jpd.compute(&plain, m.segments(), td, &qd, &vd);
+                let re = |x: &[D]| x.iter().map(|d| d.re).collect::<Vec<_>>();
+                let eps = |x: &[D]| x.iter().map(|d| d.eps).collect::<Vec<_>>();
+                for (what, a, b) in [
+                    ("B", jp.b.as_slice().to_vec(), jf.b.as_slice().to_vec()),
+                    ("gamma", jp.gamma.to_vec(), jf.gamma.to_vec()),
+                    ("value", jp.value.to_vec(), jf.value.to_vec()),
+                    ("gdot", jp.gdot.to_vec(), jf.gdot.to_vec()),
+                    ("B (dual)", eps(jpd.b.as_slice()), eps(jfd.b.as_slice())),
+                    ("gamma (dual)", eps(&jpd.gamma), eps(&jfd.gamma)),
+                    ("gamma (dual, re)", re(&jpd.gamma), re(&jfd.gamma)),
+                    ("value (dual)", eps(&jpd.value), eps(&jfd.value)),
+                ] {
+                    let err = rel(&a, &b);
+                    assert!(err <= TOL, "{}: {what} differs by {err:.2e}", scene.name);
+                }
+            }
+        });
+    }
+    for (name, want) in [
+        ("panda_circle", (6, 4)),
+        ("talos_com_shift", (18, 16)),
+        ("affine_signals", (4, 3)),
+        ("all_signals", (0, 0)),
+    ] {
+        assert_eq!(counted.get(name), Some(&want), "{name}: {counted:?}");
+    }
 }

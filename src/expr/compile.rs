@@ -706,7 +706,7 @@ impl Expr {
         self.eval(slots, &mut stack)
     }
 
-    #[cfg(test)]
+    /// The bytecode (read by [`Expr::affine`] and the tests).
     pub(crate) fn code(&self) -> &[Op] {
         &self.code
     }

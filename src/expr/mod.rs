@@ -86,6 +86,7 @@
 //! everything exactly with the same code that computes values, and lets errors point at the
 //! scene file (see [`ExprError::render`]).
 
+mod affine;
 mod compile;
 mod cse;
 mod error;
@@ -95,6 +96,7 @@ mod tape;
 #[cfg(test)]
 mod tests;
 
+pub use affine::Affine;
 pub use compile::Expr;
 pub use error::{closest, ExprError, ExprErrorKind};
 pub use parser::Func;

@@ -1190,3 +1190,95 @@ fn gradient_matches_one_dual_pass_per_slot() {
         assert!(rel(grad[s].eps, want.eps) <= 64.0 * f64::EPSILON);
     }
 }
+
+/// `Expr::affine`: linear slots x, y, tip.x (0, 1, 7), free slot t (2). Each affine answer is
+/// checked against the tape's gradient at three states (the coefficients, and the value equals
+/// sum c x + F with F = E at zero linear slots); the nonlinear forms (products of linear slots, a
+/// linear slot times or under a function of t, division by a linear slot, a slot that is neither)
+/// must be refused.
+#[test]
+fn affine_forms_are_recognised_and_nonlinear_ones_refused() {
+    let t = table();
+    let linear = |s: usize| [0, 1, 7].contains(&s);
+    let free = |s: usize| s == 2;
+    let affine = [
+        ("x", vec![(0, 1.0)], false),
+        (
+            "tip.x - (0.3 - 0.1 + 0.1*cos(2*pi*(t/4 - sin(2*pi*t/4)/(2*pi))))",
+            vec![(7, 1.0)],
+            true,
+        ),
+        ("2*x - 3*y/4 + 1", vec![(0, 2.0), (1, -0.75)], false),
+        (
+            "-(x - y)*0.5 - (1 - tip.x)",
+            vec![(0, -0.5), (1, 0.5), (7, 1.0)],
+            false,
+        ),
+        ("(x + sin(t))*2 + (x + sin(t)) - 3*x", vec![(0, 0.0)], true),
+        (
+            "(0.6)*(x) + (-0.8)*(y) - t^2/exp(t)",
+            vec![(0, 0.6), (1, -0.8)],
+            true,
+        ),
+    ];
+    let states = [
+        [0.7, 1.3, 0.4, -0.8, 1.9, 0.5, -0.2, 0.3, 1.1],
+        [-1.1, 0.2, 2.5, 0.1, 0.4, -0.3, 0.9, -1.7, 0.6],
+        [0.05, -2.0, -0.6, 0.3, 0.2, 0.1, 0.0, 4.0, -0.4],
+    ];
+    for (src, terms, reads_free) in &affine {
+        let e = Expr::compile(src, &t).unwrap_or_else(|err| panic!("{src}: {err}"));
+        let a = e
+            .affine(linear, free)
+            .unwrap_or_else(|| panic!("{src}: not affine"));
+        assert_eq!(a.reads_free, *reads_free, "{src}");
+        assert_eq!(a.terms.len(), terms.len(), "{src}: {a:?}");
+        for ((s, c), (ws, wc)) in a.terms.iter().zip(terms) {
+            assert!(
+                s == ws && (c - wc).abs() <= 4.0 * f64::EPSILON,
+                "{src}: {a:?}"
+            );
+        }
+        for base in &states {
+            let mut grad = vec![0.0; base.len()];
+            let v = e.gradient(base, &mut Vec::new(), &mut grad);
+            for &(s, c) in &a.terms {
+                assert!((grad[s] - c).abs() <= 4.0 * f64::EPSILON, "{src}: d/d{s}");
+            }
+            let mut zeroed = *base;
+            for &(s, _) in &a.terms {
+                zeroed[s] = 0.0;
+            }
+            let f = e.value(&zeroed);
+            let sum: f64 = a.terms.iter().map(|&(s, c)| c * base[s]).sum::<f64>() + f;
+            assert!(
+                (sum - v).abs() <= 1e2 * f64::EPSILON * (1.0 + v.abs()),
+                "{src}: value"
+            );
+        }
+    }
+    for src in [
+        "x*x",
+        "x^2 - 1",
+        "t*x",
+        "x/t",
+        "sin(x)",
+        "x*y",
+        "1/x",
+        "y/x",
+        "x - theta",
+        "sqrt(tip.x^2)",
+        "atan2(x, 1)",
+        "2^x",
+        "abs(x)",
+        "x*(t - t)",
+        "x/2 - y*t/t*0 + 5",
+    ] {
+        let e = Expr::compile(src, &t).unwrap();
+        assert_eq!(e.affine(linear, free), None, "{src}");
+    }
+    // with no slot linear, a function of t alone is affine with no terms
+    let e = Expr::compile("3*t - sin(t)", &t).unwrap();
+    let a = e.affine(|_| false, free).unwrap();
+    assert!(a.terms.is_empty() && a.reads_free);
+}

@@ -17,6 +17,14 @@
 //!   Jacobian rows for signals; one gradient of E_i (a reverse sweep over its tape,
 //!   [`Expr::gradient`]) gives every dE_i/ds (the plain computation, one `Dual` pass per slot, stays
 //!   for the tests: [`ExprConstraints::set_plain_passes`]).
+//!
+//! A row affine in signals with constant coefficients, E = sum_k c_k s_k + F(t) (a frame task
+//! such as `tcp.x - x_d(t)`, a weld's point and rotation rows; [`Expr::affine`]), skips the
+//! tape where it can (issue 31, fast rows for frames): B_i = sum c_k J_k over the signals of its
+//! level, no gradient; and when F is a constant (no t), value and derivatives are the signals'
+//! jets combined, value = sum c_k s_k + F, d^m E/dt^m = sum c_k d^m s_k/dt^m, no pass over the
+//! expression at all. Within round-off of the tape's result (the same products, summed in
+//! another order).
 
 use super::layout::Layout;
 use super::signals::{SignalJets, SignalWork, Signals};
@@ -46,8 +54,47 @@ pub struct ExprConstraints {
     signal_needs: Vec<bool>,
     /// Rows per level: position, velocity, acceleration.
     by_level: [Vec<usize>; 3],
+    /// Rows affine in signals (see the module's text), by row.
+    fast: Vec<Option<FastRow>>,
+    /// The rows per level whose value and derivatives need a pass over their expression when
+    /// fast rows are on (all but the fast rows without t).
+    tape_by_level: [Vec<usize>; 3],
     /// `[[actuators]]`: the programme is realized by these (servo-constraints), else ideally.
     actuation: Option<crate::servo::Actuation>,
+}
+
+/// A row E = sum_k c_k s_k + F of signals s_k ([`Expr::affine`]).
+#[derive(Clone, Debug)]
+struct FastRow {
+    /// (signal, c_k) of every term.
+    terms: Vec<(usize, f64)>,
+    /// (signal, c_k) of the terms of the row's own level: B_i = sum c_k J_k.
+    b_terms: Vec<(usize, f64)>,
+    /// F when it is a constant (the row reads no t): the row needs no pass over its expression.
+    offset: Option<f64>,
+}
+
+impl FastRow {
+    fn new(e: &Expr, level: Level, layout: &Layout, signals: &Signals) -> Option<FastRow> {
+        let a = e.affine(|s| s >= layout.signals, |s| s == layout.t)?;
+        if a.terms.is_empty() {
+            return None;
+        }
+        let terms: Vec<(usize, f64)> = (a.terms.iter())
+            .map(|&(s, c)| (s - layout.signals, c))
+            .collect();
+        let b_terms = (terms.iter())
+            .filter(|&&(k, _)| signals.quantity(k).level() == level)
+            .copied()
+            .collect();
+        // F = E at every signal 0 (the form is affine); t unread
+        let offset = Some(e.value(&vec![0.0; e.min_slots()])).filter(|f| f.is_finite());
+        Some(FastRow {
+            terms,
+            b_terms,
+            offset: offset.filter(|_| !a.reads_free),
+        })
+    }
 }
 
 /// Scratch of an [`ExprConstraints`] evaluation.
@@ -92,6 +139,13 @@ impl ExprConstraints {
                 layout.level(slot)
             }
         };
+        let fast: Vec<Option<FastRow>> = (specs.iter().zip(&exprs))
+            .map(|(sp, e)| FastRow::new(e, sp.level, &layout, &signals))
+            .collect();
+        let mut tape_by_level = by_level.clone();
+        for rows in tape_by_level.iter_mut() {
+            rows.retain(|&i| fast[i].as_ref().is_none_or(|f| f.offset.is_none()));
+        }
         let mut seeds: Vec<(usize, Vec<usize>)> = vec![];
         let mut signal_needs = vec![false; signals.len()];
         let mut row_seeds: Vec<(usize, Vec<usize>)> = vec![];
@@ -101,6 +155,7 @@ impl ExprConstraints {
                     continue;
                 }
                 match row_seeds.last_mut() {
+                    _ if fast[i].is_some() => {}
                     Some((r, slots)) if *r == i => slots.push(slot),
                     _ => row_seeds.push((i, vec![slot])),
                 }
@@ -126,8 +181,17 @@ impl ExprConstraints {
             plain: false,
             signal_needs,
             by_level,
+            fast,
+            tape_by_level,
             actuation: None,
         }
+    }
+
+    /// How many rows are affine in signals (B without the tape), and how many of them need no
+    /// pass over their expression at all (no t): what the tests and the profile count.
+    pub fn fast_rows(&self) -> (usize, usize) {
+        let f = self.fast.iter().flatten();
+        (f.clone().count(), f.filter(|r| r.offset.is_some()).count())
     }
 
     /// B by one dual pass per slot (true) or one gradient per row (false, the default); the tests
@@ -251,8 +315,14 @@ impl Constraints for ExprConstraints {
             ws.slots[l.signals + k] = j[0];
         }
         out.gdot.fill(z);
-        // gamma and values, level by level.
-        if !self.by_level[0].is_empty() {
+        // gamma and values, level by level; rows affine in signals without t from the jets
+        let levels = if self.plain {
+            &self.by_level
+        } else {
+            self.direct_rows(ws, out.value, out.gdot, out.gamma);
+            &self.tape_by_level
+        };
+        if !levels[0].is_empty() {
             for (x, &y) in ws.slots2.iter_mut().zip(&ws.slots) {
                 *x = Dual2::from_re(y);
             }
@@ -263,14 +333,14 @@ impl Constraints for ExprConstraints {
             for (k, j) in ws.jets.taylor.iter().enumerate() {
                 ws.slots2[l.signals + k] = Dual2::new(j[0], j[1], j[2]);
             }
-            for &i in &self.by_level[0] {
+            for &i in &levels[0] {
                 let g = self.exprs[i].eval(&ws.slots2, &mut ws.stack2);
                 out.value[i] = g.re;
                 out.gdot[i] = g.v1;
                 out.gamma[i] = -g.v2;
             }
         }
-        if !self.by_level[1].is_empty() {
+        if !levels[1].is_empty() {
             for (x, &y) in ws.slots1.iter_mut().zip(&ws.slots) {
                 *x = Dual::from_re(y);
             }
@@ -281,31 +351,53 @@ impl Constraints for ExprConstraints {
             for (k, j) in ws.jets.taylor.iter().enumerate() {
                 ws.slots1[l.signals + k] = Dual::new(j[0], j[1]);
             }
-            for &i in &self.by_level[1] {
+            for &i in &levels[1] {
                 let f = self.exprs[i].eval(&ws.slots1, &mut ws.stack1);
                 out.value[i] = f.re;
                 out.gamma[i] = -f.eps;
             }
         }
-        for &i in &self.by_level[2] {
+        for &i in &levels[2] {
             let h = self.exprs[i].eval(&ws.slots, &mut ws.stack);
             out.value[i] = h;
             out.gamma[i] = -h;
         }
-        out.b.fill(z);
+        self.fill_b(ws, segments, q, out.b);
+        true
+    }
+}
+
+impl ExprConstraints {
+    /// B (the module's text): one gradient per row, or one Dual pass per slot in plain mode; the
+    /// rows affine in signals as sum c_k J_k.
+    fn fill_b<S: Scalar>(
+        &self,
+        ws: &mut RowsWork<S>,
+        segments: &[Segment],
+        q: &[S],
+        b: &mut DMatrix<S>,
+    ) {
+        let (l, z) = (&self.layout, S::zero());
+        b.fill(z);
         if !self.plain {
-            // B: one gradient per row.
             for (i, slots) in &self.row_seeds {
                 let i = *i;
                 self.exprs[i].gradient(&ws.slots, &mut ws.work, &mut ws.grad);
                 for &slot in slots {
                     let d = ws.grad[slot];
-                    add_slot(l, segments, q, &ws.jets, slot, d, out.b, i);
+                    add_slot(l, segments, q, &ws.jets, slot, d, b, i);
                 }
             }
-            return true;
+            for (i, f) in self.fast.iter().enumerate() {
+                for &(k, c) in f.iter().flat_map(|f| &f.b_terms) {
+                    let c = S::from(c);
+                    for j in 0..l.nv {
+                        b[(i, j)] += c * ws.jets.jac[(k, j)];
+                    }
+                }
+            }
+            return;
         }
-        // B: one Dual pass per slot that enters it.
         for x in ws.slots1.iter_mut().zip(&ws.slots) {
             *x.0 = Dual::from_re(*x.1);
         }
@@ -314,11 +406,43 @@ impl Constraints for ExprConstraints {
             ws.slots1[slot].eps = S::one();
             for &i in rows {
                 let d = self.exprs[i].eval(&ws.slots1, &mut ws.stack1).eps;
-                add_slot(l, segments, q, &ws.jets, slot, d, out.b, i);
+                add_slot(l, segments, q, &ws.jets, slot, d, b, i);
             }
             ws.slots1[slot].eps = z;
         }
-        true
+    }
+
+    /// Value, dE/dt and gamma of the rows affine in signals without t, from the signals' jets:
+    /// d^m E/dt^m = sum c_k d^m s_k/dt^m, gamma = -d^m E/dt^m with m = 2, 1, 0 for position,
+    /// velocity and acceleration rows (the module's text).
+    fn direct_rows<S: Scalar>(
+        &self,
+        ws: &RowsWork<S>,
+        value: &mut [S],
+        gdot: &mut [S],
+        gamma: &mut [S],
+    ) {
+        for (i, f) in self.fast.iter().enumerate() {
+            let Some((f, offset)) = f.as_ref().and_then(|f| Some((f, f.offset?))) else {
+                continue;
+            };
+            let mut d = [S::zero(); 3];
+            for &(k, c) in &f.terms {
+                let (j, c) = (&ws.jets.taylor[k], S::from(c));
+                for m in 0..3 {
+                    d[m] += j[m] * c;
+                }
+            }
+            value[i] = d[0] + S::from(offset);
+            match self.specs[i].level {
+                Level::Position => {
+                    gdot[i] = d[1];
+                    gamma[i] = -d[2];
+                }
+                Level::Velocity => gamma[i] = -d[1],
+                Level::Acceleration => gamma[i] = -value[i],
+            }
+        }
     }
 }
 
