@@ -298,15 +298,32 @@ impl<S: Scalar> Inertia<S> {
     }
     /// Express an inertia given in B coordinates in A coordinates: `X^T I X` with `X = ^B X_A`
     /// (Featherstone Table 2.5, written with the parallel-axis theorem, no division by `m`).
+    ///
+    /// ibar_A = E^T ibar E - m [r]x[r]x - [r]x[h']x - [h']x[r]x with h' = E^T h, and with
+    /// [a]x[b]x = b a^T - (a . b) 1 the last three terms are
+    /// (m |r|^2 + 2 r . h') 1 - m r r^T - r h'^T - h' r^T; both parts symmetric, one triangle
+    /// computed.
     pub fn transform_to_parent(&self, x: &Xform<S>) -> Inertia<S> {
-        let et = x.e.transpose();
-        let hp = et * self.h;
-        let rx = skew(&x.r);
-        let hx = skew(&hp);
+        let (e, r, m) = (&x.e, &x.r, self.m);
+        let hp = e.tr_mul(&self.h);
+        let t = e.tr_mul(&self.ibar);
+        let diag = r.dot(r) * m + r.dot(&hp) * c::<S>(2.0);
+        let mut ibar = Matrix3::zeros();
+        for i in 0..3 {
+            for j in i..3 {
+                let rot = t[(i, 0)] * e[(0, j)] + t[(i, 1)] * e[(1, j)] + t[(i, 2)] * e[(2, j)];
+                let mut v = rot - r[i] * r[j] * m - r[i] * hp[j] - hp[i] * r[j];
+                if i == j {
+                    v += diag;
+                }
+                ibar[(i, j)] = v;
+                ibar[(j, i)] = v;
+            }
+        }
         Inertia {
-            m: self.m,
-            h: hp + x.r * self.m,
-            ibar: et * self.ibar * x.e - rx * rx * self.m - rx * hx - hx * rx,
+            m,
+            h: hp + r * m,
+            ibar,
         }
     }
 }
