@@ -148,7 +148,11 @@ impl Signals {
         let total: f64 = bodies.iter().map(|b| b.mass).sum();
         // The bodies welded to one link move as one rigid body: one entry each (mass, CoM and
         // inertia about it in the link's own body, parallel-axis theorem), so the sums over the
-        // bodies below run over the moving links (a humanoid: 19 entries, not 60).
+        // bodies below run over the moving links (a humanoid: 19 entries, not 60). Not read from
+        // the tree's folded links: those hold the inertia about the link's origin, and the inertia
+        // about the CoM recovered from it (ibar - m (|c|^2 1 - c c^T)) would lose digits to
+        // cancellation for a CoM far from the origin; combining the parts about their own CoMs
+        // does not.
         // (mass, CoM, inertia about it) of each body, in the frame of its link's own body
         type Part = (f64, Vector3<f64>, Matrix3<f64>);
         let mut owners: Vec<(usize, Vec<Part>)> = vec![];
