@@ -878,3 +878,84 @@ fn a_cylinder_turning_square_to_the_rail_stops_the_solve_naming_the_row() {
         other => panic!("{other}"),
     }
 }
+
+/// tau, the hidden constraints and |b_i| of the decoupling at (t, q, v), by the given servo.
+fn decoupled(
+    servo: &progmo::servo::Servo<
+        '_,
+        impl progmo::model::Model,
+        impl progmo::programme::Constraints,
+    >,
+    an: &progmo::servo::Analysis,
+    t: f64,
+    q: &[f64],
+    v: &[f64],
+) -> (Vec<f64>, Vec<f64>) {
+    let d = servo
+        .decoupling(t, q, v, &an.degrees, &an.b_norms, 1e-12)
+        .unwrap_or_else(|e| panic!("decoupling at t = {t}: {e:?}"));
+    let mut h = vec![];
+    servo.hidden(t, q, v, &an.degrees, &mut h).unwrap();
+    (d.tau, h)
+}
+
+/// Largest |x - y| / (1 + |y|) over two vectors of the same length.
+fn rel_gap(x: &[f64], y: &[f64]) -> f64 {
+    assert_eq!(x.len(), y.len());
+    x.iter()
+        .zip(y)
+        .map(|(a, b)| (a - b).abs() / (1.0 + b.abs()))
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn the_direct_route_equals_the_nested_dual_numbers() {
+    // Rows at their level's relative degree take y^(r) = B a - gamma, a = A^-1 (F + H tau)
+    // (servo module docs) instead of nested dual numbers along the flow and on tau; both are exact,
+    // so tau and the hidden constraints agree to round-off at states off the motion.
+    use progmo::programme::Constraints;
+    use progmo::scene::SceneSystem;
+    use progmo::servo::Servo;
+    for (name, direct) in [
+        ("overhead_crane", vec![1]),
+        ("rotary_crane", vec![2]),
+        ("passive_arm", vec![0, 1]),
+        ("thruster_cars", vec![]),
+    ] {
+        let path = root().join(format!("references/scenes/{name}.toml"));
+        let s = Scene::from_text(&path, &std::fs::read_to_string(&path).unwrap()).unwrap();
+        let an = s.servo_analysis().expect("actuated").expect("realizable");
+        let SceneSystem::Tree(p) = &s.system else {
+            panic!("{name}: a tree scene")
+        };
+        let act = p.constraints.actuation().expect("actuators");
+        let fast = Servo::new(&p.model, &p.constraints, act).reduced(an.reduction.as_ref());
+        let nested = Servo::new(&p.model, &p.constraints, act)
+            .reduced(an.reduction.as_ref())
+            .nested_only(true);
+        // the route: the rows at their level's degree (a crane's z_r rows too, inside)
+        assert_eq!(fast.direct_rows(&an.degrees), direct, "{name}");
+        assert!(nested.direct_rows(&an.degrees).is_empty());
+        let mut worst = 0.0f64;
+        for k in 0..4 {
+            let kf = k as f64;
+            let q: Vec<f64> = (p.q0.iter().enumerate())
+                .map(|(i, x)| x + 0.03 * (1.7 * kf + i as f64).sin())
+                .collect();
+            let v: Vec<f64> = (p.v0.iter().enumerate())
+                .map(|(i, x)| x + 0.1 * (0.9 * kf - i as f64).cos())
+                .collect();
+            let t = p.t0 + 0.13 * kf;
+            let (tau_f, h_f) = decoupled(&fast, &an, t, &q, &v);
+            let (tau_n, h_n) = decoupled(&nested, &an, t, &q, &v);
+            worst = worst.max(rel_gap(&tau_f, &tau_n)).max(rel_gap(&h_f, &h_n));
+            // negative control: the comparison sees a state 1e-6 away
+            let mut q2 = q.clone();
+            q2[0] += 1e-6;
+            let (tau_c, h_c) = decoupled(&nested, &an, t, &q2, &v);
+            let control = rel_gap(&tau_f, &tau_c).max(rel_gap(&h_f, &h_c));
+            assert!(control > 1e-9, "{name}: control {control:.1e} not seen");
+        }
+        assert!(worst < 1e-13, "{name}: direct vs nested {worst:.1e}");
+    }
+}

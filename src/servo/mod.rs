@@ -24,6 +24,14 @@
 //! Derivatives are exact: L^k g is evaluated by nesting k first-order dual numbers, each level
 //! seeded with the flow, (t, q, v) + eps (1, v, a) (Euclidean coordinates only: q' = v). b comes
 //! from one more dual level seeded on tau. Cost grows as 3^(k+1) model evaluations; k <= 5 here.
+//!
+//! The direct route: a row whose relative degree is its level's (2 for a position row, 1 for a
+//! velocity row, 0 for an acceleration row; the orthogonal and mixed realizations) reads
+//! y^(r) = B a - gamma (B, gamma of the programme's jet, jet.rs) with a = A^-1 (F + H tau) (2.2), so
+//!   a_i = (B A^-1 F - gamma)_i,   b_i = (B A^-1 H)_i:
+//! one jet and one Cholesky factorization, no dual level for the flow nor for tau. The
+//! combinations z_r of a [`Reduction`] whose rows all sit at their level's degree (the cranes) are
+//! built from the same quantities; only their own derivatives z^(k) nest dual numbers.
 
 use crate::linalg;
 use crate::model::{Model, Segment};
@@ -141,6 +149,9 @@ pub struct Servo<'a, M: Model, C: Constraints> {
     has_acc_rows: bool,
     /// The structure algorithm's step when b was rank-deficient at t0 ([`Reduction`]).
     red: Option<&'a Reduction>,
+    /// Nested dual numbers for every row (no direct route): the reference the direct route is
+    /// tested against ([`Servo::nested_only`]).
+    nested_only: bool,
 }
 
 type LieFn<M, C, T> =
@@ -162,7 +173,82 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
                 .iter()
                 .any(|r| r.level == crate::programme::Level::Acceleration),
             red: None,
+            nested_only: false,
         }
+    }
+
+    /// The same servo with every derivative taken by nested dual numbers (module docs: the
+    /// direct route switched off); the independent route the direct one is checked against.
+    pub fn nested_only(mut self, on: bool) -> Self {
+        self.nested_only = on;
+        self
+    }
+
+    /// The degree at which tau reaches row i directly, through a (y^(r) = B a - gamma): 2 for a
+    /// position row, 1 for a velocity row, 0 for an acceleration row.
+    fn level_degree(&self, i: usize) -> usize {
+        match self.cons.rows()[i].level {
+            crate::programme::Level::Position => 2,
+            crate::programme::Level::Velocity => 1,
+            crate::programme::Level::Acceleration => 0,
+        }
+    }
+
+    /// Does row i (of relative degree `k`) take the direct route?
+    fn is_direct(&self, i: usize, k: usize) -> bool {
+        !self.nested_only && k == self.level_degree(i)
+    }
+
+    /// Rows that take the direct route at the given (effective) degrees: the rows that are not
+    /// combinations z_r and sit at their level's degree.
+    pub fn direct_rows(&self, degrees: &[usize]) -> Vec<usize> {
+        (0..degrees.len())
+            .filter(|&i| !self.is_z(i) && self.is_direct(i, degrees[i]))
+            .collect()
+    }
+
+    /// y^(r) at tau = 0 (`val`) and b = d y^(r) / d tau (`db`, s x m) of every row at its level's
+    /// degree r, by the direct route (module docs): y^(r) = B a - gamma, a = A^-1 (F + H tau), so
+    /// val = B A^-1 F - gamma and db = B A^-1 H. Entries of rows at other degrees are meaningless.
+    fn direct<T: Scalar>(
+        &self,
+        t: T,
+        q: &[T],
+        v: &[T],
+        val: &mut [T],
+        db: &mut DMatrix<T>,
+    ) -> Result<(), linalg::Singular> {
+        let (s, m) = self.dims();
+        let n = v.len();
+        let segments = self.model.segments();
+        let mut jet = Jet::<C, T>::new(self.cons, segments, q.len(), n);
+        jet.compute(self.cons, segments, t, q, v);
+        let mut ws = self.model.workspace::<T>();
+        let mut a = DMatrix::from_element(n, n, T::zero());
+        self.model.mass_matrix(&mut ws, q, &mut a);
+        let mut x = vec![T::zero(); n];
+        let mut scratch = vec![T::zero(); n];
+        self.model
+            .natural_forces(&mut ws, t, q, v, &mut x, &mut scratch);
+        linalg::cholesky(&mut a, n)?;
+        linalg::cholesky_solve(&a, n, &mut x);
+        let bx = |x: &[T], i: usize| (0..n).fold(T::zero(), |acc, k| acc + jet.b[(i, k)] * x[k]);
+        for (i, y) in val.iter_mut().enumerate().take(s) {
+            *y = bx(&x, i) - jet.gamma[i];
+        }
+        let mut e = vec![T::zero(); m];
+        for j in 0..m {
+            e.iter_mut()
+                .enumerate()
+                .for_each(|(l, y)| *y = if l == j { T::one() } else { T::zero() });
+            x.iter_mut().for_each(|y| *y = T::zero());
+            self.act.add_force(t, q, &e, &mut x);
+            linalg::cholesky_solve(&a, n, &mut x);
+            for i in 0..s {
+                db[(i, j)] = bx(&x, i);
+            }
+        }
+        Ok(())
     }
 
     /// The same servo with the rows of a [`Reduction`] (from [`Analysis::reduction`]): the
@@ -381,6 +467,10 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         let mut vk = vec![T::zero(); s];
         let mut bk = DMatrix::from_element(s, m, T::zero());
         let mut ks = red.row_degrees.clone();
+        if (0..s).all(|i| self.is_direct(i, red.row_degrees[i])) {
+            self.direct(t, q, v, &mut val, &mut b)?;
+            ks.clear();
+        }
         ks.sort_unstable();
         ks.dedup();
         for &k in &ks {
@@ -531,9 +621,19 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         let mut rhs = vec![T::zero(); s];
         let mut val = vec![T::zero(); s];
         let mut db = DMatrix::from_element(s, m, T::zero());
+        let direct = self.direct_rows(degrees);
+        if !direct.is_empty() {
+            self.direct(t, q, v, &mut val, &mut db)?;
+            for &i in &direct {
+                rhs[i] = -val[i];
+                for j in 0..m {
+                    b[(i, j)] = db[(i, j)];
+                }
+            }
+        }
         for z in [false, true] {
             let mut ks: Vec<usize> = (0..s)
-                .filter(|&i| self.is_z(i) == z)
+                .filter(|&i| self.is_z(i) == z && !direct.contains(&i))
                 .map(|i| degrees[i])
                 .collect();
             ks.sort_unstable();
@@ -544,7 +644,9 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
                 } else {
                     self.lie_tau(k, t, q, v, &zero, &mut val, &mut db)?;
                 }
-                for i in (0..s).filter(|&i| degrees[i] == k && self.is_z(i) == z) {
+                for i in
+                    (0..s).filter(|&i| degrees[i] == k && self.is_z(i) == z && !direct.contains(&i))
+                {
                     rhs[i] = -val[i];
                     for j in 0..m {
                         b[(i, j)] = db[(i, j)];
