@@ -911,8 +911,10 @@ fn rel_gap(x: &[f64], y: &[f64]) -> f64 {
 #[test]
 fn the_direct_route_equals_the_nested_dual_numbers() {
     // Rows at their level's relative degree take y^(r) = B a - gamma, a = A^-1 (F + H tau)
-    // (servo module docs) instead of nested dual numbers along the flow and on tau; both are exact,
-    // so tau and the hidden constraints agree to round-off at states off the motion.
+    // (servo module docs) instead of nested dual numbers along the flow and on tau, and the other
+    // rows (the cranes' z_r, the thruster's degree-4 row) get d y^(k) / d tau from L^(k-1) seeded
+    // along A^-1 h_j (`flow_tau`) instead of tau-seeded passes of L^k; all routes are exact, so tau
+    // and the hidden constraints agree to round-off at states off the motion.
     use progmo::programme::Constraints;
     use progmo::scene::SceneSystem;
     use progmo::servo::Servo;

@@ -32,8 +32,10 @@ pub struct JetRows<'a, S: Scalar> {
 /// Derivatives of all rows at one state; preallocated, reused at every evaluation.
 pub struct Jet<C: Constraints, S: Scalar> {
     ws0: C::Workspace<S>,
-    ws1: C::Workspace<Dual<S>>,
-    ws2: C::Workspace<Dual2<S>>,
+    /// The generic passes' workspaces, made by their first use: constraints with their own
+    /// [`Constraints::jet`] never need them (a tree's workspace over `Dual2<S>` is large).
+    ws1: Option<C::Workspace<Dual<S>>>,
+    ws2: Option<C::Workspace<Dual2<S>>>,
     q1: Vec<Dual<S>>,
     v1: Vec<Dual<S>>,
     a1: Vec<Dual<S>>,
@@ -70,8 +72,8 @@ impl<C: Constraints, S: Scalar> Jet<C, S> {
         ];
         Jet {
             ws0: constraints.workspace(),
-            ws1: constraints.workspace(),
-            ws2: constraints.workspace(),
+            ws1: None,
+            ws2: None,
             q1: vec![Dual::from_re(S::zero()); nq],
             v1: vec![Dual::from_re(S::zero()); nv],
             a1: vec![Dual::from_re(S::zero()); nv],
@@ -106,7 +108,8 @@ impl<C: Constraints, S: Scalar> Jet<C, S> {
     }
 
     /// Compute B, gamma, the row values and dg/dt at (t, q, v): the constraints' own
-    /// [`Constraints::jet`] when they have one, else [`Jet::compute_generic`]. Allocates nothing.
+    /// [`Constraints::jet`] when they have one, else [`Jet::compute_generic`]. Allocates nothing
+    /// (the generic passes' workspaces once, at their first use).
     pub fn compute(&mut self, c: &C, segments: &[Segment], t: S, q: &[S], v: &[S]) {
         self.compute_with(c, segments, t, q, v, None)
     }
@@ -136,6 +139,8 @@ impl<C: Constraints, S: Scalar> Jet<C, S> {
     /// The generic passes over [`Constraints::eval`] (nv `Dual` passes per level and one `Dual2`
     /// pass); also the independent reference the specialised jets are tested against.
     pub fn compute_generic(&mut self, c: &C, segments: &[Segment], t: S, q: &[S], v: &[S]) {
+        self.ws1.get_or_insert_with(|| c.workspace());
+        self.ws2.get_or_insert_with(|| c.workspace());
         crate::model::qdot(segments, q, v, &mut self.qd);
         for x in self.gdot.iter_mut() {
             *x = S::zero();
@@ -172,7 +177,7 @@ impl<C: Constraints, S: Scalar> Jet<C, S> {
     /// One `Dual` pass of the constraints at (t1, q1, v1, a1) into `out1`.
     fn eval1(&mut self, c: &C, t1: Dual<S>) {
         c.eval(
-            &mut self.ws1,
+            self.ws1.as_mut().expect("made by compute_generic"),
             t1,
             &self.q1,
             &self.v1,
@@ -209,7 +214,7 @@ impl<C: Constraints, S: Scalar> Jet<C, S> {
         }
         let t2 = Dual2::new(t, S::one(), S::zero());
         c.eval(
-            &mut self.ws2,
+            self.ws2.as_mut().expect("made by compute_generic"),
             t2,
             &self.q2,
             &self.v2,

@@ -430,6 +430,72 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         Ok(())
     }
 
+    /// [`Servo::lie_tau`] (`z` false) or [`Servo::z_tau`] (`z` true) for the rows whose degree is
+    /// k >= 1, by the flow: L^(k-1) of such a row is free of tau, and tau enters
+    /// L^k = d/dt L^(k-1) only through the acceleration a = A^-1 (F + H tau) (2.2), so
+    ///   y^(k) = d/ds L^(k-1) (t + s, q + s v, v + s a),   d y^(k) / d tau_j = d/ds L^(k-1) (t, q, v + s A^-1 h_j):
+    /// one pass of the k-th derivative and m passes of the (k-1)-th instead of m passes of the
+    /// k-th. Rows of other degrees get meaningless entries; k = 0 (and [`Servo::nested_only`])
+    /// take the tau-seeded passes.
+    #[allow(clippy::too_many_arguments)]
+    fn flow_tau<T: Scalar>(
+        &self,
+        z: bool,
+        k: usize,
+        t: T,
+        q: &[T],
+        v: &[T],
+        tau: &[T],
+        val: &mut [T],
+        db: &mut DMatrix<T>,
+    ) -> Result<(), linalg::Singular> {
+        if k == 0 || self.nested_only {
+            return if z {
+                self.z_tau(k, t, q, v, tau, val, db)
+            } else {
+                self.lie_tau(k, t, q, v, tau, val, db)
+            };
+        }
+        let derivative = |k, t, q: &[T], v: &[T], tau: &[T], out: &mut [T]| {
+            if z {
+                self.zlie(k, t, q, v, tau, out)
+            } else {
+                self.lie(k, t, q, v, tau, out)
+            }
+        };
+        derivative(k, t, q, v, tau, val)?;
+        let (s, m) = self.dims();
+        let n = v.len();
+        let mut ws = self.model.workspace::<T>();
+        let mut a = DMatrix::from_element(n, n, T::zero());
+        self.model.mass_matrix(&mut ws, q, &mut a);
+        linalg::cholesky(&mut a, n)?;
+        let td = Dual::from_re(t);
+        let qd: Vec<Dual<T>> = q.iter().map(|&x| Dual::from_re(x)).collect();
+        let taud: Vec<Dual<T>> = tau.iter().map(|&x| Dual::from_re(x)).collect();
+        let mut e = vec![T::zero(); m];
+        let mut w = vec![T::zero(); n];
+        let mut o = vec![Dual::from_re(T::zero()); s];
+        for j in 0..m {
+            e.iter_mut()
+                .enumerate()
+                .for_each(|(l, y)| *y = if l == j { T::one() } else { T::zero() });
+            w.iter_mut().for_each(|y| *y = T::zero());
+            self.act.add_force(t, q, &e, &mut w);
+            linalg::cholesky_solve(&a, n, &mut w);
+            let vd: Vec<Dual<T>> = (0..n).map(|i| Dual::new(v[i], w[i])).collect();
+            if z {
+                self.zlie(k - 1, td, &qd, &vd, &taud, &mut o)?;
+            } else {
+                self.lie(k - 1, td, &qd, &vd, &taud, &mut o)?;
+            }
+            for i in 0..s {
+                db[(i, j)] = o[i].eps;
+            }
+        }
+        Ok(())
+    }
+
     /// L^k z of the reduction's combinations at constant tau, k <= [`MAX_REDUCED_DEGREE`].
     pub fn zlie<T: Scalar>(
         &self,
@@ -639,11 +705,7 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
             ks.sort_unstable();
             ks.dedup();
             for &k in &ks {
-                if z {
-                    self.z_tau(k, t, q, v, &zero, &mut val, &mut db)?;
-                } else {
-                    self.lie_tau(k, t, q, v, &zero, &mut val, &mut db)?;
-                }
+                self.flow_tau(z, k, t, q, v, &zero, &mut val, &mut db)?;
                 for i in
                     (0..s).filter(|&i| degrees[i] == k && self.is_z(i) == z && !direct.contains(&i))
                 {
