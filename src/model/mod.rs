@@ -31,7 +31,7 @@ pub enum Segment {
 /// A mechanical system as the solver sees it.
 pub trait Model: Send + Sync {
     /// Scratch space for evaluations over scalar type `S`.
-    type Workspace<S: Scalar>: Send;
+    type Workspace<S: Scalar>: Send + 'static;
 
     /// Allocate a workspace for scalar type `S`.
     fn workspace<S: Scalar>(&self) -> Self::Workspace<S>;

@@ -67,7 +67,7 @@ impl RowSpec {
 /// The rows of a programme together with the system's own constraints.
 pub trait Constraints: Send + Sync {
     /// Scratch space for evaluations over scalar type `S`.
-    type Workspace<S: Scalar>: Send;
+    type Workspace<S: Scalar>: Send + 'static;
 
     /// Allocate a workspace for scalar type `S`.
     fn workspace<S: Scalar>(&self) -> Self::Workspace<S>;

@@ -35,10 +35,15 @@
 
 use crate::linalg;
 use crate::model::{Model, Segment};
-use crate::programme::{jet::Jet, Constraints};
+use crate::programme::{
+    jet::{Jet, JetRows},
+    Constraints,
+};
 use crate::scalar::{re, Dual, Scalar};
 use nalgebra::DMatrix;
 use num_dual::Dual64;
+use std::any::{Any, TypeId};
+use std::collections::HashMap;
 
 pub mod internal;
 
@@ -152,6 +157,51 @@ pub struct Servo<'a, M: Model, C: Constraints> {
     /// Nested dual numbers for every row (no direct route): the reference the direct route is
     /// tested against ([`Servo::nested_only`]).
     nested_only: bool,
+    /// Workspaces kept by the caller between evaluations ([`WorkCache`]).
+    work: Option<&'a WorkCache>,
+}
+
+/// Workspaces of the servo's passes, one set per scalar type (each nested dual level has its
+/// own), made at first use and reused by every later evaluation: the owner (the evaluator, the
+/// projector) keeps it for the whole solve, so a right-hand side allocates no model or row
+/// workspace (a tree's workspace over nested duals is tens of kilobytes).
+#[derive(Default)]
+pub struct WorkCache(std::cell::RefCell<HashMap<TypeId, Box<dyn Any + Send>>>);
+
+impl WorkCache {
+    /// Run `f` on the cached `W` (made by `make` when absent, or while another call holds it).
+    fn with<W: Any + Send, R>(&self, make: impl FnOnce() -> W, f: impl FnOnce(&mut W) -> R) -> R {
+        let found = self.0.borrow_mut().remove(&TypeId::of::<W>());
+        let mut w = match found.map(|b| b.downcast::<W>()) {
+            Some(Ok(b)) => *b,
+            _ => make(),
+        };
+        let r = f(&mut w);
+        self.0.borrow_mut().insert(TypeId::of::<W>(), Box::new(w));
+        r
+    }
+}
+
+/// What [`Servo::accel`] and [`Servo::flow_tau`] need at one scalar type.
+struct AccelWork<W, T> {
+    ws: W,
+    a: DMatrix<T>,
+    scratch: Vec<T>,
+}
+
+/// What [`Servo::direct`] needs at one scalar type: the model's and the rows' workspaces and
+/// the jet's outputs.
+struct DirectWork<W, R, T> {
+    model: W,
+    rows: R,
+    b: DMatrix<T>,
+    gamma: Vec<T>,
+    value: Vec<T>,
+    gdot: Vec<T>,
+    a: DMatrix<T>,
+    x: Vec<T>,
+    scratch: Vec<T>,
+    e: Vec<T>,
 }
 
 type LieFn<M, C, T> =
@@ -174,6 +224,31 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
                 .any(|r| r.level == crate::programme::Level::Acceleration),
             red: None,
             nested_only: false,
+            work: None,
+        }
+    }
+
+    /// The same servo keeping its workspaces in `work` between calls ([`WorkCache`]).
+    pub fn cached(mut self, work: &'a WorkCache) -> Self {
+        self.work = Some(work);
+        self
+    }
+
+    /// Run `f` on the model's workspace, the n x n matrix and a scratch vector at scalar type T
+    /// (from the cache when there is one).
+    fn with_accel_work<T: Scalar, R>(
+        &self,
+        f: impl FnOnce(&mut AccelWork<M::Workspace<T>, T>) -> R,
+    ) -> R {
+        let n = self.model.nv();
+        let make = || AccelWork {
+            ws: self.model.workspace::<T>(),
+            a: DMatrix::from_element(n, n, T::zero()),
+            scratch: vec![T::zero(); n],
+        };
+        match self.work {
+            Some(w) => w.with(make, f),
+            None => f(&mut make()),
         }
     }
 
@@ -221,34 +296,67 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         let (s, m) = self.dims();
         let n = v.len();
         let segments = self.model.segments();
-        let mut jet = Jet::<C, T>::new(self.cons, segments, q.len(), n);
-        jet.compute(self.cons, segments, t, q, v);
-        let mut ws = self.model.workspace::<T>();
-        let mut a = DMatrix::from_element(n, n, T::zero());
-        self.model.mass_matrix(&mut ws, q, &mut a);
-        let mut x = vec![T::zero(); n];
-        let mut scratch = vec![T::zero(); n];
-        self.model
-            .natural_forces(&mut ws, t, q, v, &mut x, &mut scratch);
-        linalg::cholesky(&mut a, n)?;
-        linalg::cholesky_solve(&a, n, &mut x);
-        let bx = |x: &[T], i: usize| (0..n).fold(T::zero(), |acc, k| acc + jet.b[(i, k)] * x[k]);
-        for (i, y) in val.iter_mut().enumerate().take(s) {
-            *y = bx(&x, i) - jet.gamma[i];
-        }
-        let mut e = vec![T::zero(); m];
-        for j in 0..m {
-            e.iter_mut()
-                .enumerate()
-                .for_each(|(l, y)| *y = if l == j { T::one() } else { T::zero() });
-            x.iter_mut().for_each(|y| *y = T::zero());
-            self.act.add_force(t, q, &e, &mut x);
-            linalg::cholesky_solve(&a, n, &mut x);
-            for i in 0..s {
-                db[(i, j)] = bx(&x, i);
+        let make = || DirectWork {
+            model: self.model.workspace::<T>(),
+            rows: self.cons.workspace::<T>(),
+            b: DMatrix::from_element(s, n, T::zero()),
+            gamma: vec![T::zero(); s],
+            value: vec![T::zero(); s],
+            gdot: vec![T::zero(); s],
+            a: DMatrix::from_element(n, n, T::zero()),
+            x: vec![T::zero(); n],
+            scratch: vec![T::zero(); n],
+            e: vec![T::zero(); m],
+        };
+        let mut body = |w: &mut DirectWork<M::Workspace<T>, C::Workspace<T>, T>| {
+            let out = JetRows {
+                b: &mut w.b,
+                gamma: &mut w.gamma,
+                value: &mut w.value,
+                gdot: &mut w.gdot,
+            };
+            if !self.cons.jet(&mut w.rows, segments, t, q, v, out, None) {
+                let mut jet = Jet::<C, T>::new(self.cons, segments, q.len(), n);
+                jet.compute_generic(self.cons, segments, t, q, v);
+                w.b.copy_from(&jet.b);
+                w.gamma.copy_from_slice(&jet.gamma);
             }
+            let DirectWork {
+                model: ws,
+                b,
+                gamma,
+                a,
+                x,
+                scratch,
+                e,
+                ..
+            } = w;
+            self.model.mass_matrix(ws, q, a);
+            x.iter_mut().for_each(|y| *y = T::zero());
+            self.model.natural_forces(ws, t, q, v, x, scratch);
+            linalg::cholesky(a, n)?;
+            linalg::cholesky_solve(a, n, x);
+            let bx = |x: &[T], i: usize| (0..n).fold(T::zero(), |acc, k| acc + b[(i, k)] * x[k]);
+            for (i, y) in val.iter_mut().enumerate().take(s) {
+                *y = bx(x, i) - gamma[i];
+            }
+            for j in 0..m {
+                e.iter_mut()
+                    .enumerate()
+                    .for_each(|(l, y)| *y = if l == j { T::one() } else { T::zero() });
+                x.iter_mut().for_each(|y| *y = T::zero());
+                self.act.add_force(t, q, e, x);
+                linalg::cholesky_solve(a, n, x);
+                for i in 0..s {
+                    db[(i, j)] = bx(x, i);
+                }
+            }
+            Ok(())
+        };
+        match self.work {
+            Some(c) => c.with(make, body),
+            None => body(&mut make()),
         }
-        Ok(())
     }
 
     /// The same servo with the rows of a [`Reduction`] (from [`Analysis::reduction`]): the
@@ -283,16 +391,15 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         out: &mut [T],
     ) -> Result<(), linalg::Singular> {
         let n = self.model.nv();
-        let mut ws = self.model.workspace::<T>();
-        let mut a = DMatrix::from_element(n, n, T::zero());
-        self.model.mass_matrix(&mut ws, q, &mut a);
-        let mut scratch = vec![T::zero(); n];
-        self.model
-            .natural_forces(&mut ws, t, q, v, out, &mut scratch);
-        self.act.add_force(t, q, tau, out);
-        linalg::cholesky(&mut a, n)?;
-        linalg::cholesky_solve(&a, n, out);
-        Ok(())
+        self.with_accel_work(|w: &mut AccelWork<M::Workspace<T>, T>| {
+            self.model.mass_matrix(&mut w.ws, q, &mut w.a);
+            self.model
+                .natural_forces(&mut w.ws, t, q, v, out, &mut w.scratch);
+            self.act.add_force(t, q, tau, out);
+            linalg::cholesky(&mut w.a, n)?;
+            linalg::cholesky_solve(&w.a, n, out);
+            Ok(())
+        })
     }
 
     /// The rows at (t, q, v) with dv/dt from tau (k = 0).
@@ -308,8 +415,15 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         if self.has_acc_rows {
             self.accel(t, q, v, tau, &mut acc)?;
         }
-        let mut ws = self.cons.workspace::<T>();
-        self.cons.eval(&mut ws, t, q, v, &acc, out);
+        /// The rows' workspace at one scalar type ([`WorkCache`]).
+        struct RowsWork<R>(R);
+        let make = || RowsWork(self.cons.workspace::<T>());
+        let mut eval =
+            |w: &mut RowsWork<C::Workspace<T>>| self.cons.eval(&mut w.0, t, q, v, &acc, out);
+        match self.work {
+            Some(c) => c.with(make, eval),
+            None => eval(&mut make()),
+        }
         Ok(())
     }
 
@@ -466,10 +580,10 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         derivative(k, t, q, v, tau, val)?;
         let (s, m) = self.dims();
         let n = v.len();
-        let mut ws = self.model.workspace::<T>();
-        let mut a = DMatrix::from_element(n, n, T::zero());
-        self.model.mass_matrix(&mut ws, q, &mut a);
-        linalg::cholesky(&mut a, n)?;
+        let a = self.with_accel_work(|w: &mut AccelWork<M::Workspace<T>, T>| {
+            self.model.mass_matrix(&mut w.ws, q, &mut w.a);
+            linalg::cholesky(&mut w.a, n).map(|_| w.a.clone())
+        })?;
         let td = Dual::from_re(t);
         let qd: Vec<Dual<T>> = q.iter().map(|&x| Dual::from_re(x)).collect();
         let taud: Vec<Dual<T>> = tau.iter().map(|&x| Dual::from_re(x)).collect();

@@ -48,6 +48,8 @@ pub struct Evaluator<'a, M: Model, C: Constraints, S: Scalar> {
     servo_degrees: Option<Vec<usize>>,
     /// With actuators: each decoupling row's norm at t0 (reference of the vanishing-row test).
     servo_b_norms: Vec<f64>,
+    /// The servo passes' workspaces, kept for the solve.
+    servo_work: crate::servo::WorkCache,
     /// The structure algorithm's step, when the decoupling matrix was rank-deficient at t0.
     servo_reduction: Option<crate::servo::Reduction>,
     /// With actuators: u = H(t, q) tau at the last state.
@@ -77,6 +79,7 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
             row_scale: vec![1.0; s],
             servo_degrees: None,
             servo_b_norms: vec![],
+            servo_work: Default::default(),
             servo_reduction: None,
             servo_u: vec![z; nv],
             share_sweep: true,
@@ -230,7 +233,8 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
         v: &[S],
     ) -> Result<(), FormulationError> {
         let servo = crate::servo::Servo::new(self.model, self.cons, act)
-            .reduced(self.servo_reduction.as_ref());
+            .reduced(self.servo_reduction.as_ref())
+            .cached(&self.servo_work);
         let dec = servo
             .solve(
                 t,

@@ -46,6 +46,8 @@ pub struct Projector<'a, M: Model, C: Constraints> {
     cons: &'a C,
     /// Relative degrees of a servo programme: project onto its hidden constraints instead.
     servo: Option<(Vec<usize>, Option<crate::servo::Reduction>)>,
+    /// The servo passes' workspaces, kept for the solve.
+    servo_work: crate::servo::WorkCache,
 }
 
 impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
@@ -65,6 +67,7 @@ impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
             model,
             cons,
             servo: None,
+            servo_work: Default::default(),
         }
     }
 
@@ -99,7 +102,9 @@ impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
         max_iter: usize,
     ) -> ProjectionReport {
         if let (Some(act), Some((deg, red))) = (self.cons.actuation(), &self.servo) {
-            let servo = crate::servo::Servo::new(self.model, self.cons, act).reduced(red.as_ref());
+            let servo = crate::servo::Servo::new(self.model, self.cons, act)
+                .reduced(red.as_ref())
+                .cached(&self.servo_work);
             let out = servo.project(t, q, v, deg, tol, max_iter);
             let row = servo.hidden_names(deg).get(out.row).map_or(0, |(i, _)| *i);
             return ProjectionReport {
