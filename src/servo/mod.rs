@@ -31,7 +31,9 @@
 //!   a_i = (B A^-1 F - gamma)_i,   b_i = (B A^-1 H)_i:
 //! one jet and one Cholesky factorization, no dual level for the flow nor for tau. The
 //! combinations z_r of a [`Reduction`] whose rows all sit at their level's degree (the cranes) are
-//! built from the same quantities; only their own derivatives z^(k) nest dual numbers.
+//! built from the same quantities; only their own derivatives z^(k) nest dual numbers. For those
+//! (and rows of a higher degree) the decoupling takes d y^(k) / d tau from L^(k-1) seeded along
+//! A^-1 h_j (tau reaches L^k only through a): one pass of L^k and m of L^(k-1), not m of L^k.
 
 use crate::linalg;
 use crate::model::{Model, Segment};

@@ -8,14 +8,15 @@ against the crane's flat inverse (closed form, independent of the solver: the ro
 g - a_L). The ideal motion has no closed form: its runs are compared with a DOP853 run at
 rtol = atol = 1e-13 of the same scene (the floor shown is that reference against a radau5 run at
 1e-13). Cost: process CPU time of `scene.solve` (output every 0.1 s), RHS evaluations, and CPU time
-per RHS: the servo/ideal ratio of the latter is the cost of the index reduction (nested dual
-numbers up to depth 6 per decoupling, plus the hidden-constraint projection).
+per RHS: the servo/ideal ratio of the latter is the cost of the index reduction (the direct route
+for the kept row, nested dual numbers of depth 2 over the combination z = p_x'' - c p_z'' for its
+two further derivatives, plus the hidden-constraint projection).
 The servo runs' error hardly depends on the tolerance: the crane is flat, its 6 hidden constraints
 fix the whole state, and the projection after every step puts the state on the flat solution to
 the projection tolerance (1e-12); the tolerance buys only step count.
-Measured (`progmo bench --quick --only servo`, 2026-11-24, 2-core machine shared with builds): servo
-1.8e-13 .. 2.5e-16 in 0.79 .. 1.35 s CPU (152 .. 290 RHS, about 5 ms CPU per RHS); ideal 3 .. 4 us
-per RHS: the index reduction costs about 1500x per RHS.
+Measured (`progmo bench --quick --only servo --out /tmp/servo2`, 2026-11-28, commit 8305b2b): servo
+1.8e-13 .. 2.4e-16 in 8.7 .. 12.9 ms CPU (140 .. 275 RHS, 47 .. 62 us CPU per RHS); ideal 1.6 .. 2.1 us
+per RHS: the index reduction costs 30x per RHS (1164x with nested duals of depth 6 at commit 2cfd5db).
 """
 
 from __future__ import annotations
