@@ -961,3 +961,77 @@ fn the_direct_route_equals_the_nested_dual_numbers() {
         assert!(worst < 1e-13, "{name}: direct vs nested {worst:.1e}");
     }
 }
+
+#[test]
+fn a_kept_jacobian_projects_onto_the_same_hidden_constraints() {
+    // Simplified Newton (`Servo::project_with`): a Jacobian kept from an earlier projection is
+    // used while it shrinks the residual tenfold per step, else a fresh one replaces it. On the
+    // overhead crane the 6 hidden constraints fix the whole state (2n = 6), so the kept and the
+    // fresh Jacobian must land on the same point; on passive_arm (internal dynamics) both must
+    // meet the hidden constraints.
+    use progmo::programme::Constraints;
+    use progmo::scene::SceneSystem;
+    use progmo::servo::{KeptJacobian, Servo};
+    let tol = 1e-12;
+    for (name, fixed) in [("overhead_crane", true), ("passive_arm", false)] {
+        let path = root().join(format!("references/scenes/{name}.toml"));
+        let s = Scene::from_text(&path, &std::fs::read_to_string(&path).unwrap()).unwrap();
+        let an = s.servo_analysis().expect("actuated").expect("realizable");
+        let SceneSystem::Tree(p) = &s.system else {
+            panic!("{name}: a tree scene")
+        };
+        let act = p.constraints.actuation().expect("actuators");
+        let servo = Servo::new(&p.model, &p.constraints, act).reduced(an.reduction.as_ref());
+        let t = p.t0 + 0.2;
+        let near = |dx: f64| -> (Vec<f64>, Vec<f64>) {
+            let (mut q, mut v) = (p.q0.clone(), p.v0.clone());
+            servo.project(t, &mut q, &mut v, &an.degrees, tol, 20);
+            q.iter_mut()
+                .enumerate()
+                .for_each(|(i, x)| *x += dx * (1.0 + i as f64));
+            v.iter_mut()
+                .enumerate()
+                .for_each(|(i, x)| *x -= dx * (2.0 - i as f64));
+            (q, v)
+        };
+        let mut kept = KeptJacobian::default();
+        let (mut qa, mut va) = near(1e-5);
+        let first = servo.project_with(t, &mut qa, &mut va, &an.degrees, tol, 20, &mut kept);
+        assert!(first.converged && kept.fresh >= 1, "{name}: {first:?}");
+        let fresh_before = kept.fresh;
+        // a state 1e-7 off: the kept Jacobian does (no fresh one)
+        let (q1, v1) = near(1e-7);
+        let (mut qk, mut vk, mut qf, mut vf) = (q1.clone(), v1.clone(), q1.clone(), v1.clone());
+        let with_kept = servo.project_with(t, &mut qk, &mut vk, &an.degrees, tol, 20, &mut kept);
+        let fresh = servo.project(t, &mut qf, &mut vf, &an.degrees, tol, 20);
+        assert!(
+            with_kept.converged && fresh.converged,
+            "{name}: {with_kept:?} {fresh:?}"
+        );
+        assert_eq!(
+            kept.fresh, fresh_before,
+            "{name}: the kept Jacobian was replaced"
+        );
+        let mut h = vec![];
+        servo.hidden(t, &qk, &vk, &an.degrees, &mut h).unwrap();
+        let worst = h.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        assert!(
+            worst <= tol,
+            "{name}: hidden {worst:.1e} after the kept projection"
+        );
+        if fixed {
+            let gap = rel_gap(&qk, &qf).max(rel_gap(&vk, &vf));
+            assert!(gap < 1e-10, "{name}: kept vs fresh {gap:.1e}");
+        }
+        // a Jacobian kept at another time and far off (t + 1, 0.3 away) is replaced, and the
+        // projection still meets the hidden constraints
+        let mut stale = KeptJacobian::default();
+        let (mut qs, mut vs) = near(0.3);
+        servo.project_with(t + 1.0, &mut qs, &mut vs, &an.degrees, tol, 20, &mut stale);
+        let before = stale.fresh;
+        let (mut q2, mut v2) = near(1e-3);
+        let out = servo.project_with(t, &mut q2, &mut v2, &an.degrees, tol, 20, &mut stale);
+        assert!(out.converged, "{name}: {out:?}");
+        assert!(stale.fresh > before, "{name}: the stale Jacobian was kept");
+    }
+}

@@ -999,8 +999,10 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
     }
 
     /// Project (q, v) onto the hidden constraints: Gauss-Newton steps of the least (Euclidean)
-    /// correction, dx = -J^T (J J^T)^-1 h with J = dh/d(q, v) exact (one dual pass per coordinate).
-    /// Returns (iterations, |dq|, |dv|, residual, index of the worst hidden constraint, converged).
+    /// correction, dx = -J^T (J J^T)^-1 h with J = dh/d(q, v) exact (one dual pass per coordinate)
+    /// at the first iterate, kept while a step shrinks the residual tenfold (simplified Newton,
+    /// [`Servo::project_with`]). Returns (iterations, |dq|, |dv|, residual, index of the worst
+    /// hidden constraint, converged).
     pub fn project(
         &self,
         t: f64,
@@ -1010,11 +1012,39 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         tol: f64,
         max_iter: usize,
     ) -> ProjectOutcome {
+        self.project_with(
+            t,
+            q,
+            v,
+            degrees,
+            tol,
+            max_iter,
+            &mut KeptJacobian::default(),
+        )
+    }
+
+    /// [`Servo::project`] starting from the Jacobian `kept` from an earlier projection (simplified
+    /// Newton, Hairer, Lubich & Wanner, Geometric Numerical Integration, Sec. IV.4): the
+    /// corrections then lie in the rows of that Jacobian, and a step that does not shrink the
+    /// residual tenfold takes a fresh one (kept for the next call). The projected state meets the
+    /// hidden constraints to `tol` either way; the 2n dual passes of a fresh Jacobian are the
+    /// projection's cost.
+    #[allow(clippy::too_many_arguments)]
+    pub fn project_with(
+        &self,
+        t: f64,
+        q: &mut [f64],
+        v: &mut [f64],
+        degrees: &[usize],
+        tol: f64,
+        max_iter: usize,
+        kept: &mut KeptJacobian,
+    ) -> ProjectOutcome {
         let n = v.len();
         let mut h = vec![];
-        let mut hd: Vec<Dual64> = vec![];
         let mut out = ProjectOutcome::default();
         let (q0, v0) = (q.to_vec(), v.to_vec());
+        let mut last = f64::INFINITY;
         for it in 0..=max_iter {
             if self.hidden(t, q, v, degrees, &mut h).is_err() {
                 out.residual = f64::NAN;
@@ -1037,33 +1067,21 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
                 break;
             }
             let nh = h.len();
-            let mut jac = DMatrix::zeros(nh, 2 * n);
-            for c in 0..2 * n {
-                let qd: Vec<Dual64> = (0..n)
-                    .map(|i| Dual::new(q[i], if c == i { 1.0 } else { 0.0 }))
-                    .collect();
-                let vd: Vec<Dual64> = (0..n)
-                    .map(|i| Dual::new(v[i], if c == n + i { 1.0 } else { 0.0 }))
-                    .collect();
-                if self
-                    .hidden(Dual::from_re(t), &qd, &vd, degrees, &mut hd)
-                    .is_err()
-                {
-                    out.residual = f64::NAN;
-                    return out;
-                }
-                for (r, x) in hd.iter().enumerate() {
-                    jac[(r, c)] = x.eps;
+            if !kept.valid || kept.jac.shape() != (nh, 2 * n) || worst > 0.1 * last {
+                match self.fresh_jacobian(t, q, v, degrees, kept) {
+                    Ok(()) => {}
+                    Err(Some(())) => break,
+                    Err(None) => {
+                        out.residual = f64::NAN;
+                        return out;
+                    }
                 }
             }
-            let mut jjt = &jac * jac.transpose();
-            if linalg::cholesky(&mut jjt, nh).is_err() {
-                break;
-            }
+            last = worst;
             let mut mu = h.clone();
-            linalg::cholesky_solve(&jjt, nh, &mut mu);
+            linalg::cholesky_solve(&kept.jjt, nh, &mut mu);
             for c in 0..2 * n {
-                let d: f64 = (0..nh).map(|r| jac[(r, c)] * mu[r]).sum();
+                let d: f64 = (0..nh).map(|r| kept.jac[(r, c)] * mu[r]).sum();
                 if c < n {
                     q[c] -= d;
                 } else {
@@ -1083,6 +1101,69 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f64::max);
         out
+    }
+
+    /// J = dh/d(q, v) of the hidden constraints at (t, q, v) (one dual pass per coordinate) and
+    /// the Cholesky factor of J J^T into `kept`. Err(None): a hidden constraint could not be
+    /// evaluated; Err(Some(())): J J^T is singular.
+    fn fresh_jacobian(
+        &self,
+        t: f64,
+        q: &[f64],
+        v: &[f64],
+        degrees: &[usize],
+        kept: &mut KeptJacobian,
+    ) -> Result<(), Option<()>> {
+        let n = v.len();
+        kept.valid = false;
+        let mut hd: Vec<Dual64> = vec![];
+        let mut jac = DMatrix::zeros(0, 2 * n);
+        for c in 0..2 * n {
+            let qd: Vec<Dual64> = (0..n)
+                .map(|i| Dual::new(q[i], if c == i { 1.0 } else { 0.0 }))
+                .collect();
+            let vd: Vec<Dual64> = (0..n)
+                .map(|i| Dual::new(v[i], if c == n + i { 1.0 } else { 0.0 }))
+                .collect();
+            self.hidden(Dual::from_re(t), &qd, &vd, degrees, &mut hd)
+                .map_err(|_| None)?;
+            if c == 0 {
+                jac = DMatrix::zeros(hd.len(), 2 * n);
+            }
+            for (r, x) in hd.iter().enumerate() {
+                jac[(r, c)] = x.eps;
+            }
+        }
+        let nh = jac.nrows();
+        let mut jjt = &jac * jac.transpose();
+        linalg::cholesky(&mut jjt, nh).map_err(|_| Some(()))?;
+        kept.jac = jac;
+        kept.jjt = jjt;
+        kept.valid = true;
+        kept.fresh += 1;
+        Ok(())
+    }
+}
+
+/// The Jacobian of the hidden constraints and the Cholesky factor of J J^T, kept between
+/// projections by their owner ([`Servo::project_with`]).
+#[derive(Clone, Debug)]
+pub struct KeptJacobian {
+    jac: DMatrix<f64>,
+    jjt: DMatrix<f64>,
+    valid: bool,
+    /// Fresh Jacobians computed into it so far.
+    pub fresh: usize,
+}
+
+impl Default for KeptJacobian {
+    fn default() -> Self {
+        KeptJacobian {
+            jac: DMatrix::zeros(0, 0),
+            jjt: DMatrix::zeros(0, 0),
+            valid: false,
+            fresh: 0,
+        }
     }
 }
 

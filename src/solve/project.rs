@@ -48,6 +48,8 @@ pub struct Projector<'a, M: Model, C: Constraints> {
     servo: Option<(Vec<usize>, Option<crate::servo::Reduction>)>,
     /// The servo passes' workspaces, kept for the solve.
     servo_work: crate::servo::WorkCache,
+    /// The hidden constraints' Jacobian of the last servo projection (simplified Newton).
+    servo_jac: crate::servo::KeptJacobian,
 }
 
 impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
@@ -68,6 +70,7 @@ impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
             cons,
             servo: None,
             servo_work: Default::default(),
+            servo_jac: Default::default(),
         }
     }
 
@@ -105,7 +108,7 @@ impl<'a, M: Model, C: Constraints> Projector<'a, M, C> {
             let servo = crate::servo::Servo::new(self.model, self.cons, act)
                 .reduced(red.as_ref())
                 .cached(&self.servo_work);
-            let out = servo.project(t, q, v, deg, tol, max_iter);
+            let out = servo.project_with(t, q, v, deg, tol, max_iter, &mut self.servo_jac);
             let row = servo.hidden_names(deg).get(out.row).map_or(0, |(i, _)| *i);
             return ProjectionReport {
                 iterations: out.iterations,
