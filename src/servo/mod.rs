@@ -311,31 +311,35 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
             e: vec![T::zero(); m],
         };
         let mut body = |w: &mut DirectWork<M::Workspace<T>, C::Workspace<T>, T>| {
-            let out = JetRows {
-                b: &mut w.b,
-                gamma: &mut w.gamma,
-                value: &mut w.value,
-                gdot: &mut w.gdot,
-            };
-            if !self.cons.jet(&mut w.rows, segments, t, q, v, out, None) {
-                let mut jet = Jet::<C, T>::new(self.cons, segments, q.len(), n);
-                jet.compute_generic(self.cons, segments, t, q, v);
-                w.b.copy_from(&jet.b);
-                w.gamma.copy_from_slice(&jet.gamma);
-            }
             let DirectWork {
                 model: ws,
+                rows,
                 b,
                 gamma,
+                value,
+                gdot,
                 a,
                 x,
                 scratch,
                 e,
-                ..
             } = w;
+            // A and F first: the rows' jet then reads the model's forward passes (one sweep).
             self.model.mass_matrix(ws, q, a);
             x.iter_mut().for_each(|y| *y = T::zero());
             self.model.natural_forces(ws, t, q, v, x, scratch);
+            let out = JetRows {
+                b,
+                gamma,
+                value,
+                gdot,
+            };
+            let sweep = self.model.tree_sweep(ws);
+            if !self.cons.jet(rows, segments, t, q, v, out, sweep) {
+                let mut jet = Jet::<C, T>::new(self.cons, segments, q.len(), n);
+                jet.compute_generic(self.cons, segments, t, q, v);
+                b.copy_from(&jet.b);
+                gamma.copy_from_slice(&jet.gamma);
+            }
             linalg::cholesky(a, n)?;
             linalg::cholesky_solve(a, n, x);
             let bx = |x: &[T], i: usize| (0..n).fold(T::zero(), |acc, k| acc + b[(i, k)] * x[k]);
