@@ -173,13 +173,15 @@ pub struct WorkCache(std::cell::RefCell<HashMap<TypeId, Box<dyn Any + Send>>>);
 impl WorkCache {
     /// Run `f` on the cached `W` (made by `make` when absent, or while another call holds it).
     fn with<W: Any + Send, R>(&self, make: impl FnOnce() -> W, f: impl FnOnce(&mut W) -> R) -> R {
+        // the box leaves the map while in use (a nested call of the same type makes its own)
+        // and goes back as it is: no allocation, no copy of W
         let found = self.0.borrow_mut().remove(&TypeId::of::<W>());
-        let mut w = match found.map(|b| b.downcast::<W>()) {
-            Some(Ok(b)) => *b,
-            _ => make(),
+        let mut w: Box<W> = match found.map(|b| b.downcast::<W>()) {
+            Some(Ok(b)) => b,
+            _ => Box::new(make()),
         };
         let r = f(&mut w);
-        self.0.borrow_mut().insert(TypeId::of::<W>(), Box::new(w));
+        self.0.borrow_mut().insert(TypeId::of::<W>(), w);
         r
     }
 }
@@ -714,6 +716,15 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         v: &[f64],
         rank_tol: f64,
     ) -> Result<Analysis, Unrealizable> {
+        if self.work.is_none() {
+            // passes over up to six nested dual levels, m per order: one workspace per type
+            let work = WorkCache::default();
+            return Servo {
+                work: Some(&work),
+                ..*self
+            }
+            .analyse(t, q, v, rank_tol);
+        }
         let (s, m) = self.dims();
         let tau = vec![0.0; m];
         let mut val = vec![0.0; s];
