@@ -1035,3 +1035,57 @@ fn a_kept_jacobian_projects_onto_the_same_hidden_constraints() {
         assert!(stale.fresh > before, "{name}: the stale Jacobian was kept");
     }
 }
+
+#[test]
+fn one_pass_of_the_highest_order_gives_every_lower_order() {
+    // `Servo::tau_upto` (the analysis) reads d y^(k)/d tau for all k <= 5 (and d z^(k)/d tau for
+    // k <= 3) from the nested levels of one pass per actuator: the same numbers as `lie_tau` /
+    // `z_tau` order by order.
+    use nalgebra::DMatrix;
+    use progmo::programme::Constraints;
+    use progmo::scene::SceneSystem;
+    use progmo::servo::{Servo, MAX_REDUCED_DEGREE, MAX_RELATIVE_DEGREE};
+    for name in ["overhead_crane", "thruster_cars"] {
+        let path = root().join(format!("references/scenes/{name}.toml"));
+        let s = Scene::from_text(&path, &std::fs::read_to_string(&path).unwrap()).unwrap();
+        let an = s.servo_analysis().expect("actuated").expect("realizable");
+        let SceneSystem::Tree(p) = &s.system else {
+            panic!("{name}: a tree scene")
+        };
+        let act = p.constraints.actuation().expect("actuators");
+        let servo = Servo::new(&p.model, &p.constraints, act).reduced(an.reduction.as_ref());
+        let (sn, m) = servo.dims();
+        let tau = vec![0.3; m];
+        let (t, q, v) = (p.t0 + 0.1, p.q0.clone(), p.v0.clone());
+        let mut val = vec![0.0; sn];
+        for (z, top) in [(false, MAX_RELATIVE_DEGREE), (true, MAX_REDUCED_DEGREE)] {
+            if z && an.reduction.is_none() {
+                continue;
+            }
+            let mut all = vec![DMatrix::zeros(sn, m); top + 1];
+            servo.tau_upto(z, t, &q, &v, &tau, &mut all).unwrap();
+            for (k, got) in all.iter().enumerate() {
+                let mut want = DMatrix::zeros(sn, m);
+                if z {
+                    servo
+                        .z_tau(k, t, &q, &v, &tau, &mut val, &mut want)
+                        .unwrap();
+                } else {
+                    servo
+                        .lie_tau(k, t, &q, &v, &tau, &mut val, &mut want)
+                        .unwrap();
+                }
+                let scale = want.amax().max(1.0);
+                let gap = (got - &want).amax() / scale;
+                assert!(gap < 1e-14, "{name} z = {z} k = {k}: {gap:.1e}");
+                // control: the order above differs
+                if k < top && want.amax() > 0.0 {
+                    assert!(
+                        (&all[k + 1] - &want).amax() > 1e-9 * scale,
+                        "{name} k = {k}"
+                    );
+                }
+            }
+        }
+    }
+}

@@ -286,14 +286,16 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
             .collect()
     }
 
-    /// y^(r) at tau = 0 (`val`) and b = d y^(r) / d tau (`db`, s x m) of every row at its level's
-    /// degree r, by the direct route (module docs): y^(r) = B a - gamma, a = A^-1 (F + H tau), so
-    /// val = B A^-1 F - gamma and db = B A^-1 H. Entries of rows at other degrees are meaningless.
+    /// y^(r) at tau = 0 (`val`) and b = d y^(r) / d tau (`db`, s x m; only the columns `cols` when
+    /// given) of every row at its level's degree r, by the direct route (module docs):
+    /// y^(r) = B a - gamma, a = A^-1 (F + H tau), so val = B A^-1 F - gamma and db = B A^-1 H.
+    /// Entries of rows at other degrees are meaningless.
     fn direct<T: Scalar>(
         &self,
         t: T,
         q: &[T],
         v: &[T],
+        cols: Option<&[usize]>,
         val: &mut [T],
         db: &mut DMatrix<T>,
     ) -> Result<(), linalg::Singular> {
@@ -348,7 +350,7 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
             for (i, y) in val.iter_mut().enumerate().take(s) {
                 *y = bx(x, i) - gamma[i];
             }
-            for j in 0..m {
+            for j in (0..m).filter(|j| cols.is_none_or(|c| c.contains(j))) {
                 e.iter_mut()
                     .enumerate()
                     .for_each(|(l, y)| *y = if l == j { T::one() } else { T::zero() });
@@ -496,6 +498,48 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         self.tau_columns(t, q, v, tau, val, db, |td, qd, vd, taud, o| {
             self.lie(k, td, qd, vd, taud, o)
         })
+    }
+
+    /// d y^(k) / d tau for every k <= [`MAX_RELATIVE_DEGREE`] (`z` false) or d z^(k) / d tau for
+    /// every k <= [`MAX_REDUCED_DEGREE`] (`z` true) into `bk` (s x m each, one per order): the same
+    /// numbers as [`Servo::lie_tau`] / [`Servo::z_tau`] order by order, from one tau-seeded pass
+    /// per actuator of the highest order (its nested levels hold the lower ones).
+    pub fn tau_upto<T: Scalar>(
+        &self,
+        z: bool,
+        t: T,
+        q: &[T],
+        v: &[T],
+        tau: &[T],
+        bk: &mut [DMatrix<T>],
+    ) -> Result<(), linalg::Singular> {
+        let (s, m) = self.dims();
+        let top = if z {
+            MAX_REDUCED_DEGREE
+        } else {
+            MAX_RELATIVE_DEGREE
+        };
+        assert_eq!(bk.len(), top + 1, "one matrix per order");
+        let td = Dual::from_re(t);
+        let qd: Vec<Dual<T>> = q.iter().map(|&x| Dual::from_re(x)).collect();
+        let vd: Vec<Dual<T>> = v.iter().map(|&x| Dual::from_re(x)).collect();
+        let mut outs = vec![vec![Dual::from_re(T::zero()); s]; top + 1];
+        for j in 0..m {
+            let taud: Vec<Dual<T>> = (0..m)
+                .map(|l| Dual::new(tau[l], if l == j { T::one() } else { T::zero() }))
+                .collect();
+            if z {
+                zupto3(self, td, &qd, &vd, &taud, &mut outs)?;
+            } else {
+                upto5(self, td, &qd, &vd, &taud, &mut outs)?;
+            }
+            for (b, o) in bk.iter_mut().zip(&outs) {
+                for i in 0..s {
+                    b[(i, j)] = o[i].eps;
+                }
+            }
+        }
+        Ok(())
     }
 
     /// [`Servo::lie_tau`] of the combinations z_r of the reduction (k <= [`MAX_REDUCED_DEGREE`]);
@@ -656,7 +700,8 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         let mut bk = DMatrix::from_element(s, m, T::zero());
         let mut ks = red.row_degrees.clone();
         if (0..s).all(|i| self.is_direct(i, red.row_degrees[i])) {
-            self.direct(t, q, v, &mut val, &mut b)?;
+            // c_r reads the pivot columns J only
+            self.direct(t, q, v, Some(&red.cols), &mut val, &mut b)?;
             ks.clear();
         }
         ks.sort_unstable();
@@ -727,12 +772,9 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         }
         let (s, m) = self.dims();
         let tau = vec![0.0; m];
-        let mut val = vec![0.0; s];
         let mut bk = vec![DMatrix::zeros(s, m); MAX_RELATIVE_DEGREE + 1];
-        for (k, b) in bk.iter_mut().enumerate() {
-            self.lie_tau(k, t, q, v, &tau, &mut val, b)
-                .map_err(|_| Unrealizable::Model)?;
-        }
+        self.tau_upto(false, t, q, v, &tau, &mut bk)
+            .map_err(|_| Unrealizable::Model)?;
         let degrees = first_degrees(&bk, s, m)?;
         let b_norms: Vec<f64> = (0..s).map(|i| row_norm(&bk[degrees[i]], i)).collect();
         let index = degrees.iter().copied().max().unwrap_or(0) + 1;
@@ -760,11 +802,9 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
             ..*self
         };
         let mut zk = vec![DMatrix::zeros(s, m); MAX_REDUCED_DEGREE + 1];
-        for (k, b) in zk.iter_mut().enumerate() {
-            servo
-                .z_tau(k, t, q, v, &tau, &mut val, b)
-                .map_err(|_| Unrealizable::Model)?;
-        }
+        servo
+            .tau_upto(true, t, q, v, &tau, &mut zk)
+            .map_err(|_| Unrealizable::Model)?;
         let mut eff = degrees.clone();
         let mut norms = b_norms;
         let mut missing = vec![];
@@ -820,7 +860,7 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         let mut db = DMatrix::from_element(s, m, T::zero());
         let direct = self.direct_rows(degrees);
         if !direct.is_empty() {
-            self.direct(t, q, v, &mut val, &mut db)?;
+            self.direct(t, q, v, None, &mut val, &mut db)?;
             for &i in &direct {
                 rhs[i] = -val[i];
                 for j in 0..m {
@@ -1241,6 +1281,72 @@ lie_level!(lie2, lie1);
 lie_level!(lie3, lie2);
 lie_level!(lie4, lie3);
 lie_level!(lie5, lie4);
+
+/// L^j g for every j <= k (k + 1 = `outs.len()`) from one evaluation of L^k: the nested level j
+/// holds L^(k-1-j) and its derivative ([`Servo::lie_tau_upto`]).
+fn upto0<M: Model, C: Constraints, T: Scalar>(
+    x: &Servo<'_, M, C>,
+    t: T,
+    q: &[T],
+    v: &[T],
+    tau: &[T],
+    outs: &mut [Vec<T>],
+) -> Result<(), linalg::Singular> {
+    x.rows_at(t, q, v, tau, &mut outs[0])
+}
+
+macro_rules! upto_level {
+    ($name:ident, $inner:ident, $k:expr) => {
+        fn $name<M: Model, C: Constraints, T: Scalar>(
+            x: &Servo<'_, M, C>,
+            t: T,
+            q: &[T],
+            v: &[T],
+            tau: &[T],
+            outs: &mut [Vec<T>],
+        ) -> Result<(), linalg::Singular> {
+            let (n, s) = (v.len(), outs[0].len());
+            let mut a = vec![T::zero(); n];
+            x.accel(t, q, v, tau, &mut a)?;
+            let td = Dual::new(t, T::one());
+            let qd: Vec<Dual<T>> = (0..n).map(|i| Dual::new(q[i], v[i])).collect();
+            let vd: Vec<Dual<T>> = (0..n).map(|i| Dual::new(v[i], a[i])).collect();
+            let taud: Vec<Dual<T>> = tau.iter().map(|&y| Dual::from_re(y)).collect();
+            let mut inner = vec![vec![Dual::from_re(T::zero()); s]; $k];
+            $inner::<M, C, Dual<T>>(x, td, &qd, &vd, &taud, &mut inner)?;
+            for j in 0..$k {
+                for i in 0..s {
+                    outs[j][i] = inner[j][i].re;
+                }
+            }
+            for i in 0..s {
+                outs[$k][i] = inner[$k - 1][i].eps;
+            }
+            Ok(())
+        }
+    };
+}
+// the chains end at MAX_RELATIVE_DEGREE = 5 and MAX_REDUCED_DEGREE = 3
+const _: () = assert!(MAX_RELATIVE_DEGREE == 5 && MAX_REDUCED_DEGREE == 3);
+upto_level!(upto1, upto0, 1);
+upto_level!(upto2, upto1, 2);
+upto_level!(upto3, upto2, 3);
+upto_level!(upto4, upto3, 4);
+upto_level!(upto5, upto4, 5);
+
+fn zupto0<M: Model, C: Constraints, T: Scalar>(
+    x: &Servo<'_, M, C>,
+    t: T,
+    q: &[T],
+    v: &[T],
+    _tau: &[T],
+    outs: &mut [Vec<T>],
+) -> Result<(), linalg::Singular> {
+    x.zrows(t, q, v, &mut outs[0])
+}
+upto_level!(zupto1, zupto0, 1);
+upto_level!(zupto2, zupto1, 2);
+upto_level!(zupto3, zupto2, 3);
 
 fn zlie0<M: Model, C: Constraints, T: Scalar>(
     x: &Servo<'_, M, C>,
