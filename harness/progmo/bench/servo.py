@@ -14,10 +14,11 @@ two further derivatives, plus the hidden-constraint projection).
 The servo runs' error hardly depends on the tolerance: the crane is flat, its 6 hidden constraints
 fix the whole state, and the projection after every step puts the state on the flat solution to
 the projection tolerance (1e-12); the tolerance buys only step count.
-Measured (`progmo bench --quick --only servo --out /tmp/servo2`, 2026-11-28, commit 8305b2b): servo
-1.8e-13 .. 2.4e-16 in 8.7 .. 12.9 ms CPU (140 .. 275 RHS, 47 .. 62 us CPU per RHS); ideal 1.6 .. 2.1 us
-per RHS: the index reduction costs 30x per RHS (1164x with nested duals of depth 6 at commit 2cfd5db).
-"""
+Measured (`progmo bench --quick --only servo --out /tmp/servo6`, 2026-11-28, commit 450a6da): servo
+5.1e-14 .. 7.0e-13 in 5.4 .. 8.1 ms CPU (140 .. 275 RHS, 30 .. 39 us CPU per RHS); ideal 1.5 .. 2.1 us
+per RHS: the index reduction costs 18-19x per RHS in four runs (1164x with nested duals of depth 6 at
+commit 2cfd5db). The servo error is the projection tolerance's (simplified Newton stops within
+1e-12; full Newton overshot to 1e-16)."""
 
 from __future__ import annotations
 
