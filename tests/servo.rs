@@ -879,6 +879,31 @@ fn a_cylinder_turning_square_to_the_rail_stops_the_solve_naming_the_row() {
     }
 }
 
+/// A bundled servo scene and its analysis at t0.
+fn servo_scene(name: &str) -> (Scene, progmo::servo::Analysis) {
+    let path = root().join(format!("references/scenes/{name}.toml"));
+    let s = Scene::from_text(&path, &std::fs::read_to_string(&path).unwrap()).unwrap();
+    let an = s.servo_analysis().expect("actuated").expect("realizable");
+    (s, an)
+}
+
+/// The tree problem of a servo scene and its actuation.
+fn tree_and_actuation(
+    s: &Scene,
+) -> (
+    &progmo::solve::Problem<
+        progmo::scene::tree_model::TreeSceneModel,
+        progmo::scene::rows::ExprConstraints,
+    >,
+    &progmo::servo::Actuation,
+) {
+    use progmo::programme::Constraints;
+    let progmo::scene::SceneSystem::Tree(p) = &s.system else {
+        panic!("{}: a tree scene", s.name)
+    };
+    (p, p.constraints.actuation().expect("actuators"))
+}
+
 /// tau, the hidden constraints and |b_i| of the decoupling at (t, q, v), by the given servo.
 fn decoupled(
     servo: &progmo::servo::Servo<
@@ -915,8 +940,6 @@ fn the_direct_route_equals_the_nested_dual_numbers() {
     // rows (the cranes' z_r, the thruster's degree-4 row) get d y^(k) / d tau from L^(k-1) seeded
     // along A^-1 h_j (`flow_tau`) instead of tau-seeded passes of L^k; all routes are exact, so tau
     // and the hidden constraints agree to round-off at states off the motion.
-    use progmo::programme::Constraints;
-    use progmo::scene::SceneSystem;
     use progmo::servo::Servo;
     for (name, direct) in [
         ("overhead_crane", vec![1]),
@@ -924,13 +947,8 @@ fn the_direct_route_equals_the_nested_dual_numbers() {
         ("passive_arm", vec![0, 1]),
         ("thruster_cars", vec![]),
     ] {
-        let path = root().join(format!("references/scenes/{name}.toml"));
-        let s = Scene::from_text(&path, &std::fs::read_to_string(&path).unwrap()).unwrap();
-        let an = s.servo_analysis().expect("actuated").expect("realizable");
-        let SceneSystem::Tree(p) = &s.system else {
-            panic!("{name}: a tree scene")
-        };
-        let act = p.constraints.actuation().expect("actuators");
+        let (s, an) = servo_scene(name);
+        let (p, act) = tree_and_actuation(&s);
         let fast = Servo::new(&p.model, &p.constraints, act).reduced(an.reduction.as_ref());
         let nested = Servo::new(&p.model, &p.constraints, act)
             .reduced(an.reduction.as_ref())
@@ -969,18 +987,11 @@ fn a_kept_jacobian_projects_onto_the_same_hidden_constraints() {
     // overhead crane the 6 hidden constraints fix the whole state (2n = 6), so the kept and the
     // fresh Jacobian must land on the same point; on passive_arm (internal dynamics) both must
     // meet the hidden constraints.
-    use progmo::programme::Constraints;
-    use progmo::scene::SceneSystem;
     use progmo::servo::{KeptJacobian, Servo};
     let tol = 1e-12;
     for (name, fixed) in [("overhead_crane", true), ("passive_arm", false)] {
-        let path = root().join(format!("references/scenes/{name}.toml"));
-        let s = Scene::from_text(&path, &std::fs::read_to_string(&path).unwrap()).unwrap();
-        let an = s.servo_analysis().expect("actuated").expect("realizable");
-        let SceneSystem::Tree(p) = &s.system else {
-            panic!("{name}: a tree scene")
-        };
-        let act = p.constraints.actuation().expect("actuators");
+        let (s, an) = servo_scene(name);
+        let (p, act) = tree_and_actuation(&s);
         let servo = Servo::new(&p.model, &p.constraints, act).reduced(an.reduction.as_ref());
         let t = p.t0 + 0.2;
         let near = |dx: f64| -> (Vec<f64>, Vec<f64>) {
@@ -1042,17 +1053,10 @@ fn one_pass_of_the_highest_order_gives_every_lower_order() {
     // k <= 3) from the nested levels of one pass per actuator: the same numbers as `lie_tau` /
     // `z_tau` order by order.
     use nalgebra::DMatrix;
-    use progmo::programme::Constraints;
-    use progmo::scene::SceneSystem;
     use progmo::servo::{Servo, MAX_REDUCED_DEGREE, MAX_RELATIVE_DEGREE};
     for name in ["overhead_crane", "thruster_cars"] {
-        let path = root().join(format!("references/scenes/{name}.toml"));
-        let s = Scene::from_text(&path, &std::fs::read_to_string(&path).unwrap()).unwrap();
-        let an = s.servo_analysis().expect("actuated").expect("realizable");
-        let SceneSystem::Tree(p) = &s.system else {
-            panic!("{name}: a tree scene")
-        };
-        let act = p.constraints.actuation().expect("actuators");
+        let (s, an) = servo_scene(name);
+        let (p, act) = tree_and_actuation(&s);
         let servo = Servo::new(&p.model, &p.constraints, act).reduced(an.reduction.as_ref());
         let (sn, m) = servo.dims();
         let tau = vec![0.3; m];
