@@ -286,6 +286,25 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
             .collect()
     }
 
+    /// A^-1 h_j into `x`: the acceleration actuator j gives per unit tau_j (2.2), with `chol` the
+    /// Cholesky factor of A and `e` scratch of length m.
+    fn force_direction<T: Scalar>(
+        &self,
+        t: T,
+        q: &[T],
+        j: usize,
+        chol: &DMatrix<T>,
+        e: &mut [T],
+        x: &mut [T],
+    ) {
+        e.iter_mut()
+            .enumerate()
+            .for_each(|(l, y)| *y = if l == j { T::one() } else { T::zero() });
+        x.iter_mut().for_each(|y| *y = T::zero());
+        self.act.add_force(t, q, e, x);
+        linalg::cholesky_solve(chol, x.len(), x);
+    }
+
     /// y^(r) at tau = 0 (`val`) and b = d y^(r) / d tau (`db`, s x m; only the columns `cols` when
     /// given) of every row at its level's degree r, by the direct route (module docs):
     /// y^(r) = B a - gamma, a = A^-1 (F + H tau), so val = B A^-1 F - gamma and db = B A^-1 H.
@@ -351,12 +370,7 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
                 *y = bx(x, i) - gamma[i];
             }
             for j in (0..m).filter(|j| cols.is_none_or(|c| c.contains(j))) {
-                e.iter_mut()
-                    .enumerate()
-                    .for_each(|(l, y)| *y = if l == j { T::one() } else { T::zero() });
-                x.iter_mut().for_each(|y| *y = T::zero());
-                self.act.add_force(t, q, e, x);
-                linalg::cholesky_solve(a, n, x);
+                self.force_direction(t, q, j, a, e, x);
                 for i in 0..s {
                     db[(i, j)] = bx(x, i);
                 }
@@ -643,12 +657,7 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         let mut w = vec![T::zero(); n];
         let mut o = vec![Dual::from_re(T::zero()); s];
         for j in 0..m {
-            e.iter_mut()
-                .enumerate()
-                .for_each(|(l, y)| *y = if l == j { T::one() } else { T::zero() });
-            w.iter_mut().for_each(|y| *y = T::zero());
-            self.act.add_force(t, q, &e, &mut w);
-            linalg::cholesky_solve(&a, n, &mut w);
+            self.force_direction(t, q, j, &a, &mut e, &mut w);
             let vd: Vec<Dual<T>> = (0..n).map(|i| Dual::new(v[i], w[i])).collect();
             if z {
                 self.zlie(k - 1, td, &qd, &vd, &taud, &mut o)?;
