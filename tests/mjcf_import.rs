@@ -441,9 +441,10 @@ fn a_keyframe_starts_the_motion() {
     );
 }
 
-/// A static body's mesh geom (robosuite's arm bases): its mass does not enter the motion, so the
-/// file imports; a scene naming `com.` needs every body's mass and is refused at the geom. A
-/// moving body's mesh stays refused (tests/robots/mjcf/bad_geom_inertia.xml).
+/// A static body's mesh geom (robosuite's arm bases) whose mesh cannot be weighed (here: its file
+/// is missing): its mass does not enter the motion, so the file imports; a scene naming `com.`
+/// needs every body's mass and is refused at the <mesh>, naming the file. (Meshes that load are
+/// weighed as MuJoCo does: tests/python/test_robot_files_mujoco.py.)
 #[test]
 fn a_static_bodys_mesh_mass_is_needed_only_by_centre_of_mass_signals() {
     let xml = robots().join("static_mesh.xml");
@@ -452,9 +453,9 @@ fn a_static_bodys_mesh_mass_is_needed_only_by_centre_of_mass_signals() {
     let row = "[[programme]]\nname = \"h\"\nexpr = \"com.z - 0.1\"\n";
     let e = load(&scene_text(&xml, row)).expect_err("com. needs the base's mass");
     let text = e.to_string();
-    assert!(text.contains("static_mesh.xml:7"), "{text}");
-    assert!(text.contains("of a static body is not computed"), "{text}");
-    assert_eq!(e.field, "body[base].geom[plate_geom]");
+    assert!(text.contains("static_mesh.xml:4"), "{text}");
+    assert!(text.contains("plate.stl` not found"), "{text}");
+    assert_eq!(e.field, "asset.mesh[plate]");
     // the arm's own signals need no mass of the base
     let row = "[[programme]]\nname = \"h\"\nexpr = \"arm.x - 0.2\"\n";
     load(&scene_text(&xml, row)).unwrap_or_else(|e| panic!("{e}"));

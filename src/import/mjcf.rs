@@ -6,7 +6,8 @@
 //! Joint attributes may come from `<default>` classes (`class`, a body's `childclass`, nested
 //! defaults inherit). Mass properties from an explicit `<inertial>` (`pos`, orientation, `mass`,
 //! `diaginertia` or `fullinertia`) or, as MuJoCo's compiler does, from the primitive geoms
-//! ([`super::geom_inertia`]; mesh geoms with mass are refused), then `boundmass`/`boundinertia`.
+//! ([`super::geom_inertia`]) and mesh geoms ([`super::mesh`], files under `meshdir`), then
+//! `boundmass`/`boundinertia`.
 //! Modelled with MuJoCo's meaning: joint `damping`, `armature`, `stiffness` with `springref`
 //! (hinge and slide), `ref` (hinge and slide; `ref` and `springref` of hinges in degrees under
 //! `<compiler angle="degree">`, as MuJoCo converts them) and body `gravcomp`. Read and not
@@ -14,17 +15,21 @@
 //! limits (with their ranges), `actuatorfrcrange`, `frictionloss`, tendons, equality constraints,
 //! colliding geoms and `<contact>` pairs/excludes, actuators, fluid options. Refused (located
 //! errors): springs on ball and free joints, `springdamper`, and what changes the stated model
-//! (see [`compiler`]). Sites, cameras, lights, sensors and assets are not read (no dynamics).
+//! (see [`compiler`]). Cameras, lights, sensors, textures and materials are not read (no
+//! dynamics); of the assets only meshes are.
 //! `<include>`s are expanded first, as MuJoCo does ([`super::include`]).
 
 use super::geom_inertia::{self as gi, GeomMass, MassProps, Shape};
+use super::mesh::{self, MeshInertia, MeshMass};
 use super::unmodelled::{JointRange, Recorder, Unmodelled};
 use super::urdf::Robot;
 use crate::located::{SceneError, Source};
 use crate::tree::{BodySpec, JointSpec, WORLD};
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 use roxmltree::Node;
+use std::cell::RefCell;
 use std::collections::{HashMap, HashSet};
+use std::path::Path;
 
 type R<T> = Result<T, SceneError>;
 
@@ -103,6 +108,13 @@ struct Compiler {
     groups: [f64; 2],
     /// `settotalmass` (> 0: every body's mass and inertia scaled to this total; 0: off).
     totalmass: f64,
+    /// `meshdir` (else `assetdir`): the folder of mesh files, relative to the main file's.
+    meshdir: String,
+    /// `strippath`: mesh file names reduced to their last component.
+    strippath: bool,
+    /// `fitaabb`: a primitive geom naming a mesh is fitted to its bounding box (refused), not
+    /// to its equivalent inertia box.
+    fitaabb: bool,
 }
 
 fn compiler(src: &Source, root: Node) -> R<Compiler> {
@@ -114,6 +126,9 @@ fn compiler(src: &Source, root: Node) -> R<Compiler> {
         boundinertia: 0.0,
         groups: [0.0, 5.0],
         totalmass: 0.0,
+        meshdir: String::new(),
+        strippath: false,
+        fitaabb: false,
     };
     for n in elements(root).filter(|n| n.has_tag_name("compiler")) {
         if let Some(a) = n.attribute("angle") {
@@ -154,6 +169,13 @@ fn compiler(src: &Source, root: Node) -> R<Compiler> {
             c.from_geom = s.into();
         }
         bounds(src, n, &mut c)?;
+        if let Some(d) = n.attribute("meshdir").or(n.attribute("assetdir")) {
+            c.meshdir = d.into();
+        }
+        c.strippath = n
+            .attribute("strippath")
+            .map_or(c.strippath, |v| v == "true");
+        c.fitaabb = n.attribute("fitaabb").map_or(c.fitaabb, |v| v == "true");
         if n.attribute("balanceinertia") == Some("true") {
             return Err(err(src, n, "compiler.balanceinertia", "`balanceinertia=\"true\"` (MuJoCo would change the stated inertias) is not supported"));
         }
@@ -407,9 +429,10 @@ struct Defaults<'a, 'i> {
     classes: HashMap<String, DefaultClass<'a, 'i>>,
 }
 
-/// (parent class, its `<joint>`, `<geom>` and `<site>` defaults)
+/// (parent class, its `<joint>`, `<geom>`, `<site>` and `<mesh>` defaults)
 type DefaultClass<'a, 'i> = (
     Option<String>,
+    Option<Node<'a, 'i>>,
     Option<Node<'a, 'i>>,
     Option<Node<'a, 'i>>,
     Option<Node<'a, 'i>>,
@@ -446,9 +469,10 @@ impl<'a, 'i> Defaults<'a, 'i> {
         let joint = elements(n).find(|c| c.has_tag_name("joint"));
         let geom = elements(n).find(|c| c.has_tag_name("geom"));
         let site = elements(n).find(|c| c.has_tag_name("site"));
+        let mesh = elements(n).find(|c| c.has_tag_name("mesh"));
         self.classes.insert(
             name.to_string(),
-            (parent.map(String::from), joint, geom, site),
+            (parent.map(String::from), joint, geom, site, mesh),
         );
         for c in elements(n).filter(|c| c.has_tag_name("default")) {
             self.add(src, c, Some(name))?;
@@ -464,6 +488,11 @@ impl<'a, 'i> Defaults<'a, 'i> {
     /// The same for a geom.
     fn geom_attr(&self, g: Node<'a, 'i>, class: &str, attr: &str) -> Option<&'a str> {
         self.attr(g, class, attr, |d| d.2)
+    }
+
+    /// The same for a `<mesh>` asset.
+    fn mesh_attr(&self, m: Node<'a, 'i>, class: &str, attr: &str) -> Option<&'a str> {
+        self.attr(m, class, attr, |d| d.4)
     }
 
     /// The placement attribute a `<site>` default of the class chain gives, if any.
@@ -631,6 +660,7 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
     }
     let c = compiler(src, root)?;
     let defaults = Defaults::read(src, root)?;
+    let meshes = Meshes::read(src, &c, &defaults, root)?;
     let mut notes = vec![];
     let mut rec = Recorder::new(src);
     read_top_level(src, root, &mut notes, &mut rec)?;
@@ -657,6 +687,7 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         body_name: String::new(),
         sites: vec![],
         mass_unknown: vec![],
+        meshes: &meshes,
     };
     // depth-first, parents first: (element, parent body name, inherited childclass)
     let mut stack = top_bodies(src, &c, &worldbodies)?;
@@ -876,6 +907,8 @@ struct Walk<'s, 'd, 'a, 'i> {
     sites: Vec<Site>,
     /// Static bodies' geoms whose mass progmo does not compute ([`super::urdf::Robot::mass_unknown`]).
     mass_unknown: Vec<SceneError>,
+    /// The `<asset>` meshes, weighed at first use.
+    meshes: &'d Meshes<'d, 'a, 'i>,
 }
 
 impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
@@ -1044,7 +1077,7 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
                     chain,
                     what: gwhat,
                 };
-                parts.extend(geom_mass(src, c, &a, moving, &mut self.mass_unknown)?);
+                parts.extend(geom_mass(self.meshes, &a, moving, &mut self.mass_unknown)?);
             }
             if let Some(p) = gi::combine(&parts) {
                 props = Some(p);
@@ -1430,10 +1463,9 @@ impl<'a, 'i> GeomAttrs<'_, 'a, 'i> {
         Ok((mid, z2quat(v), size))
     }
 
-    /// The geom's mass: `mass` when given (0 when the volume is not above mjEPS), else
-    /// `density` (1000) times the volume (the area for a shell).
-    fn mass(&self, shape: Shape, size: [f64; 3], shell: bool) -> R<f64> {
-        let vol = gi::volume(shape, size, shell);
+    /// The geom's mass for volume `vol` (the area for a shell): `mass` when given (0 when the
+    /// volume is not above mjEPS), else `density` (1000) times the volume.
+    fn mass(&self, vol: f64) -> R<f64> {
         let (attr, value) = match self.get("mass") {
             Some(_) => ("mass", self.num::<1>("mass", [0.0])?[0]),
             None => ("density", self.num::<1>("density", [1000.0])?[0]),
@@ -1455,7 +1487,8 @@ impl<'a, 'i> GeomAttrs<'_, 'a, 'i> {
     }
 
     /// A geom type without a closed form: a plane adds nothing (refused in a moving body, as
-    /// MuJoCo does); a mesh, sdf or height field only with `mass="0"` or `density="0"`.
+    /// MuJoCo does); an sdf or height field only with `mass="0"` or `density="0"`; a mesh geom
+    /// reaches here only without its `mesh`.
     fn no_shape(&self, kind: &str, moving: bool) -> R<()> {
         let (src, g, what) = (self.src, self.chain[0], &self.what);
         match kind {
@@ -1466,7 +1499,13 @@ impl<'a, 'i> GeomAttrs<'_, 'a, 'i> {
                 "a plane geom in a body that moves: MuJoCo allows planes only in static bodies",
             )),
             "plane" => Ok(()),
-            "mesh" | "sdf" | "hfield" => {
+            "mesh" => Err(err(
+                src,
+                g,
+                what,
+                "a mesh geom needs `mesh` (the name of an <asset> <mesh>)",
+            )),
+            "sdf" | "hfield" => {
                 let zero = |a| {
                     self.get(a)
                         .is_some_and(|(_, v)| v.trim().parse::<f64>() == Ok(0.0))
@@ -1475,7 +1514,7 @@ impl<'a, 'i> GeomAttrs<'_, 'a, 'i> {
                     return Ok(());
                 }
                 let asset = self
-                    .get(if kind == "hfield" { "hfield" } else { "mesh" })
+                    .get(if kind == "hfield" { "hfield" } else { "sdf" })
                     .map_or("?", |x| x.1);
                 let msg = if moving {
                     format!("the inertia of {kind} geom (`{asset}`) is not supported (give the body an <inertial>, or the geom mass=\"0\")")
@@ -1495,21 +1534,50 @@ impl<'a, 'i> GeomAttrs<'_, 'a, 'i> {
 }
 
 /// One geom's share of its body's mass properties (`None` for a geom outside
-/// `inertiagrouprange` or without volume). A mesh, sdf or height field of a static body, whose
-/// mass does not enter the motion, is left out and its error kept in `unknown` (raised only if the
-/// scene needs every body's mass: `com.` signals).
+/// `inertiagrouprange` or without volume). A mesh geom is weighed as MuJoCo does ([`mesh`]); a
+/// primitive geom naming a mesh is fitted to it first. A geom of a static body whose mass progmo
+/// cannot compute (an sdf or height field, a mesh it cannot weigh) does not enter the motion: it
+/// is left out and its error kept in `unknown` (raised only if the scene needs every body's mass:
+/// `com.` signals).
 fn geom_mass(
-    src: &Source,
-    c: &Compiler,
+    meshes: &Meshes,
     a: &GeomAttrs,
     moving: bool,
     unknown: &mut Vec<SceneError>,
 ) -> R<Option<GeomMass>> {
+    let (src, c) = (meshes.src, meshes.c);
     let group = a.num::<1>("group", [0.0])?[0];
     if group < c.groups[0] || group > c.groups[1] {
         return Ok(None);
     }
     let kind = a.get("type").map_or("sphere", |x| x.1);
+    let shell = a.get("shellinertia").is_some_and(|x| x.1 == "true");
+    let zero = |attr| {
+        a.get(attr)
+            .is_some_and(|(_, v)| v.trim().parse::<f64>() == Ok(0.0))
+    };
+    if kind == "mesh" && (zero("mass") || (a.get("mass").is_none() && zero("density"))) {
+        return Ok(None); // a visual-only mesh: no mass, its file not needed
+    }
+    let fitted = match a.get("mesh") {
+        Some((n, name)) if kind == "mesh" || Shape::parse(kind).is_some() => {
+            if kind == "mesh" && shell {
+                return Err(err(src, a.chain[0], &format!("{}.shellinertia", a.what), "a mesh geom is weighed as its asset says: give the <mesh> inertia=\"shell\" instead"));
+            }
+            match meshes.weigh(n, name, &a.what) {
+                Ok(m) => Some(m),
+                Err(e) if !moving => {
+                    unknown.push(e);
+                    return Ok(None);
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        _ => None,
+    };
+    if let (Some(m), "mesh") = (&fitted, kind) {
+        return mesh_geom(a, c, m).map(Some);
+    }
     let Some(shape) = Shape::parse(kind) else {
         match a.no_shape(kind, moving) {
             Err(e) if !moving => unknown.push(e),
@@ -1517,8 +1585,10 @@ fn geom_mass(
         }
         return Ok(None);
     };
-    let shell = a.get("shellinertia").is_some_and(|x| x.1 == "true");
-    let (pos, rot, size) = a.frame(c, shape)?;
+    let (pos, rot, size) = match &fitted {
+        None => a.frame(c, shape)?,
+        Some(m) => fit(a, c, shape, m)?,
+    };
     if let Some(k) = (0..shape.sizes()).find(|&k| !(size[k] > 0.0)) {
         return Err(err(
             src,
@@ -1530,7 +1600,7 @@ fn geom_mass(
             ),
         ));
     }
-    let mass = a.mass(shape, size, shell)?;
+    let mass = a.mass(gi::volume(shape, size, shell))?;
     let principal = if mass > 0.0 {
         gi::principal(shape, size, mass, shell)
     } else {
@@ -1542,4 +1612,217 @@ fn geom_mass(
         rot,
         principal,
     }))
+}
+
+/// The geom's `pos` and orientation (a mesh geom, or one fitted to a mesh, takes no `fromto`).
+fn placement(a: &GeomAttrs, c: &Compiler) -> R<(Vector3<f64>, UnitQuaternion<f64>)> {
+    if let Some((n, _)) = a.get("fromto") {
+        return Err(err(
+            a.src,
+            n,
+            &format!("{}.fromto", a.what),
+            "`fromto` on a geom placed by its mesh is not supported (give pos and an orientation)",
+        ));
+    }
+    Ok((
+        Vector3::from(a.num::<3>("pos", [0.0; 3])?),
+        a.orientation(c)?,
+    ))
+}
+
+/// A mesh geom: its frame moved to the mesh's centre of mass and principal axes, its mass
+/// density times the mesh's volume (or `mass`), its inertia the equivalent box's.
+fn mesh_geom(a: &GeomAttrs, c: &Compiler, m: &MeshMass) -> R<GeomMass> {
+    let (pos, rot) = placement(a, c)?;
+    let mass = a.mass(m.measure)?;
+    Ok(GeomMass {
+        mass,
+        pos: pos + rot * m.com,
+        rot: rot * m.rot,
+        principal: m.principal(mass),
+    })
+}
+
+/// A primitive geom fitted to a mesh (`mjCMesh::FitGeom` with `fitaabb="false"`): sizes from the
+/// mesh's equivalent inertia box b (sphere (b0 + b1 + b2)/3; capsule r = (b0 + b1)/2 and half
+/// length b2 - r/2; cylinder r = (b0 + b1)/2, b2; box and ellipsoid b), times `fitscale`; placed at
+/// the mesh's centre of mass along its principal axes.
+fn fit(
+    a: &GeomAttrs,
+    c: &Compiler,
+    shape: Shape,
+    m: &MeshMass,
+) -> R<(Vector3<f64>, UnitQuaternion<f64>, [f64; 3])> {
+    if c.fitaabb {
+        return Err(err(a.src, a.chain[0], &a.what, "a geom fitted to a mesh's bounding box (`<compiler fitaabb=\"true\">`) is not supported: give the geom type=\"mesh\" or its own size"));
+    }
+    let (pos, rot) = placement(a, c)?;
+    let b = m.boxsz;
+    let r = (b[0] + b[1]) / 2.0;
+    let size = match shape {
+        Shape::Sphere => [(b[0] + b[1] + b[2]) / 3.0, 0.0, 0.0],
+        Shape::Capsule => [r, (b[2] - r / 2.0).max(0.0), 0.0],
+        Shape::Cylinder => [r, b[2], 0.0],
+        Shape::Ellipsoid | Shape::Box => b,
+    };
+    let scale = a.num::<1>("fitscale", [1.0])?[0];
+    Ok((pos + rot * m.com, rot * m.rot, size.map(|x| x * scale)))
+}
+
+/// The `<asset>` meshes by name, each weighed at its first use ([`mesh`]).
+struct Meshes<'d, 'a, 'i> {
+    src: &'d Source,
+    c: &'d Compiler,
+    defaults: &'d Defaults<'a, 'i>,
+    decl: HashMap<String, Node<'a, 'i>>,
+    done: RefCell<HashMap<String, MeshMass>>,
+}
+
+impl<'d, 'a, 'i> Meshes<'d, 'a, 'i> {
+    fn read(
+        src: &'d Source,
+        c: &'d Compiler,
+        defaults: &'d Defaults<'a, 'i>,
+        root: Node<'a, 'i>,
+    ) -> R<Self> {
+        let mut decl = HashMap::new();
+        for m in elements(root)
+            .filter(|n| n.has_tag_name("asset"))
+            .flat_map(elements)
+            .filter(|n| n.has_tag_name("mesh"))
+        {
+            // MuJoCo names a mesh without `name` after its file, without folder and extension
+            let stem = m
+                .attribute("file")
+                .and_then(|f| Path::new(f).file_stem())
+                .and_then(|s| s.to_str());
+            let Some(name) = m.attribute("name").or(stem) else {
+                return Err(err(src, m, "asset.mesh", "a <mesh> needs `name` or `file`"));
+            };
+            if decl.insert(name.to_string(), m).is_some() {
+                return Err(err(
+                    src,
+                    m,
+                    &format!("asset.mesh[{name}]"),
+                    format!("mesh `{name}` is defined twice"),
+                ));
+            }
+        }
+        Ok(Meshes {
+            src,
+            c,
+            defaults,
+            decl,
+            done: RefCell::new(HashMap::new()),
+        })
+    }
+
+    /// The mass properties of mesh `name`, which geom `what` (element `at`) names.
+    fn weigh(&self, at: Node, name: &str, what: &str) -> R<MeshMass> {
+        if let Some(m) = self.done.borrow().get(name) {
+            return Ok(m.clone());
+        }
+        let Some(&n) = self.decl.get(name) else {
+            return Err(err(
+                self.src,
+                at,
+                &format!("{what}.mesh"),
+                format!("no <mesh> named `{name}` in <asset>"),
+            ));
+        };
+        let m = self.compute(n, name)?;
+        self.done.borrow_mut().insert(name.into(), m.clone());
+        Ok(m)
+    }
+
+    fn compute(&self, n: Node<'a, 'i>, name: &str) -> R<MeshMass> {
+        let src = self.src;
+        let what = format!("asset.mesh[{name}]");
+        let class = n.attribute("class").unwrap_or(MAIN);
+        if !self.defaults.classes.contains_key(class) && class != MAIN {
+            return Err(err(
+                src,
+                n,
+                &format!("{what}.class"),
+                format!("unknown default class `{class}`"),
+            ));
+        }
+        let attr = |a: &str| self.defaults.mesh_attr(n, class, a);
+        let num3 = |a: &str, d: [f64; 3]| match attr(a) {
+            None => Ok(d),
+            Some(t) => fixed::<3>(src, n, &format!("{what}.{a}"), a, t),
+        };
+        let (scale, refpos) = (num3("scale", [1.0; 3])?, num3("refpos", [0.0; 3])?);
+        let refquat = match attr("refquat") {
+            None => [1.0, 0.0, 0.0, 0.0],
+            Some(t) => fixed::<4>(src, n, &format!("{what}.refquat"), "refquat", t)?,
+        };
+        let kind = MeshInertia::parse(attr("inertia").unwrap_or("legacy"))
+            .map_err(|e| err(src, n, &format!("{what}.inertia"), e))?;
+        if n.has_children() && elements(n).any(|e| e.has_tag_name("plugin"))
+            || attr("plugin").is_some()
+        {
+            return Err(err(
+                src,
+                n,
+                &what,
+                "a mesh made by a plugin (an SDF) is not supported",
+            ));
+        }
+        let at = |e: String| err(src, n, &what, e);
+        let list = |a: &str| {
+            n.attribute(a)
+                .map(|t| parse_list(src, n, &format!("{what}.{a}"), a, t))
+                .transpose()
+        };
+        let mut m = match (n.attribute("file"), list("vertex")?) {
+            (Some(_), Some(_)) => {
+                return Err(at(
+                    "both `file` and `vertex` given (MuJoCo: repeated vertex specification)".into(),
+                ))
+            }
+            (Some(f), None) => self.load(f, scale).map_err(at)?,
+            (None, Some(v)) => mesh::inline(&v, list("face")?.as_deref(), scale).map_err(at)?,
+            (None, None) => return Err(at("a <mesh> needs `file` or `vertex`".into())),
+        };
+        let norm = refquat.iter().map(|x| x * x).sum::<f64>().sqrt();
+        mesh::transform(&mut m, refpos, refquat.map(|x| x / norm), scale);
+        mesh::mass(&m, kind).map_err(|e| at(format!("mesh `{name}`: {e}")))
+    }
+
+    /// The mesh file `file` (in `meshdir`, relative to the main file's folder, under the path
+    /// rule of [`crate::input::resolve`]) by its extension: `.stl`, `.obj` or `.msh`.
+    fn load(&self, file: &str, scale: [f64; 3]) -> Result<mesh::Mesh, String> {
+        let file = if self.c.strippath {
+            Path::new(file)
+                .file_name()
+                .and_then(|s| s.to_str())
+                .unwrap_or(file)
+        } else {
+            file
+        };
+        let rel = Path::new(&self.c.meshdir).join(file);
+        let rel = rel.to_string_lossy();
+        let dir = self.src.file.parent().unwrap_or(Path::new("."));
+        let path = crate::input::resolve(&rel, dir)?;
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .unwrap_or("")
+            .to_ascii_lowercase();
+        if !["stl", "obj", "msh"].contains(&ext.as_str()) {
+            return Err(format!("`{rel}`: a mesh file is .stl, .obj or .msh"));
+        }
+        let bytes = crate::input::read(&path, crate::input::ROBOT_LIMIT)
+            .map_err(|e| format!("cannot read `{}`: {e}", path.display()))?;
+        let out = match ext.as_str() {
+            "stl" => mesh::stl(&bytes, scale),
+            "msh" => mesh::msh(&bytes, scale),
+            _ => match String::from_utf8(bytes) {
+                Ok(t) => mesh::obj(&t, scale),
+                Err(_) => Err("an OBJ file is text; this one is not UTF-8".into()),
+            },
+        };
+        out.map_err(|e| format!("`{}`: {e}", path.display()))
+    }
 }

@@ -5,8 +5,8 @@
 //!   floating joints, joint damping; visuals and meshes are not read.
 //! - [`mjcf`]: MuJoCo MJCF files: bodies, inertials (explicit or from primitive geoms, as MuJoCo
 //!   computes them: `geom_inertia`), hinge / slide / ball / free joints
-//!   with damping, armature, springs and `ref`, body `gravcomp`, joint defaults; sites and assets
-//!   are not read; `<include>`d files are expanded first ([`include`]).
+//!   with damping, armature, springs and `ref`, body `gravcomp`, joint defaults, mesh geoms
+//!   weighed as MuJoCo weighs them ([`mesh`]); `<include>`d files are expanded first ([`include`]).
 //! - [`unmodelled`]: what either file holds that is read and not modelled (limits, friction,
 //!   tendons, contacts, actuators, ...): a closed vocabulary of kinds, one record per element.
 //! - [`resolve`]: where `package://PKG/...` paths are found (`$PROGMO_ROBOT_PATH`, then
@@ -17,6 +17,7 @@
 
 mod geom_inertia;
 pub mod include;
+mod mesh;
 pub mod mjcf;
 pub mod unmodelled;
 pub mod urdf;

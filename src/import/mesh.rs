@@ -1,0 +1,578 @@
+//! Mesh geoms' mass properties as MuJoCo's compiler computes them, so that a body weighed by its
+//! meshes has the inertia MuJoCo simulates with (read from MuJoCo's `user_mesh.cc` and
+//! `mjCGeom::SetInertia`; checked against MuJoCo 4.0 by tests/python/test_robot_files_mujoco.py):
+//!
+//! 1. vertices: the file's float32 numbers (STL binary, MuJoCo's MSH, OBJ) or the `vertex`
+//!    attribute, held in double; `refpos` subtracted, rotated by `refquat`^-1, times `scale`;
+//! 2. the area-weighted centroid c_f of the faces;
+//! 3. the centre of mass from the pyramids on each face with apex c_f (the area and its pyramid
+//!    centre 3/4 c + 1/4 c_f per face for `inertia="shell"`); `legacy` (MuJoCo's default) takes
+//!    each pyramid's volume unsigned, `exact` signed (and refuses inconsistently oriented faces);
+//! 4. the second moments from the pyramids with apex at that centre (tetrahedron formula, /20;
+//!    triangle formula /12 for a shell), whose volume (area) is the one the geom's mass uses;
+//! 5. principal moments e_0 >= e_1 >= e_2 and axes (the mesh frame; exact here, MuJoCo's own
+//!    iteration stops up to 1e-7 short, see `principal_frame`); the geom's inertia is that
+//!    of the equivalent box b_i = sqrt(6 (e_j + e_k - e_i) / V) / 2, I_i = m (b_j^2 + b_k^2) / 3,
+//!    and a primitive geom naming a mesh is fitted to that box (`fitaabb="false"`, the default).
+//!
+//! `inertia="convex"` (the convex hull's mass) and meshes without faces (MuJoCo takes their hull)
+//! are refused: progmo computes no convex hull.
+
+use nalgebra::{Matrix3, Rotation3, SymmetricEigen, UnitQuaternion, Vector3};
+
+/// MuJoCo's `mjMINVAL`: smaller faces count as none; smaller areas and volumes are refused.
+const MJ_MINVAL: f64 = 1e-15;
+
+/// `<mesh inertia>`: how the mesh is weighed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum MeshInertia {
+    /// pyramid volumes taken unsigned (MuJoCo's default)
+    Legacy,
+    /// signed volumes: right for any closed, consistently oriented mesh
+    Exact,
+    /// mass on the surface
+    Shell,
+}
+
+impl MeshInertia {
+    pub(crate) fn parse(s: &str) -> Result<Self, String> {
+        match s {
+            "legacy" => Ok(Self::Legacy),
+            "exact" => Ok(Self::Exact),
+            "shell" => Ok(Self::Shell),
+            "convex" => Err("`inertia=\"convex\"` weighs the mesh's convex hull, which progmo does not compute: give the body an <inertial>, or the mesh inertia=\"legacy\" or \"exact\"".into()),
+            o => Err(format!("`inertia=\"{o}\"`: expected legacy, exact, shell or convex")),
+        }
+    }
+}
+
+/// A triangle mesh: vertices (double, from float32 numbers) and faces (indices, counter-clockwise
+/// seen from outside).
+#[derive(Debug)]
+pub(crate) struct Mesh {
+    pub vert: Vec<[f64; 3]>,
+    pub face: Vec<[usize; 3]>,
+}
+
+/// A mesh's mass properties at unit density, in the frame its vertices are given in after
+/// `refpos`, `refquat` and `scale` (MuJoCo's mesh `pos_`, `quat_`, `boxsz_`, volume).
+#[derive(Clone, Debug)]
+pub(crate) struct MeshMass {
+    /// The volume (the area for a shell): the geom's mass is density times this.
+    pub measure: f64,
+    /// The centre of mass.
+    pub com: Vector3<f64>,
+    /// The principal axes (columns in the order of `boxsz`).
+    pub rot: UnitQuaternion<f64>,
+    /// The equivalent inertia box's half-sizes, principal moments in decreasing order.
+    pub boxsz: [f64; 3],
+}
+
+impl MeshMass {
+    /// The principal moments of a geom of mass `m` (`mjCGeom::SetInertia` for a mesh).
+    pub(crate) fn principal(&self, m: f64) -> [f64; 3] {
+        let b = self.boxsz.map(|x| x * x);
+        [
+            m * (b[1] + b[2]) / 3.0,
+            m * (b[0] + b[2]) / 3.0,
+            m * (b[0] + b[1]) / 3.0,
+        ]
+    }
+}
+
+/// Area, unit normal and centre of a triangle (MuJoCo's `triangle`: no area below `mjMINVAL`).
+fn triangle(v1: &[f64; 3], v2: &[f64; 3], v3: &[f64; 3]) -> (f64, [f64; 3], [f64; 3]) {
+    let center = [0, 1, 2].map(|i| (v1[i] + v2[i] + v3[i]) / 3.0);
+    let b = [0, 1, 2].map(|i| v2[i] - v1[i]);
+    let c = [0, 1, 2].map(|i| v3[i] - v1[i]);
+    let n = [
+        b[1] * c[2] - b[2] * c[1],
+        b[2] * c[0] - b[0] * c[2],
+        b[0] * c[1] - b[1] * c[0],
+    ];
+    let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+    if len < MJ_MINVAL {
+        return (0.0, n, center);
+    }
+    (0.5 * len, n.map(|x| x / len), center)
+}
+
+fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Faces sharing a directed edge: the first such edge (1-based vertices, as MuJoCo reports).
+fn misoriented(m: &Mesh) -> Option<(usize, usize)> {
+    let mut edges: Vec<(usize, usize)> = Vec::with_capacity(3 * m.face.len());
+    for f in &m.face {
+        let [a, b, c] = f.map(|k| &m.vert[k]);
+        if triangle(a, b, c).0 > MJ_MINVAL.sqrt() {
+            edges.extend([(f[0], f[1]), (f[1], f[2]), (f[2], f[0])]);
+        }
+    }
+    edges.sort_unstable();
+    edges
+        .windows(2)
+        .find(|w| w[0] == w[1])
+        .map(|w| (w[0].0 + 1, w[0].1 + 1))
+}
+
+/// `refpos`, `refquat` (normalized) and `scale` applied to the vertices, in MuJoCo's order.
+pub(crate) fn transform(m: &mut Mesh, refpos: [f64; 3], refquat: [f64; 4], scale: [f64; 3]) {
+    for v in &mut m.vert {
+        for i in 0..3 {
+            v[i] -= refpos[i];
+        }
+    }
+    if refquat != [1.0, 0.0, 0.0, 0.0] {
+        let q = nalgebra::Quaternion::new(refquat[0], refquat[1], refquat[2], refquat[3]);
+        let r = UnitQuaternion::from_quaternion(q).to_rotation_matrix();
+        for v in &mut m.vert {
+            let x = r.inverse() * Vector3::from(*v);
+            *v = x.into();
+        }
+    }
+    for v in &mut m.vert {
+        for i in 0..3 {
+            v[i] *= scale[i];
+        }
+    }
+}
+
+/// The mass properties of a transformed mesh (steps 2 to 5 of the module docs); the error says why
+/// MuJoCo would refuse the mesh.
+pub(crate) fn mass(m: &Mesh, kind: MeshInertia) -> Result<MeshMass, String> {
+    if kind == MeshInertia::Exact {
+        if let Some((a, b)) = misoriented(m) {
+            return Err(format!("faces have inconsistent orientation (the faces containing vertices {a} and {b}); MuJoCo refuses such a mesh with inertia=\"exact\""));
+        }
+    }
+    let tri = |f: &[usize; 3]| triangle(&m.vert[f[0]], &m.vert[f[1]], &m.vert[f[2]]);
+    // step 2: area-weighted face centroid
+    let (mut fc, mut total_area) = ([0.0; 3], 0.0);
+    for f in &m.face {
+        let (area, _, c) = tri(f);
+        for i in 0..3 {
+            fc[i] += area * c[i];
+        }
+        total_area += area;
+    }
+    if total_area < MJ_MINVAL {
+        return Err("the mesh's surface area is too small".into());
+    }
+    fc = fc.map(|x| x / total_area);
+    // step 3: centre of mass from pyramids with apex fc
+    let (mut com, mut total) = ([0.0; 3], 0.0);
+    for f in &m.face {
+        let (area, n, c) = tri(f);
+        let w = match kind {
+            MeshInertia::Shell => area,
+            _ => {
+                let vec = [c[0] - fc[0], c[1] - fc[1], c[2] - fc[2]];
+                let v = dot(&vec, &n) * area / 3.0;
+                if kind == MeshInertia::Legacy {
+                    v.abs()
+                } else {
+                    v
+                }
+            }
+        };
+        total += w;
+        for i in 0..3 {
+            com[i] += w * (c[i] * 3.0 / 4.0 + fc[i] / 4.0);
+        }
+    }
+    if total < MJ_MINVAL {
+        return Err(match kind {
+            MeshInertia::Shell => "the mesh's surface area is too small".into(),
+            _ if total < 0.0 => "the mesh's volume is negative (misoriented triangles)".into(),
+            _ => "the mesh's volume is too small (MuJoCo suggests inertia=\"shell\")".into(),
+        });
+    }
+    com = com.map(|x| x / total);
+    let (inert, measure) = second_moments(m, kind, &com);
+    principal_frame(inert, measure, com)
+}
+
+/// Step 4: the inertia about `com` at unit density and the volume (area) it recomputes.
+fn second_moments(m: &Mesh, kind: MeshInertia, com: &[f64; 3]) -> (Matrix3<f64>, f64) {
+    let centred: Vec<[f64; 3]> = m
+        .vert
+        .iter()
+        .map(|v| [v[0] - com[0], v[1] - com[1], v[2] - com[2]])
+        .collect();
+    const K: [(usize, usize); 6] = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)];
+    let c = if kind == MeshInertia::Shell {
+        12.0
+    } else {
+        20.0
+    };
+    let (mut p, mut total) = ([0.0; 6], 0.0);
+    for f in &m.face {
+        let [d, e, g] = f.map(|k| &centred[k]);
+        let (area, n, cen) = triangle(d, e, g);
+        let mut vol = match kind {
+            MeshInertia::Shell => area,
+            _ => dot(&cen, &n) * area / 3.0,
+        };
+        if kind == MeshInertia::Legacy {
+            vol = vol.abs();
+        }
+        total += vol;
+        for (j, &(a, b)) in K.iter().enumerate() {
+            p[j] += vol / c
+                * (2.0 * (d[a] * d[b] + e[a] * e[b] + g[a] * g[b])
+                    + d[a] * e[b]
+                    + d[b] * e[a]
+                    + d[a] * g[b]
+                    + d[b] * g[a]
+                    + e[a] * g[b]
+                    + e[b] * g[a]);
+        }
+    }
+    let i = [p[1] + p[2], p[0] + p[2], p[0] + p[1], -p[3], -p[4], -p[5]];
+    let full = Matrix3::new(i[0], i[3], i[4], i[3], i[1], i[5], i[4], i[5], i[2]);
+    (full, total)
+}
+
+/// Step 5: principal moments (decreasing), axes and the equivalent box, with MuJoCo's checks.
+/// The axes are the exact eigenvectors. MuJoCo's compiler finds them by a Jacobi iteration
+/// (`mjuu_eig3`) whose stopping rule leaves its mesh frame off by up to about 1e-7 relative for
+/// MuJoCo 4.0 (measured, tests/python/test_robot_files_mujoco.py); that is MuJoCo's error, not
+/// replicated here.
+fn principal_frame(inert: Matrix3<f64>, measure: f64, com: [f64; 3]) -> Result<MeshMass, String> {
+    let eig = SymmetricEigen::new(inert);
+    let mut order = [0, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let e = order.map(|k| eig.eigenvalues[k]);
+    if !(e[2] > 0.0) {
+        return Err(format!(
+            "an eigenvalue of the mesh's inertia is not positive ({:e})",
+            e[2]
+        ));
+    }
+    let (rtol, atol) = (1e-6, 1e-9);
+    if e[1] + e[2] < e[0] * (1.0 - rtol) - atol {
+        return Err(format!(
+            "the principal moments of the mesh's inertia violate A + B >= C ({e:?})"
+        ));
+    }
+    let mut axes = Matrix3::from_columns(&order.map(|k| eig.eigenvectors.column(k).into_owned()));
+    if axes.determinant() < 0.0 {
+        axes.column_mut(2).neg_mut();
+    }
+    let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(axes));
+    let b = |i: usize, j: usize, k: usize| 0.5 * (6.0 * (e[j] + e[k] - e[i]) / measure).sqrt();
+    Ok(MeshMass {
+        measure,
+        com: Vector3::from(com),
+        rot,
+        boxsz: [b(0, 1, 2), b(1, 0, 2), b(2, 0, 1)],
+    })
+}
+
+/// Vertices made one where their float32 numbers are equal (MuJoCo does so for STL files, whose
+/// triangles list their corners each time); faces renumbered.
+fn merge_repeated(vert: Vec<[f32; 3]>, face: &mut [[usize; 3]]) -> Vec<[f64; 3]> {
+    let key = |v: &[f32; 3]| v.map(|x| if x == 0.0 { 0u32 } else { x.to_bits() });
+    let mut index = std::collections::HashMap::new();
+    let mut out = vec![];
+    let mut map = Vec::with_capacity(vert.len());
+    for v in &vert {
+        let k = *index.entry(key(v)).or_insert_with(|| {
+            out.push(v.map(f64::from));
+            out.len() - 1
+        });
+        map.push(k);
+    }
+    for f in face.iter_mut() {
+        *f = f.map(|k| map[k]);
+    }
+    out
+}
+
+/// Whether `scale` keeps the handedness (else faces are reversed, as MuJoCo does on loading).
+fn righthand(scale: [f64; 3]) -> bool {
+    scale[0] * scale[1] * scale[2] > 0.0
+}
+
+/// A binary STL file (MuJoCo reads no ASCII STL): 80-byte header, face count, 50 bytes a face.
+pub(crate) fn stl(bytes: &[u8], scale: [f64; 3]) -> Result<Mesh, String> {
+    if bytes.len() < 84 {
+        return Err("too short for a binary STL header (84 bytes)".into());
+    }
+    let n = u32::from_le_bytes(bytes[80..84].try_into().unwrap()) as usize;
+    if !(1..=200_000).contains(&n) {
+        return Err(format!("{n} faces: a binary STL file has 1 to 200000 (MuJoCo's bound); perhaps this is an ASCII STL file, which MuJoCo does not read"));
+    }
+    if n * 50 != bytes.len() - 84 {
+        return Err(format!("{} bytes for {n} faces (expected {}); perhaps this is an ASCII STL file, which MuJoCo does not read", bytes.len(), 84 + 50 * n));
+    }
+    let f32_at = |o: usize| f32::from_le_bytes(bytes[o..o + 4].try_into().unwrap());
+    let (mut vert, mut face) = (Vec::with_capacity(3 * n), Vec::with_capacity(n));
+    for i in 0..n {
+        let mut f = [0; 3];
+        for j in 0..3 {
+            let o = 84 + 50 * i + 12 * (j + 1);
+            let v = [f32_at(o), f32_at(o + 4), f32_at(o + 8)];
+            if v.iter().any(|x| !x.is_finite() || x.abs() > 2f32.powi(30)) {
+                return Err(format!(
+                    "face {i}: a vertex is not finite or exceeds 2^30 ({v:?})"
+                ));
+            }
+            f[j] = vert.len();
+            vert.push(v);
+        }
+        face.push(f);
+    }
+    finish(vert, face, scale, true)
+}
+
+/// MuJoCo's MSH file: four int32 counts (vertices, normals, texture coordinates, faces), then the
+/// float32 vertices, normals and texture coordinates, then int32 faces.
+pub(crate) fn msh(bytes: &[u8], scale: [f64; 3]) -> Result<Mesh, String> {
+    let int = |k: usize| i32::from_le_bytes(bytes[4 * k..4 * k + 4].try_into().unwrap()) as i64;
+    if bytes.len() < 16 {
+        return Err("missing the MSH header (16 bytes)".into());
+    }
+    let [nv, nn, nt, nf] = [int(0), int(1), int(2), int(3)];
+    if nv < 4 || nf < 0 || nn < 0 || nt < 0 || (nn > 0 && nn != nv) || (nt > 0 && nt != nv) {
+        return Err(format!("invalid sizes in the MSH header ({nv} vertices, {nn} normals, {nt} texture coordinates, {nf} faces)"));
+    }
+    let expected = 16 + 12 * (nv + nn + nf) + 8 * nt;
+    if bytes.len() as i64 != expected {
+        return Err(format!("{} bytes, the header says {expected}", bytes.len()));
+    }
+    let f32_at = |o: usize| f32::from_le_bytes(bytes[o..o + 4].try_into().unwrap());
+    let vert: Vec<[f32; 3]> = (0..nv as usize)
+        .map(|i| [0, 1, 2].map(|j| f32_at(16 + 12 * i + 4 * j)))
+        .collect();
+    let start = (16 + 12 * (nv + nn) + 8 * nt) as usize;
+    let mut face = vec![];
+    for i in 0..nf as usize {
+        let f = [0, 1, 2].map(|j| int(start / 4 + 3 * i + j));
+        if f.iter().any(|&k| k < 0 || k >= nv) {
+            return Err(format!(
+                "face {i} names a vertex that does not exist ({f:?})"
+            ));
+        }
+        face.push(f.map(|k| k as usize));
+    }
+    finish(vert, face, scale, false)
+}
+
+/// An OBJ file as MuJoCo's loader (tinyobjloader) reads it: every `v`; the `f` faces of the first
+/// object or group that has faces (indices 1-based, negative from the end, `v/vt/vn` forms),
+/// quads split along their shorter diagonal, larger polygons as fans.
+pub(crate) fn obj(text: &str, scale: [f64; 3]) -> Result<Mesh, String> {
+    let (mut vert, mut face) = (vec![], vec![]);
+    let mut shapes_done = false;
+    for (ln, line) in text.lines().enumerate() {
+        let mut w = line.split_whitespace();
+        match w.next() {
+            Some("v") => {
+                let xs: Vec<f32> = w
+                    .take(3)
+                    .map(|s| s.parse::<f64>().map(|x| x as f32))
+                    .collect::<Result<_, _>>()
+                    .map_err(|_| format!("line {}: `{line}` is not a vertex", ln + 1))?;
+                if xs.len() != 3 || xs.iter().any(|x| !x.is_finite()) {
+                    return Err(format!("line {}: `{line}` is not a vertex", ln + 1));
+                }
+                vert.push([xs[0], xs[1], xs[2]]);
+            }
+            Some("o" | "g") if !face.is_empty() => shapes_done = true,
+            Some("f") if !shapes_done => {
+                let idx: Vec<usize> = w
+                    .map(|s| obj_index(s, vert.len()))
+                    .collect::<Option<_>>()
+                    .ok_or_else(|| {
+                        format!("line {}: `{line}`: a face index is not a vertex", ln + 1)
+                    })?;
+                if idx.len() < 3 {
+                    return Err(format!("line {}: a face needs 3 vertices", ln + 1));
+                }
+                if idx.len() == 4 {
+                    let d = |a: usize, b: usize| {
+                        let (p, q) = (vert[idx[a]], vert[idx[b]]);
+                        (0..3).map(|i| (q[i] - p[i]) * (q[i] - p[i])).sum::<f32>()
+                    };
+                    if d(0, 2) < d(1, 3) {
+                        face.extend([[idx[0], idx[1], idx[2]], [idx[0], idx[2], idx[3]]]);
+                    } else {
+                        face.extend([[idx[0], idx[1], idx[3]], [idx[1], idx[2], idx[3]]]);
+                    }
+                } else {
+                    face.extend((1..idx.len() - 1).map(|k| [idx[0], idx[k], idx[k + 1]]));
+                }
+            }
+            _ => {}
+        }
+    }
+    if face.is_empty() {
+        return Err("no faces (MuJoCo would take the convex hull of the vertices, which progmo does not compute)".into());
+    }
+    let vert64 = vert.iter().map(|v| v.map(f64::from)).collect();
+    orient(&mut face, scale);
+    Ok(Mesh { vert: vert64, face })
+}
+
+/// An OBJ vertex reference (`k`, `k/t`, `k//n`, `k/t/n`; negative counts from the last vertex).
+fn obj_index(s: &str, nvert: usize) -> Option<usize> {
+    let k: i64 = s.split('/').next()?.parse().ok()?;
+    let i = if k < 0 { nvert as i64 + k } else { k - 1 };
+    (0..nvert as i64).contains(&i).then_some(i as usize)
+}
+
+/// Faces reversed under a left-handed `scale`.
+fn orient(face: &mut [[usize; 3]], scale: [f64; 3]) {
+    if !righthand(scale) {
+        for f in face {
+            f.swap(1, 2);
+        }
+    }
+}
+
+fn finish(
+    vert: Vec<[f32; 3]>,
+    mut face: Vec<[usize; 3]>,
+    scale: [f64; 3],
+    merge: bool,
+) -> Result<Mesh, String> {
+    let vert = if merge {
+        merge_repeated(vert, &mut face)
+    } else {
+        vert.iter().map(|v| v.map(f64::from)).collect()
+    };
+    if vert.len() < 4 {
+        return Err(format!("{} vertices: a mesh needs at least 4", vert.len()));
+    }
+    orient(&mut face, scale);
+    Ok(Mesh { vert, face })
+}
+
+/// A mesh given in the XML (`vertex`, `face`): float32 numbers, faces required.
+pub(crate) fn inline(
+    vertex: &[f64],
+    face: Option<&[f64]>,
+    scale: [f64; 3],
+) -> Result<Mesh, String> {
+    if vertex.len() % 3 != 0 || vertex.len() < 12 {
+        return Err(format!(
+            "`vertex` holds {} numbers: a multiple of 3, at least 4 vertices",
+            vertex.len()
+        ));
+    }
+    let vert: Vec<[f32; 3]> = vertex
+        .chunks(3)
+        .map(|c| [c[0] as f32, c[1] as f32, c[2] as f32])
+        .collect();
+    let Some(face) = face else {
+        return Err("no `face`: MuJoCo would take the convex hull of the vertices, which progmo does not compute".into());
+    };
+    if face.len() % 3 != 0 {
+        return Err(format!(
+            "`face` holds {} numbers: a multiple of 3",
+            face.len()
+        ));
+    }
+    let mut faces = vec![];
+    for c in face.chunks(3) {
+        let f = [c[0], c[1], c[2]];
+        if f.iter()
+            .any(|&k| k < 0.0 || k.fract() != 0.0 || k >= vert.len() as f64)
+        {
+            return Err(format!("face {f:?} names a vertex that does not exist"));
+        }
+        faces.push(f.map(|k| k as usize));
+    }
+    finish(vert, faces, scale, false)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A box of half-sizes a, outward faces (12 triangles).
+    fn cube(a: [f64; 3]) -> Mesh {
+        let vert = (0..8)
+            .map(|k| [0, 1, 2].map(|i| if k >> i & 1 == 1 { a[i] } else { -a[i] }))
+            .collect();
+        // faces as quads (corners by bit pattern), counter-clockwise from outside
+        let quads = [
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+        ];
+        let face = quads
+            .iter()
+            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+            .collect();
+        Mesh { vert, face }
+    }
+
+    #[test]
+    fn a_box_mesh_weighs_as_the_box() {
+        let a = [0.3, 0.5, 0.7];
+        let mut m = cube(a);
+        transform(&mut m, [0.1, -0.2, 0.05], [1.0, 0.0, 0.0, 0.0], [1.0; 3]);
+        for kind in [MeshInertia::Legacy, MeshInertia::Exact] {
+            let p = mass(&m, kind).unwrap();
+            let vol = 8.0 * a[0] * a[1] * a[2];
+            assert!((p.measure - vol).abs() < 1e-15, "{}", p.measure);
+            assert!((p.com - Vector3::new(-0.1, 0.2, -0.05)).norm() < 1e-15);
+            // the box about its centre: the largest moment about the shortest side's axis
+            let want = a;
+            for i in 0..3 {
+                assert!((p.boxsz[i] - want[i]).abs() < 1e-14, "{:?}", p.boxsz);
+            }
+        }
+        // a face turned inside out: exact refuses, legacy weighs it as before
+        m.face[0].swap(1, 2);
+        assert!(mass(&m, MeshInertia::Exact)
+            .unwrap_err()
+            .contains("inconsistent orientation"));
+        assert!(mass(&m, MeshInertia::Legacy).is_ok());
+    }
+
+    #[test]
+    fn binary_stl_and_obj_give_the_same_mesh() {
+        let m = cube([1.0, 2.0, 3.0]);
+        let mut stl_bytes = vec![0u8; 80];
+        stl_bytes.extend((m.face.len() as u32).to_le_bytes());
+        for f in &m.face {
+            stl_bytes.extend([0u8; 12]);
+            for &k in f {
+                for x in m.vert[k] {
+                    stl_bytes.extend((x as f32).to_le_bytes());
+                }
+            }
+            stl_bytes.extend([0u8; 2]);
+        }
+        let s = stl(&stl_bytes, [1.0; 3]).unwrap();
+        assert_eq!(s.vert.len(), 8, "corners merged");
+        let mut text = String::from("# cube\no cube\n");
+        for v in &m.vert {
+            text += &format!("v {} {} {}\n", v[0], v[1], v[2]);
+        }
+        for f in &m.face {
+            text += &format!("f {}/1/1 {}//2 {}\n", f[0] + 1, f[1] + 1, f[2] as i64 - 8);
+        }
+        let o = obj(&text, [1.0; 3]).unwrap();
+        let (ps, po) = (
+            mass(&s, MeshInertia::Exact).unwrap(),
+            mass(&o, MeshInertia::Exact).unwrap(),
+        );
+        assert!((ps.measure - 48.0).abs() < 1e-13 && (po.measure - 48.0).abs() < 1e-13);
+        // an ASCII STL is refused with the reason
+        let ascii = b"solid cube\n facet normal 0 0 1\n".repeat(4);
+        assert!(stl(&ascii, [1.0; 3]).unwrap_err().contains("ASCII"));
+        // a negative scale reverses the faces: the volume stays positive
+        let mut r = obj(&text, [-1.0, 1.0, 1.0]).unwrap();
+        transform(&mut r, [0.0; 3], [1.0, 0.0, 0.0, 0.0], [-1.0, 1.0, 1.0]);
+        assert!((mass(&r, MeshInertia::Exact).unwrap().measure - 48.0).abs() < 1e-13);
+    }
+}
