@@ -8,13 +8,14 @@
 //! `diaginertia` or `fullinertia`) or, as MuJoCo's compiler does, from the primitive geoms
 //! ([`super::geom_inertia`]) and mesh geoms ([`super::mesh`], files under `meshdir`), then
 //! `boundmass`/`boundinertia`.
-//! Modelled with MuJoCo's meaning: joint `damping`, `armature`, `stiffness` with `springref`
+//! Modelled with MuJoCo's meaning: joint `damping`, `armature`, `springdamper` (hinge and slide,
+//! [`spring_dampers`]), `stiffness` with `springref`
 //! (hinge and slide), `ref` (hinge and slide; `ref` and `springref` of hinges in degrees under
 //! `<compiler angle="degree">`, as MuJoCo converts them) and body `gravcomp`. Read and not
 //! modelled, one [`Unmodelled`] record per element (kinds of [`super::unmodelled::KINDS`]): joint
 //! limits (with their ranges), `actuatorfrcrange`, `frictionloss`, tendons, equality constraints,
 //! colliding geoms and `<contact>` pairs/excludes, actuators, fluid options. Refused (located
-//! errors): springs on ball and free joints, `springdamper`, and what changes the stated model
+//! errors): springs on ball and free joints, and what changes the stated model
 //! (see [`compiler`]). Cameras, lights, sensors, textures and materials are not read (no
 //! dynamics); of the assets only meshes are.
 //! `<include>`s are expanded first, as MuJoCo does ([`super::include`]).
@@ -339,6 +340,48 @@ fn keyframes(src: &Source, root: Node, layout: &[(String, Vec<f64>)]) -> R<Vec<K
         });
     }
     Ok(out)
+}
+
+/// `springdamper="timeconst dampratio"` as MuJoCo's compiler applies it to a hinge or slide:
+/// with m = 1 / (A(qpos0)^-1)_ii, the joint's effective mass in the file's model at qpos0
+/// (MuJoCo's `dof_invweight0`, armature included), stiffness m / (timeconst^2 dampratio^2) and
+/// damping 2 m / timeconst replace the stated ones (a mass-spring-damper of that time constant
+/// and damping ratio). `full` is the file's model with no joint locked.
+fn spring_dampers(
+    src: &Source,
+    root: Node,
+    full: &[BodySpec],
+    joints: &[(String, [f64; 2])],
+    bodies: &mut [BodySpec],
+) -> R<()> {
+    use crate::tree;
+    let at = |m: String| err(src, root, "joint.springdamper", m);
+    let model = tree::Model::new(full, tree::Fields::default())
+        .map_err(|e| at(format!("the model at qpos0 (for springdamper): {e}")))?;
+    let q = tree::neutral(&model);
+    let mut data = tree::TreeData::<f64>::new(&model);
+    let n = model.nv();
+    let mut a = nalgebra::DMatrix::zeros(n, n);
+    tree::mass_matrix(&model, &mut data, q.as_slice(), &mut a);
+    let Some(chol) = a.cholesky() else {
+        return Err(at(
+            "the mass matrix at qpos0 is singular: springdamper needs each joint's effective mass"
+                .into(),
+        ));
+    };
+    let inv = chol.inverse();
+    for (name, [tc, dr]) in joints {
+        let j = model.joint_id(name).expect("a joint of the file");
+        let i = model.joint_v_range(j).start;
+        let m = 1.0 / inv[(i, i)];
+        for js in bodies.iter_mut().flat_map(|b| b.joints.iter_mut()) {
+            if &js.name == name {
+                js.stiffness = m / (tc * tc * dr * dr);
+                js.damping = 2.0 * m / tc;
+            }
+        }
+    }
+    Ok(())
 }
 
 fn quat_of(u: UnitQuaternion<f64>) -> [f64; 4] {
@@ -688,6 +731,7 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         sites: vec![],
         mass_unknown: vec![],
         meshes: &meshes,
+        spring_dampers: vec![],
     };
     // depth-first, parents first: (element, parent body name, inherited childclass)
     let mut stack = top_bodies(src, &c, &worldbodies)?;
@@ -712,6 +756,15 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
             "locked_joints",
             format!("locked joint `{}` is not a joint of this file", locked[k]),
         ));
+    }
+    if !w.spring_dampers.is_empty() {
+        // MuJoCo's qpos0 mass matrix is the file's, every joint free to move
+        let full = if locked.is_empty() {
+            w.bodies.clone()
+        } else {
+            import(src, &[])?.bodies
+        };
+        spring_dampers(src, root, &full, &w.spring_dampers, &mut w.bodies)?;
     }
     let unmodelled: Vec<Unmodelled> = w.rec.out;
     Ok(Robot {
@@ -909,6 +962,8 @@ struct Walk<'s, 'd, 'a, 'i> {
     mass_unknown: Vec<SceneError>,
     /// The `<asset>` meshes, weighed at first use.
     meshes: &'d Meshes<'d, 'a, 'i>,
+    /// Joints with `springdamper` (time constant, damping ratio), in file order.
+    spring_dampers: Vec<(String, [f64; 2])>,
 }
 
 impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
@@ -1175,7 +1230,10 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
             a.get("type").unwrap_or("hinge")
         };
         let js = a.spec(jname, kind, parent)?;
-        let (js, reference) = a.dynamics(self.c, js, kind)?;
+        let (js, reference, springdamper) = a.dynamics(self.c, js, kind)?;
+        if let Some(sd) = springdamper {
+            self.spring_dampers.push((jname.to_string(), sd));
+        }
         let qpos0 = match kind {
             "free" => [&self.pose.0[..], &self.pose.1[..]].concat(),
             "ball" => vec![1.0, 0.0, 0.0, 0.0],
@@ -1323,12 +1381,28 @@ impl<'a> JointAttrs<'_, 'a, '_> {
 
     /// `js` with its damping, armature, spring and reference (angles of hinges in the compiler's
     /// unit), and the reference.
-    fn dynamics(&self, c: &Compiler, js: JointSpec, kind: &str) -> R<(JointSpec, f64)> {
+    /// `springdamper` (time constant, damping ratio) unless "0 0" (then both must be positive):
+    /// its stiffness and damping replace the stated ones ([`spring_dampers`]).
+    fn dynamics(
+        &self,
+        c: &Compiler,
+        js: JointSpec,
+        kind: &str,
+    ) -> R<(JointSpec, f64, Option<[f64; 2]>)> {
         let (src, e, jwhat) = (self.src, self.e, &self.what);
         let hinge = kind == "hinge";
         let angle = |x: f64| joint_angle(c, kind, x);
-        if self.get("springdamper").is_some() && self.nonzero("springdamper") {
-            return Err(err(src, e, &format!("{jwhat}.springdamper"), "`springdamper` (stiffness and damping from a time constant and the mass matrix at qpos0) is not supported: give stiffness and damping"));
+        let sd = match self.get("springdamper") {
+            Some(t) => fixed::<2>(src, e, &format!("{jwhat}.springdamper"), "springdamper", t)?,
+            None => [0.0; 2],
+        };
+        // MuJoCo: "0 0" is none; any other pair must be positive
+        let springdamper = (sd != [0.0; 2]).then_some(sd);
+        if springdamper.is_some() && !(sd[0] > 0.0 && sd[1] > 0.0) {
+            return Err(err(src, e, &format!("{jwhat}.springdamper"), format!("springdamper values must be positive (time constant, damping ratio), got {} {} (MuJoCo refuses them too)", sd[0], sd[1])));
+        }
+        if springdamper.is_some() && !(hinge || kind == "slide") {
+            return Err(err(src, e, &format!("{jwhat}.springdamper"), format!("a spring on a {kind} joint is not supported (springs on hinge and slide joints only)")));
         }
         let damping = self.scalar("damping", 0.0)?;
         let armature = self.scalar("armature", 0.0)?;
@@ -1363,7 +1437,7 @@ impl<'a> JointAttrs<'_, 'a, '_> {
             .with_armature(armature)
             .with_spring(stiffness, springref)
             .with_reference(reference);
-        Ok((js, reference))
+        Ok((js, reference, springdamper))
     }
 }
 

@@ -800,3 +800,51 @@ def test_a_mesh_progmo_cannot_weigh_is_refused_at_its_line(tmp_path, change, mes
     line = next(k + 1 for k, s in enumerate(text.splitlines()) if message in s)
     assert f"meshes.xml:{line}" in str(e.value), str(e.value)
     assert "asset.mesh[" in str(e.value), str(e.value)
+
+
+SPRINGDAMPER_MJCF = """<mujoco model="springdamper">
+  <default>
+    <joint armature="0.01"/>
+    <default class="tail"><joint springdamper="0.05 0.8" damping="7" stiffness="3"/></default>
+  </default>
+  <worldbody>
+    <body name="a" pos="0 0 1">
+      <joint name="j0" axis="0 1 0" springdamper="0.1 0.7" ref="10" springref="5"/>
+      <geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.04"/>
+      <body name="b" pos="0.3 0 0">
+        <joint name="j1" class="tail" axis="0 0 1"/>
+        <joint name="j2" type="slide" axis="1 0 0" springdamper="0.2 1.5"/>
+        <geom type="box" size="0.1 0.05 0.02" pos="0.1 0 0"/>
+        <body name="c" pos="0.2 0 0">
+          <joint name="j3" axis="1 0 0" springdamper="0 0" stiffness="2" damping="0.3"/>
+          <geom type="sphere" size="0.05"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+@pytest.mark.parametrize("locked", [[], ["j2"]])
+def test_springdamper_is_the_stiffness_and_damping_mujoco_derives(tmp_path, locked):
+    """`springdamper="timeconst dampratio"` on hinges and a slide (in a default class, over stated
+    stiffness and damping, with ref and springref; "0 0" is none, as in MuJoCo): the
+    stiffness and damping MuJoCo's compiler derives from each joint's effective mass at qpos0.
+    A and G + Q equal MuJoCo's at random states (relative 1e-12), also with a joint locked (the
+    effective masses are still the file's, every joint free). Control: MuJoCo's copy with a
+    different time constant fails."""
+    xml = tmp_path / "sd.xml"
+    xml.write_text(SPRINGDAMPER_MJCF)
+    scene = mjcf_scene(tmp_path, xml, dict(gravity=[0.0, 0.0, -9.81], locked_joints=locked))
+    model = mujoco.MjModel.from_xml_path(str(xml))
+    assert model.jnt_stiffness[1] != 3.0 and model.dof_damping[1] != 7.0  # MuJoCo overrides them
+    wa, wf = worst(scene, model, 3)
+    assert wa <= TOL and wf <= TOL, (wa, wf)
+    other = mujoco.MjModel.from_xml_string(SPRINGDAMPER_MJCF.replace('"0.1 0.7"', '"0.11 0.7"'))
+    wa, wf = worst(scene, other, 3)
+    assert max(wa, wf) > 1e-4, (wa, wf)
+    bad = SPRINGDAMPER_MJCF.replace('springdamper="0 0"', 'springdamper="0 0.5"')
+    xml.write_text(bad)
+    with pytest.raises(Exception, match="springdamper values must be positive"):
+        mjcf_scene(tmp_path, xml, dict(locked_joints=locked))
