@@ -18,7 +18,8 @@
 //! errors): springs on ball and free joints, and what changes the stated model
 //! (see [`compiler`]). Cameras, lights, sensors, textures and materials are not read (no
 //! dynamics); of the assets only meshes are.
-//! `<include>`s are expanded first, as MuJoCo does ([`super::include`]).
+//! `<include>`s are expanded first, as MuJoCo does ([`super::include`]); `<frame>` and
+//! `<replicate>` are resolved while walking the bodies ([`child_bodies`]).
 
 use super::geom_inertia::{self as gi, GeomMass, MassProps, Shape};
 use super::mesh::{self, MeshInertia, MeshMass};
@@ -732,15 +733,19 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         mass_unknown: vec![],
         meshes: &meshes,
         spring_dampers: vec![],
+        suffix: String::new(),
     };
     // depth-first, parents first: (element, parent body name, inherited childclass)
     let mut stack = top_bodies(src, &c, &worldbodies)?;
-    while let Some((b, parent, class, frame)) = stack.pop() {
+    while let Some((b, parent, class, frame, suffix)) = stack.pop() {
+        w.suffix = suffix;
         let (name, class) = w.body(b, &parent, &class, frame)?;
         let mut children = vec![];
-        child_bodies(src, &c, b, (&name, &class), IDENTITY, false, &mut children)?;
+        let at = (&name[..], &class[..], &w.suffix[..]);
+        child_bodies(src, &c, b, at, IDENTITY, false, &mut children)?;
         stack.extend(children.into_iter().rev());
     }
+    w.suffix.clear();
     for wb in &worldbodies {
         w.sites(*wb, WORLD, MAIN)?;
     }
@@ -794,7 +799,7 @@ fn read_top_level(src: &Source, root: Node, notes: &mut Vec<String>, rec: &mut R
                     n,
                     tag,
                     format!(
-                    "<{tag}> is not supported here (a <frame> belongs in <worldbody> or a <body>)"
+                    "<{tag}> is not supported here (a <frame> or <replicate> belongs in <worldbody> or a <body>)"
                 ),
                 ))
             }
@@ -854,8 +859,9 @@ fn read_top_level(src: &Source, root: Node, notes: &mut Vec<String>, rec: &mut R
 }
 
 /// A body still to read: (element, parent body name, inherited childclass, the pose of the
-/// `<frame>`s around it in the parent body's frame).
-type Pending<'a, 'i> = (Node<'a, 'i>, String, String, Pose);
+/// `<frame>`s and `<replicate>` copies around it in the parent body's frame, the suffix the
+/// `<replicate>`s around it add to the names in its subtree).
+type Pending<'a, 'i> = (Node<'a, 'i>, String, String, Pose, String);
 
 /// A placement: position and quaternion (w, x, y, z) in the enclosing frame.
 type Pose = ([f64; 3], [f64; 4]);
@@ -877,21 +883,23 @@ fn top_bodies<'a, 'i>(
 ) -> R<Vec<Pending<'a, 'i>>> {
     let mut all = vec![];
     for w in worldbodies {
-        child_bodies(src, c, *w, (WORLD, MAIN), IDENTITY, true, &mut all)?;
+        child_bodies(src, c, *w, (WORLD, MAIN, ""), IDENTITY, true, &mut all)?;
     }
     all.reverse();
     Ok(all)
 }
 
 /// The child bodies of `parent` in document order, those inside `<frame>` elements (nested too)
-/// with the frames' composed pose and childclass, as MuJoCo's compiler resolves them (its sites:
-/// `Walk::sites_in`). A geom, joint or inertial in a body's frame is refused (its pose would change
-/// the body's mass properties or joints); in the worldbody its static geometry is not read. `<replicate>` and `<attach>` are refused.
+/// with the frames' composed pose and childclass, and those inside `<replicate>` elements once per
+/// copy ([`replicas`]), as MuJoCo's compiler resolves them (its sites: `Walk::sites_in`). A geom,
+/// joint or inertial in a body's frame or replicate is refused (its pose would change the body's
+/// mass properties or joints); in the worldbody its static geometry is not read. `<attach>` is
+/// refused.
 fn child_bodies<'a, 'i>(
     src: &Source,
     c: &Compiler,
     parent: Node<'a, 'i>,
-    (name, class): (&str, &str),
+    (name, class, suffix): (&str, &str, &str),
     frame: Pose,
     in_world: bool,
     out: &mut Vec<Pending<'a, 'i>>,
@@ -899,36 +907,66 @@ fn child_bodies<'a, 'i>(
     for e in elements(parent) {
         let tag = e.tag_name().name();
         match tag {
-            "body" => out.push((e, name.to_string(), class.to_string(), frame)),
-            "frame" => {
-                let what = format!("frame[{}]", e.attribute("name").unwrap_or(""));
-                let pos = attr_k::<3>(src, e, &format!("{what}.pos"), "pos", [0.0; 3])?;
-                let quat = orientation(src, c, e, &what)?;
-                let fclass = e.attribute("childclass").unwrap_or(class);
+            "body" => out.push((e, name.to_string(), class.to_string(), frame, suffix.into())),
+            "frame" | "replicate" => {
                 let held = ["geom", "joint", "freejoint", "inertial"];
                 if let Some(x) =
                     elements(e).find(|x| !in_world && held.contains(&x.tag_name().name()))
                 {
                     let t = x.tag_name().name();
-                    return Err(err(src, x, &format!("{what}.{t}"), format!("a <{t}> inside a <frame> of a body is not supported (bodies, sites and frames are read in a frame): move it into the body, composing the frame's pose")));
+                    let what = format!("{tag}[{}].{t}", e.attribute("name").unwrap_or(""));
+                    return Err(err(src, x, &what, format!("a <{t}> inside a <{tag}> of a body is not supported (bodies, sites, frames and replicates are read there): move it into the body, composing the pose")));
                 }
-                child_bodies(
-                    src,
-                    c,
-                    e,
-                    (name, fclass),
-                    compose(frame, (pos, quat)),
-                    in_world,
-                    out,
-                )?;
+                let fclass = e.attribute("childclass").unwrap_or(class);
+                for (pose, sfx) in replicas(src, c, e, suffix)? {
+                    let at = (name, fclass, &sfx[..]);
+                    child_bodies(src, c, e, at, compose(frame, pose), in_world, out)?;
+                }
             }
-            "replicate" | "attach" => {
+            "attach" => {
                 return Err(err(src, e, tag, format!("<{tag}> is not supported (write the file out, e.g. with MuJoCo's mj_saveLastXML)")));
             }
             _ => {}
         }
     }
     Ok(())
+}
+
+/// The copies a `<frame>` (one, its pose) or a `<replicate count sep offset orientation>` makes:
+/// copy k placed at T^k, T the offset and rotation, its names suffixed by `sep` and k before the
+/// suffix of the replicates around it (MuJoCo: the innermost index first).
+fn replicas(src: &Source, c: &Compiler, e: Node, suffix: &str) -> R<Vec<(Pose, String)>> {
+    let tag = e.tag_name().name();
+    let what = format!("{tag}[{}]", e.attribute("name").unwrap_or(""));
+    let pos = attr_k::<3>(src, e, &format!("{what}.pos"), "pos", [0.0; 3])?;
+    let quat = orientation(src, c, e, &what)?;
+    if tag == "frame" {
+        return Ok(vec![((pos, quat), suffix.to_string())]);
+    }
+    let count = match e.attribute("count").map(|t| t.trim().parse::<usize>()) {
+        Some(Ok(n)) if (1..=crate::input::MAX_BODIES).contains(&n) => n,
+        _ => {
+            return Err(err(
+                src,
+                e,
+                &format!("{what}.count"),
+                format!(
+                    "a <replicate> needs `count`, a whole number from 1 to {}",
+                    crate::input::MAX_BODIES
+                ),
+            ))
+        }
+    };
+    let offset = attr_k::<3>(src, e, &format!("{what}.offset"), "offset", [0.0; 3])?;
+    let sep = e.attribute("sep").unwrap_or("");
+    let step = (offset, quat);
+    let mut at = (pos, [1.0, 0.0, 0.0, 0.0]);
+    let mut out = Vec::with_capacity(count);
+    for k in 0..count {
+        out.push((at, format!("{sep}{k}{suffix}")));
+        at = compose(at, step);
+    }
+    Ok(out)
 }
 
 /// What the depth-first walk over the bodies builds, and what it checks names against.
@@ -964,6 +1002,8 @@ struct Walk<'s, 'd, 'a, 'i> {
     meshes: &'d Meshes<'d, 'a, 'i>,
     /// Joints with `springdamper` (time constant, damping ratio), in file order.
     spring_dampers: Vec<(String, [f64; 2])>,
+    /// The suffix the `<replicate>`s around the current body add to its subtree's names.
+    suffix: String,
 }
 
 impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
@@ -991,7 +1031,7 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
         }
         let name = b
             .attribute("name")
-            .map(String::from)
+            .map(|n| format!("{n}{}", self.suffix))
             .unwrap_or_else(|| format!("body{k}"));
         let what = format!("body[{name}]");
         if name == WORLD {
@@ -1059,17 +1099,20 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
     /// composed pose and childclass; `frame`: the pose of the frames around `b` in the body.
     fn sites_in(&mut self, b: Node<'a, 'i>, parent: &str, class: &str, frame: Pose) -> R<()> {
         let src = self.src;
-        for f in elements(b).filter(|e| e.has_tag_name("frame")) {
-            let what = format!("frame[{}]", f.attribute("name").unwrap_or(""));
-            let pos = attr_k::<3>(src, f, &format!("{what}.pos"), "pos", [0.0; 3])?;
-            let quat = orientation(src, self.c, f, &what)?;
+        for f in elements(b).filter(|e| e.has_tag_name("frame") || e.has_tag_name("replicate")) {
             let fclass = f.attribute("childclass").unwrap_or(class).to_string();
-            self.sites_in(f, parent, &fclass, compose(frame, (pos, quat)))?;
+            let outer = std::mem::take(&mut self.suffix);
+            for (pose, sfx) in replicas(src, self.c, f, &outer)? {
+                self.suffix = sfx;
+                self.sites_in(f, parent, &fclass, compose(frame, pose))?;
+            }
+            self.suffix = outer;
         }
         for e in elements(b).filter(|e| e.has_tag_name("site")) {
-            let Some(name) = e.attribute("name") else {
+            let Some(name) = e.attribute("name").map(|n| format!("{n}{}", self.suffix)) else {
                 continue; // an unnamed site cannot be named in a row
             };
+            let name = &name[..];
             let what = format!("site[{name}]");
             let sclass = e.attribute("class").unwrap_or(class);
             let problem = if e.attribute("fromto").is_some() {
@@ -1116,7 +1159,9 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
             let mut parts = vec![];
             for (k, g) in elements(b).filter(|e| e.has_tag_name("geom")).enumerate() {
                 let gclass = g.attribute("class").unwrap_or(class);
-                let gname = g.attribute("name").map_or(format!("{k}"), String::from);
+                let gname = g
+                    .attribute("name")
+                    .map_or(format!("{k}"), |n| format!("{n}{}", self.suffix));
                 let gwhat = format!("{what}.geom[{gname}]");
                 if !self.defaults.classes.contains_key(gclass) && gclass != MAIN {
                     return Err(err(
@@ -1163,7 +1208,9 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
                     .is_none_or(|v| v.trim().parse::<i64>() != Ok(0)) // MuJoCo's default: 1
             });
             if collides {
-                let gname = g.attribute("name").map_or(format!("{gi}"), String::from);
+                let gname = g
+                    .attribute("name")
+                    .map_or(format!("{gi}"), |n| format!("{n}{}", self.suffix));
                 self.rec.push("contact", format!("{what}.geom[{gname}]"), g);
             }
         }
@@ -1192,8 +1239,9 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
         let free = tag == "freejoint"
             || (tag == "joint" && self.defaults.joint_attr(e, jclass, "type") == Some("free"));
         let unnamed_free = format!("{}_free", self.body_name);
-        let jname = match e.attribute("name") {
-            Some(n) => n,
+        let suffixed = e.attribute("name").map(|n| format!("{n}{}", self.suffix));
+        let jname = match &suffixed {
+            Some(n) => n.as_str(),
             None if free => unnamed_free.as_str(), // the body's coordinates: BODY_free.x, ...
             None => {
                 return Err(err(

@@ -1408,9 +1408,19 @@ fn push_frame(
     sites.push(name.to_string());
 }
 
-/// Every word of `text` that a `.` follows (`NAME.` names a signal source), in one forward pass.
+/// Every word of `text` that a `.` follows (`NAME.` or `` `NAME`. `` names a signal source).
 fn dotted_words(text: &str) -> std::collections::HashSet<&str> {
     let mut named = std::collections::HashSet::new();
+    // backquoted names (`` `tip-2`.x ``, the quoting of expr/lexer.rs)
+    let mut rest = text;
+    while let Some(open) = rest.find('`') {
+        let after = &rest[open + 1..];
+        let Some(close) = after.find('`') else { break };
+        if after[close + 1..].starts_with('.') {
+            named.insert(&after[..close]);
+        }
+        rest = &after[close + 1..];
+    }
     let mut start = None;
     for (i, c) in text.char_indices() {
         if c.is_alphanumeric() || c == '_' {
@@ -1427,9 +1437,9 @@ fn dotted_words(text: &str) -> std::collections::HashSet<&str> {
 
 /// The MJCF file's `<site>`s the scene names (`NAME.` in its text: model only what a scene needs),
 /// appended as massless bodies welded where the site is, like `[[model.frames]]`. A site whose
-/// name is a link's, a joint's or a `frames` entry's, or not an identifier, is not added (that
-/// name means the other); one that cannot be read as a frame is refused with its reason, located
-/// at the site.
+/// name is a link's, a joint's or a `frames` entry's, or cannot be written in a row even
+/// backquoted, is not added (that name means the other); one that cannot be read as a frame is
+/// refused with its reason, located at the site.
 fn site_frames(
     src: &Source,
     file_sites: &[crate::import::mjcf::Site],
@@ -1443,7 +1453,9 @@ fn site_frames(
     taken.extend(joints.iter().cloned());
     for site in file_sites {
         let unused = !named.contains(site.name.as_str());
-        if unused || taken.contains(&site.name) || !is_identifier(&site.name) {
+        let writable =
+            is_identifier(&site.name) || crate::import::unusable_name(&site.name).is_none();
+        if unused || taken.contains(&site.name) || !writable {
             continue;
         }
         if let Some(e) = &site.problem {

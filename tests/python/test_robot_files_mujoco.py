@@ -848,3 +848,58 @@ def test_springdamper_is_the_stiffness_and_damping_mujoco_derives(tmp_path, lock
     xml.write_text(bad)
     with pytest.raises(Exception, match="springdamper values must be positive"):
         mjcf_scene(tmp_path, xml, dict(locked_joints=locked))
+
+
+REPLICATE_MJCF = """<mujoco model="replicate">
+  <compiler angle="degree"/>
+  <worldbody>
+    <replicate count="3" offset="0.5 0 0" euler="0 0 30" sep="-">
+      <body name="arm" pos="0 0.1 0">
+        <joint name="shoulder" axis="0 1 0"/>
+        <geom type="capsule" fromto="0 0 0 0.2 0 0" size="0.03"/>
+        <site name="tip" pos="0.2 0 0"/>
+      </body>
+    </replicate>
+    <body name="hub" pos="0 0 1">
+      <freejoint name="hub_free"/>
+      <geom type="box" size="0.2 0.1 0.05"/>
+      <replicate count="2" offset="0 0 -0.2" euler="10 0 0">
+        <frame pos="0.1 0 0" euler="0 20 0">
+          <replicate count="2" offset="0.3 0 0" sep="_">
+            <body name="leg"><joint name="knee" axis="1 0 0"/><geom size="0.05" pos="0 0 -0.1"/>
+              <site name="foot" pos="0 0 -0.2"/></body>
+          </replicate>
+        </frame>
+      </replicate>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+def test_replicate_copies_bodies_where_mujoco_puts_them(tmp_path):
+    """Issue 30, item 1: `<replicate>` in the worldbody and in a body, nested, around a `<frame>`:
+    copy k at offset and rotation composed k times, names suffixed with `sep` and the index (the
+    innermost first). The joints are MuJoCo's, in its order; A and G + Q equal MuJoCo's reading
+    at random states (relative 1e-12); sites named in a row are where MuJoCo puts them. Control:
+    MuJoCo's copy with another rotation step fails."""
+    xml = tmp_path / "rep.xml"
+    xml.write_text(REPLICATE_MJCF)
+    rows = "[[programme]]\nname = \"p\"\nexpr = \"`tip-2`.x + foot_10.z - 1\"\n"
+    scene = mjcf_scene(tmp_path, xml, dict(gravity=[0.0, 0.0, -9.81]), rows)
+    model = mujoco.MjModel.from_xml_path(str(xml))
+    names = [model.joint(i).name for i in range(model.njnt)]
+    assert [n for n in scene.v_names if "." not in n] == [n for n in names if n != "hub_free"]
+    wa, wf = worst(scene, model, 11)
+    assert wa <= TOL and wf <= TOL, (wa, wf)
+    d = mujoco.MjData(model)
+    qa, _ = coordinates(scene, model)
+    q, _ = random_state(scene, np.random.default_rng(3))
+    d.qpos[qa] = q
+    mujoco.mj_forward(model, d)
+    poses = {n: p for n, p, _ in scene.body_poses(q)}
+    for site in ("tip-2", "foot_10"):
+        assert np.abs(np.array(poses[site]) - d.site(site).xpos).max() < 1e-12, site
+    other = mujoco.MjModel.from_xml_string(REPLICATE_MJCF.replace('euler="10 0 0"', 'euler="11 0 0"'))
+    wa, wf = worst(scene, other, 11)
+    assert max(wa, wf) > 1e-4, (wa, wf)
