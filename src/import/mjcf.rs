@@ -19,7 +19,8 @@
 //! (see [`compiler`]). Cameras, lights, sensors, textures and materials are not read (no
 //! dynamics); of the assets only meshes are.
 //! `<include>`s are expanded first, as MuJoCo does ([`super::include`]); `<frame>` and
-//! `<replicate>` are resolved while walking the bodies ([`child_bodies`]).
+//! `<replicate>` are resolved while walking the bodies ([`child_bodies`]); an `<attach>`ed
+//! model's file is imported on its own and its subtree grafted ([`Walk::attach`]).
 
 use super::geom_inertia::{self as gi, GeomMass, MassProps, Shape};
 use super::mesh::{self, MeshInertia, MeshMass};
@@ -341,6 +342,32 @@ fn keyframes(src: &Source, root: Node, layout: &[(String, Vec<f64>)]) -> R<Vec<K
         });
     }
     Ok(out)
+}
+
+/// The `springdamper`s of the file's joints applied ([`spring_dampers`]); refused in an
+/// `<attach>`ed file (its stiffness would need the whole model's mass matrix).
+fn apply_spring_dampers(
+    src: &Source,
+    root: Node,
+    locked: &[String],
+    depth: usize,
+    sd: &[(String, [f64; 2])],
+    bodies: &mut [BodySpec],
+) -> R<()> {
+    if sd.is_empty() {
+        return Ok(());
+    }
+    if depth > 0 {
+        let j = &sd[0].0;
+        return Err(src.error(0..0, &format!("joint[{j}].springdamper"), format!("joint `{j}` of an <attach>ed model has `springdamper`: its stiffness depends on the whole model's mass matrix, which is not computed for attached models; give stiffness and damping")));
+    }
+    // MuJoCo's qpos0 mass matrix is the file's, every joint free to move
+    let full = if locked.is_empty() {
+        bodies.to_vec()
+    } else {
+        import(src, &[])?.bodies
+    };
+    spring_dampers(src, root, &full, sd, bodies)
 }
 
 /// `springdamper="timeconst dampratio"` as MuJoCo's compiler applies it to a hinge or slide:
@@ -689,6 +716,14 @@ fn body_spec(
 /// Read an MJCF document (`src` is the file and its text); `locked` joints are welded at the
 /// file's pose (q = their `ref`, the value reported in [`Robot::locked`]).
 pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
+    import_at(src, locked, 0)
+}
+
+/// Most nested `<attach>`ed models (an attach cycle would nest without end).
+const MAX_ATTACH_DEPTH: usize = 8;
+
+/// [`import`] of a file `depth` `<attach>`es deep.
+fn import_at(src: &Source, locked: &[String], depth: usize) -> R<Robot> {
     // `<include>`s expanded first: one composed document, errors located in the file they are in
     let expanded = super::include::expand(src)?;
     let src = expanded.as_ref().unwrap_or(src);
@@ -734,11 +769,17 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
         meshes: &meshes,
         spring_dampers: vec![],
         suffix: String::new(),
+        models: models(src, root)?,
+        depth,
     };
     // depth-first, parents first: (element, parent body name, inherited childclass)
     let mut stack = top_bodies(src, &c, &worldbodies)?;
     while let Some((b, parent, class, frame, suffix)) = stack.pop() {
         w.suffix = suffix;
+        if b.has_tag_name("attach") {
+            w.attach(b, &parent, frame)?;
+            continue;
+        }
         let (name, class) = w.body(b, &parent, &class, frame)?;
         let mut children = vec![];
         let at = (&name[..], &class[..], &w.suffix[..]);
@@ -762,15 +803,7 @@ pub fn import(src: &Source, locked: &[String]) -> R<Robot> {
             format!("locked joint `{}` is not a joint of this file", locked[k]),
         ));
     }
-    if !w.spring_dampers.is_empty() {
-        // MuJoCo's qpos0 mass matrix is the file's, every joint free to move
-        let full = if locked.is_empty() {
-            w.bodies.clone()
-        } else {
-            import(src, &[])?.bodies
-        };
-        spring_dampers(src, root, &full, &w.spring_dampers, &mut w.bodies)?;
-    }
+    apply_spring_dampers(src, root, locked, depth, &w.spring_dampers, &mut w.bodies)?;
     let unmodelled: Vec<Unmodelled> = w.rec.out;
     Ok(Robot {
         bodies: w.bodies,
@@ -893,8 +926,8 @@ fn top_bodies<'a, 'i>(
 /// with the frames' composed pose and childclass, and those inside `<replicate>` elements once per
 /// copy ([`replicas`]), as MuJoCo's compiler resolves them (its sites: `Walk::sites_in`). A geom,
 /// joint or inertial in a body's frame or replicate is refused (its pose would change the body's
-/// mass properties or joints); in the worldbody its static geometry is not read. `<attach>` is
-/// refused.
+/// mass properties or joints); in the worldbody its static geometry is not read. An `<attach>`
+/// is queued like a body ([`Walk::attach`]).
 fn child_bodies<'a, 'i>(
     src: &Source,
     c: &Compiler,
@@ -923,13 +956,55 @@ fn child_bodies<'a, 'i>(
                     child_bodies(src, c, e, at, compose(frame, pose), in_world, out)?;
                 }
             }
-            "attach" => {
-                return Err(err(src, e, tag, format!("<{tag}> is not supported (write the file out, e.g. with MuJoCo's mj_saveLastXML)")));
-            }
+            "attach" => out.push((e, name.to_string(), class.to_string(), frame, suffix.into())),
             _ => {}
         }
     }
     Ok(())
+}
+
+/// The file of an `<asset>` `<model>` (element `m`, what `mwhat`), imported `depth` attaches deep.
+fn attached_file(
+    src: &Source,
+    m: Node,
+    mwhat: &str,
+    file: &str,
+    depth: usize,
+) -> R<(Robot, std::path::PathBuf)> {
+    let at = |msg: String| err(src, m, mwhat, msg);
+    let dir = src.file.parent().unwrap_or(Path::new("."));
+    let path = crate::input::resolve(file, dir).map_err(at)?;
+    let bytes = crate::input::read(&path, crate::input::ROBOT_LIMIT)
+        .map_err(|x| at(format!("cannot read `{}`: {x}", path.display())))?;
+    let text = crate::input::text(bytes)
+        .map_err(|x| at(format!("`{}`: {}", path.display(), x.message)))?;
+    Ok((
+        import_at(&Source::new(path.clone(), text), &[], depth)?,
+        path,
+    ))
+}
+
+/// The `<asset>` `<model name file>` elements by name.
+fn models<'a, 'i>(src: &Source, root: Node<'a, 'i>) -> R<HashMap<String, Node<'a, 'i>>> {
+    let mut out = HashMap::new();
+    for m in elements(root)
+        .filter(|n| n.has_tag_name("asset"))
+        .flat_map(elements)
+        .filter(|n| n.has_tag_name("model"))
+    {
+        let Some(name) = m.attribute("name") else {
+            return Err(err(src, m, "asset.model", "a <model> needs `name`"));
+        };
+        if out.insert(name.to_string(), m).is_some() {
+            return Err(err(
+                src,
+                m,
+                &format!("asset.model[{name}]"),
+                format!("model `{name}` is defined twice"),
+            ));
+        }
+    }
+    Ok(out)
 }
 
 /// The copies a `<frame>` (one, its pose) or a `<replicate count sep offset orientation>` makes:
@@ -1004,6 +1079,10 @@ struct Walk<'s, 'd, 'a, 'i> {
     spring_dampers: Vec<(String, [f64; 2])>,
     /// The suffix the `<replicate>`s around the current body add to its subtree's names.
     suffix: String,
+    /// The `<asset>` `<model>`s (name -> element) an `<attach>` may name.
+    models: HashMap<String, Node<'a, 'i>>,
+    /// How many `<attach>`es deep this file is read.
+    depth: usize,
 }
 
 impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
@@ -1088,6 +1167,169 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
         }
         self.bodies.push(spec);
         Ok((name, class))
+    }
+
+    /// `<attach model body prefix>` (MuJoCo): the subtree of body `body` of the `<asset>` `<model>`'s
+    /// file, read as that file says (its own compiler settings, defaults and mesh folder), its
+    /// names prefixed (and suffixed by the replicates around the attach point), its root placed at
+    /// the attach point (`frame`: the frames and replicates around it) in body `parent`. The
+    /// attached file's records (limits, actuators, ...) and sites come along; its keyframes do not.
+    fn attach(&mut self, e: Node<'a, 'i>, parent: &str, frame: Pose) -> R<()> {
+        let src = self.src;
+        let what = format!("attach[{}]", e.attribute("model").unwrap_or(""));
+        let need = |a: &str| {
+            e.attribute(a)
+                .ok_or_else(|| err(src, e, &what, format!("an <attach> needs `{a}`")))
+        };
+        let (model, body) = (need("model")?, need("body")?);
+        let prefix = e.attribute("prefix").unwrap_or("");
+        let (child, path) = self.attached_model(e, &what, model)?;
+        if let Some(x) = child.mass_unknown.first() {
+            return Err(x.clone());
+        }
+        let suffix = self.suffix.clone();
+        let rename = |n: &str| format!("{prefix}{n}{suffix}");
+        let mut inside: HashSet<&str> = HashSet::new();
+        for b in &child.bodies {
+            let root = b.name == body;
+            if !(root || inside.contains(b.parent.as_str())) {
+                continue;
+            }
+            inside.insert(&b.name);
+            let mut spec = b.clone();
+            spec.name = rename(&b.name);
+            spec.parent = if root {
+                parent.to_string()
+            } else {
+                rename(&b.parent)
+            };
+            if root {
+                (spec.pos, spec.quat) = compose(frame, (b.pos, b.quat));
+            }
+            if self.names.insert(spec.name.clone(), e).is_some() {
+                return Err(err(
+                    src,
+                    e,
+                    &what,
+                    format!("body `{}` is defined twice", spec.name),
+                ));
+            }
+            let parent_moving = self.moving.contains(&spec.parent);
+            if parent_moving || !spec.joints.is_empty() {
+                self.moving.insert(spec.name.clone());
+            }
+            spec.joints = self.attached_joints(
+                e,
+                &what,
+                spec.joints,
+                (&spec.parent, spec.pos, spec.quat),
+                &rename,
+            )?;
+            self.bodies.push(spec);
+        }
+        if inside.is_empty() {
+            return Err(err(
+                src,
+                e,
+                &format!("{what}.body"),
+                format!("no body `{body}` in `{}`", path.display()),
+            ));
+        }
+        let joint_in = |j: &str| self.joint_set.contains(&rename(j));
+        self.ranges.extend(
+            child
+                .ranges
+                .into_iter()
+                .filter(|r| joint_in(&r.joint))
+                .map(|mut r| {
+                    r.joint = rename(&r.joint);
+                    r
+                }),
+        );
+        self.rec.out.extend(child.unmodelled);
+        for mut site in child
+            .sites
+            .into_iter()
+            .filter(|x| inside.contains(x.parent.as_str()))
+        {
+            (site.name, site.parent) = (rename(&site.name), rename(&site.parent));
+            self.sites.push(site);
+        }
+        for (name, at) in child
+            .body_at
+            .into_iter()
+            .filter(|x| inside.contains(x.0.as_str()))
+        {
+            self.body_at.push((rename(&name), at));
+        }
+        Ok(())
+    }
+
+    /// The file of the `<asset>` `<model>` named `model` that attach element `e` names, imported.
+    fn attached_model(
+        &self,
+        e: Node<'a, 'i>,
+        what: &str,
+        model: &str,
+    ) -> R<(Robot, std::path::PathBuf)> {
+        let src = self.src;
+        let Some(&m) = self.models.get(model) else {
+            return Err(err(
+                src,
+                e,
+                &format!("{what}.model"),
+                format!("no <model> named `{model}` in <asset>"),
+            ));
+        };
+        let mwhat = format!("asset.model[{model}]");
+        let Some(file) = m.attribute("file") else {
+            return Err(err(src, m, &mwhat, "a <model> needs `file`"));
+        };
+        if self.depth >= MAX_ATTACH_DEPTH {
+            return Err(err(src, e, what, format!("more than {MAX_ATTACH_DEPTH} nested <attach>ed models (does a model attach itself?)")));
+        }
+        attached_file(src, m, &mwhat, file, self.depth + 1)
+    }
+
+    /// The joints of an attached body, renamed: recorded in the layout and joint lists as the
+    /// file's own joints are (a locked one welded at its reference).
+    fn attached_joints(
+        &mut self,
+        e: Node<'a, 'i>,
+        what: &str,
+        joints: Vec<JointSpec>,
+        (parent, pos, quat): (&str, [f64; 3], [f64; 4]),
+        rename: &dyn Fn(&str) -> String,
+    ) -> R<Vec<JointSpec>> {
+        let mut kept = vec![];
+        for mut js in joints {
+            js.name = rename(&js.name);
+            let qpos0 = match js.kind {
+                crate::tree::JointType::Free if parent != WORLD => {
+                    return Err(err(self.src, e, what, format!("joint `{}` is free: a free joint belongs to a top-level body (attach it in <worldbody>)", js.name)));
+                }
+                crate::tree::JointType::Free => [&pos[..], &quat[..]].concat(),
+                crate::tree::JointType::Ball => vec![1.0, 0.0, 0.0, 0.0],
+                _ => vec![js.reference],
+            };
+            if !self.joint_set.insert(js.name.clone()) {
+                return Err(err(
+                    self.src,
+                    e,
+                    what,
+                    format!("joint `{}` is defined twice", js.name),
+                ));
+            }
+            self.layout.push((js.name.clone(), qpos0));
+            if let Some(k) = self.locked.iter().position(|l| *l == js.name) {
+                self.used_locked[k] = true;
+                self.locked_values.push((js.name.clone(), js.reference));
+                continue;
+            }
+            self.joints.push(js.name.clone());
+            kept.push(js);
+        }
+        Ok(kept)
     }
 
     /// The named `<site>`s of body (or worldbody) `b`, whose childclass is `class`.

@@ -903,3 +903,87 @@ def test_replicate_copies_bodies_where_mujoco_puts_them(tmp_path):
     other = mujoco.MjModel.from_xml_string(REPLICATE_MJCF.replace('euler="10 0 0"', 'euler="11 0 0"'))
     wa, wf = worst(scene, other, 11)
     assert max(wa, wf) > 1e-4, (wa, wf)
+
+
+ATTACH_CHILD = """<mujoco model="gripper">
+  <compiler angle="radian"/>
+  <default><joint damping="0.5" armature="0.01"/><default class="heavy"><geom density="5000"/></default></default>
+  <worldbody>
+    <body name="unused" pos="1 1 1"><joint name="u"/><geom size="0.1"/></body>
+    <body name="base" pos="0 0 0.1" euler="0 0 0.5">
+      <joint name="wrist" axis="0 0 1" range="-1 1"/>
+      <geom class="heavy" type="box" size="0.05 0.04 0.02"/>
+      <body name="finger" pos="0.05 0 0"><joint name="slide" type="slide" axis="1 0 0"/>
+        <geom size="0.02"/><site name="pad" pos="0.02 0 0"/></body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+ATTACH_MJCF = """<mujoco model="arm">
+  <compiler angle="degree"/>
+  <asset><model name="gripper" file="gripper.xml"/></asset>
+  <worldbody>
+    <body name="link" pos="0 0 1">
+      <joint name="shoulder" axis="0 1 0"/>
+      <geom type="capsule" fromto="0 0 0 0.4 0 0" size="0.04"/>
+      <frame pos="0.4 0 0" euler="0 90 0">
+        <attach model="gripper" body="base" prefix="g_"/>
+      </frame>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+def test_attach_grafts_the_models_subtree_where_mujoco_puts_it(tmp_path):
+    """Issue 30, item 1: `<attach model body prefix>` inside a `<frame>` of a body: the subtree of
+    `base` of the attached file, read with that file's own compiler (radians) and defaults, names
+    prefixed, placed at the frame. Joints as MuJoCo names and orders them; A and G + Q equal
+    MuJoCo's reading at random states (relative 1e-12); the attached site is where MuJoCo puts it.
+    Control: MuJoCo's copy with the frame turned 1 degree more fails."""
+    (tmp_path / "gripper.xml").write_text(ATTACH_CHILD)
+    xml = tmp_path / "arm.xml"
+    xml.write_text(ATTACH_MJCF)
+    rows = "[[programme]]\nname = \"p\"\nexpr = \"g_pad.x - 0.5\"\n"
+    scene = mjcf_scene(tmp_path, xml, dict(gravity=[0.0, 0.0, -9.81]), rows)
+    model = mujoco.MjModel.from_xml_path(str(xml))
+    assert list(scene.v_names) == [model.joint(i).name for i in range(model.njnt)]
+    assert list(scene.v_names) == ["shoulder", "g_wrist", "g_slide"]
+    wa, wf = worst(scene, model, 13)
+    assert wa <= TOL and wf <= TOL, (wa, wf)
+    d = mujoco.MjData(model)
+    qa, _ = coordinates(scene, model)
+    q, _ = random_state(scene, np.random.default_rng(4))
+    d.qpos[qa] = q
+    mujoco.mj_kinematics(model, d)
+    poses = {n: p for n, p, _ in scene.body_poses(q)}
+    assert np.abs(np.array(poses["g_pad"]) - d.site("g_pad").xpos).max() < 1e-12
+    other = tmp_path / "other.xml"
+    other.write_text(ATTACH_MJCF.replace('euler="0 90 0"', 'euler="0 91 0"'))
+    wa, wf = worst(scene, mujoco.MjModel.from_xml_path(str(other)), 13)
+    assert max(wa, wf) > 1e-4, (wa, wf)
+
+
+@pytest.mark.parametrize("change, expected", [
+    ('body="base"', 'no body `nothing`'),
+    ('file="gripper.xml"', 'nested <attach>ed models'),
+    ('prefix="g_"/>', 'is defined twice'),
+])
+def test_an_attach_progmo_cannot_read_is_refused_where_it_is(tmp_path, change, expected):
+    """An `<attach>` of a body the model lacks, a model that attaches itself (depth bounded), and
+    the same subtree attached twice with one prefix (a name defined twice): each refused with the
+    file, line and reason."""
+    (tmp_path / "gripper.xml").write_text(ATTACH_CHILD)
+    text = ATTACH_MJCF
+    if "body" in change:
+        text = text.replace(change, 'body="nothing"')
+    elif "file" in change:
+        text = text.replace(change, 'file="arm.xml"').replace('body="base"', 'body="link"')
+    else:
+        text = text.replace(change, change + '\n        <attach model="gripper" body="base" prefix="g_"/>')
+    xml = tmp_path / "arm.xml"
+    xml.write_text(text)
+    with pytest.raises(Exception) as e:
+        mjcf_scene(tmp_path, xml, dict())
+    assert expected in str(e.value) and "arm.xml:" in str(e.value), str(e.value)
