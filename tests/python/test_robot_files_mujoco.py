@@ -850,6 +850,18 @@ def test_springdamper_is_the_stiffness_and_damping_mujoco_derives(tmp_path, lock
         mjcf_scene(tmp_path, xml, dict(locked_joints=locked))
 
 
+def _sites_where_mujoco_puts_them(scene, model, sites, seed: int) -> None:
+    """The scene's frames of the named sites at a random state equal MuJoCo's site positions."""
+    d = mujoco.MjData(model)
+    qa, _ = coordinates(scene, model)
+    q, _ = random_state(scene, np.random.default_rng(seed))
+    d.qpos[qa] = q
+    mujoco.mj_kinematics(model, d)
+    poses = {n: p for n, p, _ in scene.body_poses(q)}
+    for site in sites:
+        assert np.abs(np.array(poses[site]) - d.site(site).xpos).max() < 1e-12, site
+
+
 REPLICATE_MJCF = """<mujoco model="replicate">
   <compiler angle="degree"/>
   <worldbody>
@@ -892,14 +904,7 @@ def test_replicate_copies_bodies_where_mujoco_puts_them(tmp_path):
     assert [n for n in scene.v_names if "." not in n] == [n for n in names if n != "hub_free"]
     wa, wf = worst(scene, model, 11)
     assert wa <= TOL and wf <= TOL, (wa, wf)
-    d = mujoco.MjData(model)
-    qa, _ = coordinates(scene, model)
-    q, _ = random_state(scene, np.random.default_rng(3))
-    d.qpos[qa] = q
-    mujoco.mj_forward(model, d)
-    poses = {n: p for n, p, _ in scene.body_poses(q)}
-    for site in ("tip-2", "foot_10"):
-        assert np.abs(np.array(poses[site]) - d.site(site).xpos).max() < 1e-12, site
+    _sites_where_mujoco_puts_them(scene, model, ("tip-2", "foot_10"), 3)
     other = mujoco.MjModel.from_xml_string(REPLICATE_MJCF.replace('euler="10 0 0"', 'euler="11 0 0"'))
     wa, wf = worst(scene, other, 11)
     assert max(wa, wf) > 1e-4, (wa, wf)
@@ -952,13 +957,7 @@ def test_attach_grafts_the_models_subtree_where_mujoco_puts_it(tmp_path):
     assert list(scene.v_names) == ["shoulder", "g_wrist", "g_slide"]
     wa, wf = worst(scene, model, 13)
     assert wa <= TOL and wf <= TOL, (wa, wf)
-    d = mujoco.MjData(model)
-    qa, _ = coordinates(scene, model)
-    q, _ = random_state(scene, np.random.default_rng(4))
-    d.qpos[qa] = q
-    mujoco.mj_kinematics(model, d)
-    poses = {n: p for n, p, _ in scene.body_poses(q)}
-    assert np.abs(np.array(poses["g_pad"]) - d.site("g_pad").xpos).max() < 1e-12
+    _sites_where_mujoco_puts_them(scene, model, ("g_pad",), 4)
     other = tmp_path / "other.xml"
     other.write_text(ATTACH_MJCF.replace('euler="0 90 0"', 'euler="0 91 0"'))
     wa, wf = worst(scene, mujoco.MjModel.from_xml_path(str(other)), 13)
