@@ -31,6 +31,21 @@ PENDULUM = """<mujoco model="pendulum">
 """
 
 
+FREE_BODY = """<mujoco model="free_body">
+  <worldbody>
+    <body name="trunk" pos="0 0 1">
+      <freejoint name="root"/>
+      <inertial pos="0.05 0 0" mass="2" diaginertia="0.02 0.03 0.04"/>
+      <body name="leg" pos="0.2 0 0">
+        <joint name="hip" axis="0 1 0"/>
+        <inertial pos="0 0 -0.1" mass="0.5" diaginertia="0.002 0.002 0.001"/>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
 def _ur5() -> Path:
     return next(d / UR5 for d in data.robot_path() if (d / UR5).is_file())
 
@@ -52,7 +67,8 @@ def test_sample_of_example_robot_data(tmp_path, capsys):
               if r["parity"][s]["status"] == "ok"]
     assert judged and all(p["worst"] <= corpus.PARITY_TOL for p in judged)
     assert all(r["error"] is None or {"kind", "location", "message", "reason"} <= set(r["error"]) for r in doc["files"])
-    assert any(r.get("note") == corpus.FREE_BASE for r in doc["files"])  # free roots: import only
+    free = [r for r in doc["files"] if r.get("note") == corpus.FREE_BASE]
+    assert free and all(r["parity"] for r in free)  # free roots: compared too
 
 
 def test_negative_control_perturbed_mass_is_outside_tolerance(tmp_path):
@@ -60,13 +76,19 @@ def test_negative_control_perturbed_mass_is_outside_tolerance(tmp_path):
     bad = tmp_path / "ur5_heavier.urdf"
     bad.write_text(re.sub(r'(<mass value=")([0-9.eE+-]+)"',
                           lambda m: f'{m[1]}{float(m[2]) * 1.01!r}"', urdf.read_text()))
-    (good,) = [r for r in corpus.check_file("urdf", urdf, tmp_path) if r["root_joint"] == "fixed"]
-    (worse,) = [r for r in corpus.check_file("urdf", urdf, tmp_path, simulator_file=bad)
-                if r["root_joint"] == "fixed"]
-    for s in corpus.SIMULATORS:
-        assert good["parity"][s]["worst"] <= corpus.PARITY_TOL
-        assert worse["parity"][s]["status"] == "ok" and worse["parity"][s]["worst"] > 1e-4
-    row = corpus.summarize("negative", 1, [worse])
+    free = tmp_path / "free.xml"
+    free.write_text(FREE_BODY)
+    heavier = tmp_path / "free_heavier.xml"
+    heavier.write_text(FREE_BODY.replace('mass="2"', 'mass="2.02"'))
+    goods = corpus.check_file("urdf", urdf, tmp_path) + corpus.check_file("mjcf", free, tmp_path)
+    worses = (corpus.check_file("urdf", urdf, tmp_path, simulator_file=bad)
+              + corpus.check_file("mjcf", free, tmp_path, simulator_file=heavier))
+    assert [r.get("note") for r in goods] == [None, corpus.FREE_BASE]
+    for good, worse in zip(goods, worses):  # a free base is judged as a fixed one is
+        for s in corpus.SIMULATORS:
+            assert good["parity"][s]["worst"] <= corpus.PARITY_TOL, (good["file"], s)
+            assert worse["parity"][s]["status"] == "ok" and worse["parity"][s]["worst"] > 1e-4
+    row = corpus.summarize("negative", 2, worses)
     assert row["mujoco_within"] == row["pinocchio_within"] == 0 and row["worst_parity"] > 1e-4
 
 
