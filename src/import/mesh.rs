@@ -10,15 +10,15 @@
 //!    each pyramid's volume unsigned, `exact` signed (and refuses inconsistently oriented faces);
 //! 4. the second moments from the pyramids with apex at that centre (tetrahedron formula, /20;
 //!    triangle formula /12 for a shell), whose volume (area) is the one the geom's mass uses;
-//! 5. principal moments e_0 >= e_1 >= e_2 and axes (the mesh frame; exact here, MuJoCo's own
-//!    iteration stops up to 1e-7 short, see `principal_frame`); the geom's inertia is that
+//! 5. principal moments e_0 >= e_1 >= e_2 and axes (the mesh frame) by MuJoCo's own Jacobi
+//!    iteration and tolerance ([`eig3`]: up to 1e-7 short of exact, as MuJoCo); the geom's inertia is that
 //!    of the equivalent box b_i = sqrt(6 (e_j + e_k - e_i) / V) / 2, I_i = m (b_j^2 + b_k^2) / 3,
 //!    and a primitive geom naming a mesh is fitted to that box (`fitaabb="false"`, the default).
 //!
 //! `inertia="convex"` (the convex hull's mass) and meshes without faces (MuJoCo takes their hull)
 //! are refused: progmo computes no convex hull.
 
-use nalgebra::{Matrix3, Rotation3, SymmetricEigen, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 /// MuJoCo's `mjMINVAL`: smaller faces count as none; smaller areas and volumes are refused.
 const MJ_MINVAL: f64 = 1e-15;
@@ -236,15 +236,10 @@ fn second_moments(m: &Mesh, kind: MeshInertia, com: &[f64; 3]) -> (Matrix3<f64>,
 }
 
 /// Step 5: principal moments (decreasing), axes and the equivalent box, with MuJoCo's checks.
-/// The axes are the exact eigenvectors. MuJoCo's compiler finds them by a Jacobi iteration
-/// (`mjuu_eig3`) whose stopping rule leaves its mesh frame off by up to about 1e-7 relative for
-/// MuJoCo 4.0 (measured, tests/python/test_robot_files_mujoco.py); that is MuJoCo's error, not
-/// replicated here.
+/// The axes are MuJoCo 4.0's own ([`eig3`] with the compiler's tolerance 1e-7): they stop up to
+/// about 1e-7 relative short of the exact ones, and a mesh body's inertia is what MuJoCo makes it.
 fn principal_frame(inert: Matrix3<f64>, measure: f64, com: [f64; 3]) -> Result<MeshMass, String> {
-    let eig = SymmetricEigen::new(inert);
-    let mut order = [0, 1, 2];
-    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
-    let e = order.map(|k| eig.eigenvalues[k]);
+    let (e, q) = eig3(&inert, MESH_EIG_TOL);
     if !(e[2] > 0.0) {
         return Err(format!(
             "an eigenvalue of the mesh's inertia is not positive ({:e})",
@@ -252,16 +247,15 @@ fn principal_frame(inert: Matrix3<f64>, measure: f64, com: [f64; 3]) -> Result<M
         ));
     }
     let (rtol, atol) = (1e-6, 1e-9);
-    if e[1] + e[2] < e[0] * (1.0 - rtol) - atol {
+    if e[1] + e[2] < e[0] * (1.0 - rtol) - atol
+        || e[0] + e[2] < e[1] * (1.0 - rtol) - atol
+        || e[0] + e[1] < e[2] * (1.0 - rtol) - atol
+    {
         return Err(format!(
             "the principal moments of the mesh's inertia violate A + B >= C ({e:?})"
         ));
     }
-    let mut axes = Matrix3::from_columns(&order.map(|k| eig.eigenvectors.column(k).into_owned()));
-    if axes.determinant() < 0.0 {
-        axes.column_mut(2).neg_mut();
-    }
-    let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(axes));
+    let rot = UnitQuaternion::new_normalize(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]));
     let b = |i: usize, j: usize, k: usize| 0.5 * (6.0 * (e[j] + e[k] - e[i]) / measure).sqrt();
     Ok(MeshMass {
         measure,
@@ -269,6 +263,97 @@ fn principal_frame(inert: Matrix3<f64>, measure: f64, com: [f64; 3]) -> Result<M
         rot,
         boxsz: [b(0, 1, 2), b(1, 0, 2), b(2, 0, 1)],
     })
+}
+
+/// The relative tolerance MuJoCo 4.0's compiler gives its Jacobi iteration for a mesh's axes
+/// (found by calling libmujoco's `mju_eig3Tol` on 201 random meshes and the test blob: 1e-7
+/// reproduces every one of MuJoCo's mesh frames to 1e-14; 5e-8 and 2e-7 do not).
+const MESH_EIG_TOL: f64 = 1e-7;
+
+/// A symmetric 3x3 matrix's eigen-decomposition as MuJoCo's `mju_eig3Tol` computes it: cyclic
+/// Jacobi rotations on the largest off-diagonal element of R^T A R, accumulated as a quaternion,
+/// until that element is below `tol` times the largest entry of A (at most 500); then eigenvalues
+/// sorted decreasing by quarter turns. Returns (eigenvalues, quaternion w x y z of R).
+pub(crate) fn eig3(a: &Matrix3<f64>, tol: f64) -> ([f64; 3], [f64; 4]) {
+    let stop = tol * a.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let mut q = [1.0, 0.0, 0.0, 0.0];
+    let mut e = [0.0; 3];
+    for _ in 0..500 {
+        let r = quat_mat(&q);
+        let d = (r.transpose() * a) * r;
+        e = [d[(0, 0)], d[(1, 1)], d[(2, 2)]];
+        let (o01, o02, o12) = (d[(0, 1)].abs(), d[(0, 2)].abs(), d[(1, 2)].abs());
+        let (rk, ck, rotk) = if o01 > o02 && o01 > o12 {
+            (0, 1, 2)
+        } else if o02 > o12 {
+            (0, 2, 1)
+        } else {
+            (1, 2, 0)
+        };
+        let off = d[(rk, ck)];
+        if off.abs() < stop || off == 0.0 {
+            break;
+        }
+        let tau = (d[(ck, ck)] - d[(rk, rk)]) / (2.0 * off);
+        let t = if tau >= 0.0 {
+            1.0 / (tau + (1.0 + tau * tau).sqrt())
+        } else {
+            -1.0 / (-tau + (1.0 + tau * tau).sqrt())
+        };
+        let c = 1.0 / (1.0 + t * t).sqrt();
+        let mut s = (0.5 - 0.5 * c).sqrt();
+        if tau >= 0.0 {
+            s = -s;
+        }
+        if rotk == 1 {
+            s = -s;
+        }
+        let mut step = [0.0; 4];
+        step[rotk + 1] = s;
+        step[0] = (1.0 - s * s).sqrt();
+        q = normalized(quat_mul(&q, &normalized(step)));
+    }
+    for j in 0..3 {
+        let j1 = j % 2;
+        if e[j1] + stop < e[j1 + 1] {
+            e.swap(j1, j1 + 1);
+            let mut turn = [0.707106781186548, 0.0, 0.0, 0.0];
+            turn[(j1 + 2) % 3 + 1] = turn[0];
+            q = normalized(quat_mul(&q, &turn));
+        }
+    }
+    (e, q)
+}
+
+/// The rotation matrix of a unit quaternion (w, x, y, z).
+fn quat_mat(q: &[f64; 4]) -> Matrix3<f64> {
+    let [w, x, y, z] = *q;
+    Matrix3::new(
+        w * w + x * x - y * y - z * z,
+        2.0 * (x * y - w * z),
+        2.0 * (x * z + w * y),
+        2.0 * (x * y + w * z),
+        w * w - x * x + y * y - z * z,
+        2.0 * (y * z - w * x),
+        2.0 * (x * z - w * y),
+        2.0 * (y * z + w * x),
+        w * w - x * x - y * y + z * z,
+    )
+}
+
+/// Hamilton product p q.
+fn quat_mul(p: &[f64; 4], q: &[f64; 4]) -> [f64; 4] {
+    [
+        p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3],
+        p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2],
+        p[0] * q[2] - p[1] * q[3] + p[2] * q[0] + p[3] * q[1],
+        p[0] * q[3] + p[1] * q[2] - p[2] * q[1] + p[3] * q[0],
+    ]
+}
+
+fn normalized(q: [f64; 4]) -> [f64; 4] {
+    let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
+    q.map(|x| x / n)
 }
 
 /// Vertices made one where their float32 numbers are equal (MuJoCo does so for STL files, whose
@@ -536,6 +621,25 @@ mod tests {
             .unwrap_err()
             .contains("inconsistent orientation"));
         assert!(mass(&m, MeshInertia::Legacy).is_ok());
+    }
+
+    #[test]
+    fn eig3_sorts_and_stops_at_its_tolerance() {
+        let r = UnitQuaternion::from_euler_angles(0.3, -0.7, 1.1).to_rotation_matrix();
+        let a = r.matrix()
+            * Matrix3::from_diagonal(&Vector3::new(2e-5, 7e-5, 4e-5))
+            * r.matrix().transpose();
+        let (e, q) = eig3(&a, MESH_EIG_TOL);
+        assert!(e[0] >= e[1] && e[1] >= e[2], "{e:?}");
+        let rq = quat_mat(&q);
+        let back = rq * Matrix3::from_diagonal(&Vector3::from(e)) * rq.transpose();
+        let err = (back - a).abs().max() / a.abs().max();
+        assert!(err <= MESH_EIG_TOL, "{err:e}");
+        // control: the loose tolerance is not exact
+        let (e, q) = eig3(&a, 1e-2);
+        let rq = quat_mat(&q);
+        let back = rq * Matrix3::from_diagonal(&Vector3::from(e)) * rq.transpose();
+        assert!((back - a).abs().max() / a.abs().max() > 1e-12);
     }
 
     #[test]
