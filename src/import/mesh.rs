@@ -317,6 +317,8 @@ pub(crate) fn eig3(a: &Matrix3<f64>, tol: f64) -> ([f64; 3], [f64; 4]) {
         let j1 = j % 2;
         if e[j1] + stop < e[j1 + 1] {
             e.swap(j1, j1 + 1);
+            // MuJoCo's literal for cos(pi/4), one digit short of FRAC_1_SQRT_2: kept to match it
+            #[allow(clippy::approx_constant)]
             let mut turn = [0.707106781186548, 0.0, 0.0, 0.0];
             turn[(j1 + 2) % 3 + 1] = turn[0];
             q = normalized(quat_mul(&q, &turn));
