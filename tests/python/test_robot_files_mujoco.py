@@ -942,7 +942,8 @@ def test_attach_grafts_the_models_subtree_where_mujoco_puts_it(tmp_path):
     """Issue 30, item 1: `<attach model body prefix>` inside a `<frame>` of a body: the subtree of
     `base` of the attached file, read with that file's own compiler (radians) and defaults, names
     prefixed, placed at the frame. Joints as MuJoCo names and orders them; A and G + Q equal
-    MuJoCo's reading at random states (relative 1e-12); the attached site is where MuJoCo puts it.
+    MuJoCo's reading at random states (relative 1e-12), also with an attached joint locked; the
+    attached site is where MuJoCo puts it.
     Control: MuJoCo's copy with the frame turned 1 degree more fails."""
     (tmp_path / "gripper.xml").write_text(ATTACH_CHILD)
     xml = tmp_path / "arm.xml"
@@ -955,6 +956,10 @@ def test_attach_grafts_the_models_subtree_where_mujoco_puts_it(tmp_path):
     wa, wf = worst(scene, model, 13)
     assert wa <= TOL and wf <= TOL, (wa, wf)
     _sites_where_mujoco_puts_them(scene, model, ("g_pad",), 4)
+    locked = mjcf_scene(tmp_path, xml, dict(gravity=[0.0, 0.0, -9.81], locked_joints=["g_slide"]))
+    assert list(locked.v_names) == ["shoulder", "g_wrist"]  # an attached joint locked by its name
+    wa, wf = worst(locked, model, 13)
+    assert wa <= TOL and wf <= TOL, (wa, wf)
     other = tmp_path / "other.xml"
     other.write_text(ATTACH_MJCF.replace('euler="0 90 0"', 'euler="0 91 0"'))
     wa, wf = worst(scene, mujoco.MjModel.from_xml_path(str(other)), 13)
