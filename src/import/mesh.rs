@@ -126,7 +126,9 @@ pub(crate) fn transform(m: &mut Mesh, refpos: [f64; 3], refquat: [f64; 4], scale
     }
     if refquat != [1.0, 0.0, 0.0, 0.0] {
         let q = nalgebra::Quaternion::new(refquat[0], refquat[1], refquat[2], refquat[3]);
-        let r_inv = UnitQuaternion::from_quaternion(q).to_rotation_matrix().inverse();
+        let r_inv = UnitQuaternion::from_quaternion(q)
+            .to_rotation_matrix()
+            .inverse();
         for v in &mut m.vert {
             *v = (r_inv * Vector3::from(*v)).into();
         }
