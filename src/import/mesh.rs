@@ -15,8 +15,9 @@
 //!    of the equivalent box b_i = sqrt(6 (e_j + e_k - e_i) / V) / 2, I_i = m (b_j^2 + b_k^2) / 3,
 //!    and a primitive geom naming a mesh is fitted to that box (`fitaabb="false"`, the default).
 //!
-//! `inertia="convex"` (the convex hull's mass) and meshes without faces (MuJoCo takes their hull)
-//! are refused: progmo computes no convex hull.
+//! `inertia="convex"` weighs the convex hull of the vertices instead (signed volumes, steps 3 and
+//! 4 over the hull's triangles, the centroid of step 2 still over the mesh's faces, as MuJoCo);
+//! a mesh given without faces takes its hull's triangles as its faces ([`super::hull`]).
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
@@ -32,6 +33,8 @@ pub(crate) enum MeshInertia {
     Exact,
     /// mass on the surface
     Shell,
+    /// the convex hull's volume, signed
+    Convex,
 }
 
 impl MeshInertia {
@@ -40,8 +43,10 @@ impl MeshInertia {
             "legacy" => Ok(Self::Legacy),
             "exact" => Ok(Self::Exact),
             "shell" => Ok(Self::Shell),
-            "convex" => Err("`inertia=\"convex\"` weighs the mesh's convex hull, which progmo does not compute: give the body an <inertial>, or the mesh inertia=\"legacy\" or \"exact\"".into()),
-            o => Err(format!("`inertia=\"{o}\"`: expected legacy, exact, shell or convex")),
+            "convex" => Ok(Self::Convex),
+            o => Err(format!(
+                "`inertia=\"{o}\"`: expected legacy, exact, shell or convex"
+            )),
         }
     }
 }
@@ -102,10 +107,10 @@ fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
 }
 
 /// Faces sharing a directed edge: the first such edge (1-based vertices, as MuJoCo reports).
-fn misoriented(m: &Mesh) -> Option<(usize, usize)> {
-    let mut edges: Vec<(usize, usize)> = Vec::with_capacity(3 * m.face.len());
-    for f in &m.face {
-        let [a, b, c] = f.map(|k| &m.vert[k]);
+fn misoriented(vert: &[[f64; 3]], face: &[[usize; 3]]) -> Option<(usize, usize)> {
+    let mut edges: Vec<(usize, usize)> = Vec::with_capacity(3 * face.len());
+    for f in face {
+        let [a, b, c] = f.map(|k| &vert[k]);
         if triangle(a, b, c).0 > MJ_MINVAL.sqrt() {
             edges.extend([(f[0], f[1]), (f[1], f[2]), (f[2], f[0])]);
         }
@@ -143,15 +148,27 @@ pub(crate) fn transform(m: &mut Mesh, refpos: [f64; 3], refquat: [f64; 4], scale
 /// The mass properties of a transformed mesh (steps 2 to 5 of the module docs); the error says why
 /// MuJoCo would refuse the mesh.
 pub(crate) fn mass(m: &Mesh, kind: MeshInertia) -> Result<MeshMass, String> {
+    // a mesh without faces is its hull (MuJoCo's `CopyGraph`); `convex` weighs the hull
+    let hull = if m.face.is_empty() || kind == MeshInertia::Convex {
+        super::hull::hull(&m.vert)?
+    } else {
+        vec![]
+    };
+    let surface: &[[usize; 3]] = if m.face.is_empty() { &hull } else { &m.face };
+    let solid: &[[usize; 3]] = if kind == MeshInertia::Convex {
+        &hull
+    } else {
+        surface
+    };
     if kind == MeshInertia::Exact {
-        if let Some((a, b)) = misoriented(m) {
+        if let Some((a, b)) = misoriented(&m.vert, surface) {
             return Err(format!("faces have inconsistent orientation (the faces containing vertices {a} and {b}); MuJoCo refuses such a mesh with inertia=\"exact\""));
         }
     }
     let tri = |f: &[usize; 3]| triangle(&m.vert[f[0]], &m.vert[f[1]], &m.vert[f[2]]);
     // step 2: area-weighted face centroid
     let (mut fc, mut total_area) = ([0.0; 3], 0.0);
-    for f in &m.face {
+    for f in surface {
         let (area, _, c) = tri(f);
         for i in 0..3 {
             fc[i] += area * c[i];
@@ -164,7 +181,7 @@ pub(crate) fn mass(m: &Mesh, kind: MeshInertia) -> Result<MeshMass, String> {
     fc = fc.map(|x| x / total_area);
     // step 3: centre of mass from pyramids with apex fc
     let (mut com, mut total) = ([0.0; 3], 0.0);
-    for f in &m.face {
+    for f in solid {
         let (area, n, c) = tri(f);
         let w = match kind {
             MeshInertia::Shell => area,
@@ -191,14 +208,18 @@ pub(crate) fn mass(m: &Mesh, kind: MeshInertia) -> Result<MeshMass, String> {
         });
     }
     com = com.map(|x| x / total);
-    let (inert, measure) = second_moments(m, kind, &com);
+    let (inert, measure) = second_moments(&m.vert, solid, kind, &com);
     principal_frame(inert, measure, com)
 }
 
 /// Step 4: the inertia about `com` at unit density and the volume (area) it recomputes.
-fn second_moments(m: &Mesh, kind: MeshInertia, com: &[f64; 3]) -> (Matrix3<f64>, f64) {
-    let centred: Vec<[f64; 3]> = m
-        .vert
+fn second_moments(
+    vert: &[[f64; 3]],
+    faces: &[[usize; 3]],
+    kind: MeshInertia,
+    com: &[f64; 3],
+) -> (Matrix3<f64>, f64) {
+    let centred: Vec<[f64; 3]> = vert
         .iter()
         .map(|v| [v[0] - com[0], v[1] - com[1], v[2] - com[2]])
         .collect();
@@ -209,7 +230,7 @@ fn second_moments(m: &Mesh, kind: MeshInertia, com: &[f64; 3]) -> (Matrix3<f64>,
         20.0
     };
     let (mut p, mut total) = ([0.0; 6], 0.0);
-    for f in &m.face {
+    for f in faces {
         let [d, e, g] = f.map(|k| &centred[k]);
         let (area, n, cen) = triangle(d, e, g);
         let mut vol = match kind {
@@ -271,19 +292,30 @@ fn principal_frame(inert: Matrix3<f64>, measure: f64, com: [f64; 3]) -> Result<M
 /// reproduces every one of MuJoCo's mesh frames to 1e-14; 5e-8 and 2e-7 do not).
 const MESH_EIG_TOL: f64 = 1e-7;
 
-/// A symmetric 3x3 matrix's eigen-decomposition as MuJoCo's `mju_eig3Tol` computes it: cyclic
-/// Jacobi rotations on the largest off-diagonal element of R^T A R, accumulated as a quaternion,
-/// until that element is below `tol` times the largest entry of A (at most 500); then eigenvalues
-/// sorted decreasing by quarter turns. Returns (eigenvalues, quaternion w x y z of R).
+/// A symmetric 3x3 matrix's eigen-decomposition as MuJoCo 4.0's `mju_eig3Tol` computes it, to
+/// the bit (read from libmujoco 4.0's machine code; equal on 4000 random and near-diagonal
+/// matrices): Jacobi rotations on the largest off-diagonal element of D = R^T A R, accumulated as
+/// a quaternion, until that element is at most max(`tol`, 4e-15) times the largest entry of A (at
+/// most 500); then eigenvalues sorted decreasing by quarter turns (ties within 1e-12 max|A| kept).
+/// The rotation's half angle comes from h = tan(phi/2) = t / (1 + sqrt(1 + t^2)), free of the
+/// cancellation of sqrt((1 - cos phi) / 2) that once made small rotations differ from MuJoCo's
+/// by 1e-10. Returns (eigenvalues, quaternion w x y z of R).
 pub(crate) fn eig3(a: &Matrix3<f64>, tol: f64) -> ([f64; 3], [f64; 4]) {
-    let stop = tol * a.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let big = a.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let stop = tol.max(4e-15) * big;
+    let a: [[f64; 3]; 3] = [0, 1, 2].map(|i| [0, 1, 2].map(|j| a[(i, j)]));
     let mut q = [1.0, 0.0, 0.0, 0.0];
     let mut e = [0.0; 3];
     for _ in 0..500 {
+        // D = (R^T A) R, each entry summed in index order (mju_mulMatTMat3, mju_mulMatMat3)
         let r = quat_mat(&q);
-        let d = (r.transpose() * a) * r;
-        e = [d[(0, 0)], d[(1, 1)], d[(2, 2)]];
-        let (o01, o02, o12) = (d[(0, 1)].abs(), d[(0, 2)].abs(), d[(1, 2)].abs());
+        let rta = [0, 1, 2]
+            .map(|i| [0, 1, 2].map(|j| r[0][i] * a[0][j] + r[1][i] * a[1][j] + r[2][i] * a[2][j]));
+        let d = [0, 1, 2].map(|i| {
+            [0, 1, 2].map(|j| rta[i][0] * r[0][j] + rta[i][1] * r[1][j] + rta[i][2] * r[2][j])
+        });
+        e = [d[0][0], d[1][1], d[2][2]];
+        let (o01, o02, o12) = (d[0][1].abs(), d[0][2].abs(), d[1][2].abs());
         let (rk, ck, rotk) = if o01 > o02 && o01 > o12 {
             (0, 1, 2)
         } else if o02 > o12 {
@@ -291,57 +323,64 @@ pub(crate) fn eig3(a: &Matrix3<f64>, tol: f64) -> ([f64; 3], [f64; 4]) {
         } else {
             (1, 2, 0)
         };
-        let off = d[(rk, ck)];
-        if off.abs() < stop || off == 0.0 {
+        let off = d[rk][ck];
+        if off.abs() <= stop {
             break;
         }
-        let tau = (d[(ck, ck)] - d[(rk, rk)]) / (2.0 * off);
+        let tau = (d[ck][ck] - d[rk][rk]) / (2.0 * off);
+        let root = (1.0 + tau * tau).sqrt();
         let t = if tau >= 0.0 {
-            1.0 / (tau + (1.0 + tau * tau).sqrt())
+            1.0 / (tau + root)
         } else {
-            -1.0 / (-tau + (1.0 + tau * tau).sqrt())
+            -1.0 / (root - tau)
         };
-        let c = 1.0 / (1.0 + t * t).sqrt();
-        let mut s = (0.5 - 0.5 * c).sqrt();
-        if tau >= 0.0 {
-            s = -s;
-        }
-        if rotk == 1 {
-            s = -s;
-        }
-        let mut step = [0.0; 4];
-        step[rotk + 1] = s;
-        step[0] = (1.0 - s * s).sqrt();
-        q = normalized(quat_mul(&q, &normalized(step)));
+        let h = t / ((t * t + 1.0).sqrt() + 1.0);
+        let ch = 1.0 / (h * h + 1.0).sqrt();
+        let mut step = [ch, 0.0, 0.0, 0.0];
+        step[rotk + 1] = if rotk == 1 { h * ch } else { -h * ch };
+        q = normalize4(quat_mul(&q, &step));
     }
+    let ties = 1e-12 * big;
     for j in 0..3 {
         let j1 = j % 2;
-        if e[j1] + stop < e[j1 + 1] {
+        if e[j1] + ties < e[j1 + 1] {
             e.swap(j1, j1 + 1);
             // MuJoCo's literal for cos(pi/4), one digit short of FRAC_1_SQRT_2: kept to match it
             #[allow(clippy::approx_constant)]
             let mut turn = [0.707106781186548, 0.0, 0.0, 0.0];
             turn[(j1 + 2) % 3 + 1] = turn[0];
-            q = normalized(quat_mul(&q, &turn));
+            q = normalize4(quat_mul(&q, &turn));
         }
     }
     (e, q)
 }
 
-/// The rotation matrix of a unit quaternion (w, x, y, z).
-fn quat_mat(q: &[f64; 4]) -> Matrix3<f64> {
+/// The rotation matrix (rows) of a unit quaternion (w, x, y, z), grouped as MuJoCo 4.0's
+/// `mju_quat2Mat` computes it.
+fn quat_mat(q: &[f64; 4]) -> [[f64; 3]; 3] {
+    if *q == [1.0, 0.0, 0.0, 0.0] {
+        return [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    }
     let [w, x, y, z] = *q;
-    Matrix3::new(
-        w * w + x * x - y * y - z * z,
-        2.0 * (x * y - w * z),
-        2.0 * (x * z + w * y),
-        2.0 * (x * y + w * z),
-        w * w - x * x + y * y - z * z,
-        2.0 * (y * z - w * x),
-        2.0 * (x * z - w * y),
-        2.0 * (y * z + w * x),
-        w * w - x * x - y * y + z * z,
-    )
+    let (q00, q01, q02, q03) = (w * w, w * x, w * y, w * z);
+    let (q11, q12, q13, q22, q23, q33) = (x * x, x * y, x * z, y * y, y * z, z * z);
+    [
+        [
+            (q00 - q22) + (q11 - q33),
+            2.0 * (q12 - q03),
+            2.0 * (q13 + q02),
+        ],
+        [
+            2.0 * (q12 + q03),
+            (q00 + q22) - (q11 + q33),
+            2.0 * (q23 - q01),
+        ],
+        [
+            2.0 * (q13 - q02),
+            2.0 * (q23 + q01),
+            (q00 - q22) - (q11 - q33),
+        ],
+    ]
 }
 
 /// Hamilton product p q.
@@ -354,9 +393,17 @@ fn quat_mul(p: &[f64; 4], q: &[f64; 4]) -> [f64; 4] {
     ]
 }
 
-fn normalized(q: [f64; 4]) -> [f64; 4] {
-    let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
-    q.map(|x| x / n)
+/// MuJoCo's `mju_normalize4`: left alone within 1e-15 of unit length, the identity below 1e-15.
+fn normalize4(q: [f64; 4]) -> [f64; 4] {
+    let n = ((q[0] * q[0] + q[1] * q[1]) + (q[2] * q[2] + q[3] * q[3])).sqrt();
+    if n < MJ_MINVAL {
+        [1.0, 0.0, 0.0, 0.0]
+    } else if (n - 1.0).abs() > MJ_MINVAL {
+        let inv = 1.0 / n;
+        q.map(|x| x * inv)
+    } else {
+        q
+    }
 }
 
 /// Vertices made one where their float32 numbers are equal (MuJoCo does so for STL files, whose
@@ -497,8 +544,8 @@ pub(crate) fn obj(text: &str, scale: [f64; 3]) -> Result<Mesh, String> {
             _ => {}
         }
     }
-    if face.is_empty() {
-        return Err("no faces (MuJoCo would take the convex hull of the vertices, which progmo does not compute)".into());
+    if vert.len() < 4 {
+        return Err(format!("{} vertices: a mesh needs at least 4", vert.len()));
     }
     let vert64 = vert.iter().map(|v| v.map(f64::from)).collect();
     orient(&mut face, scale);
@@ -556,7 +603,8 @@ pub(crate) fn inline(
         .map(|c| [c[0] as f32, c[1] as f32, c[2] as f32])
         .collect();
     let Some(face) = face else {
-        return Err("no `face`: MuJoCo would take the convex hull of the vertices, which progmo does not compute".into());
+        // no faces: the mesh is its vertices' convex hull ([`mass`])
+        return finish(vert, vec![], scale, false);
     };
     if face.len() % 3 != 0 {
         return Err(format!(
@@ -634,13 +682,13 @@ mod tests {
             * r.matrix().transpose();
         let (e, q) = eig3(&a, MESH_EIG_TOL);
         assert!(e[0] >= e[1] && e[1] >= e[2], "{e:?}");
-        let rq = quat_mat(&q);
+        let rq = Matrix3::from_fn(|i, j| quat_mat(&q)[i][j]);
         let back = rq * Matrix3::from_diagonal(&Vector3::from(e)) * rq.transpose();
         let err = (back - a).abs().max() / a.abs().max();
         assert!(err <= MESH_EIG_TOL, "{err:e}");
         // control: the loose tolerance is not exact
         let (e, q) = eig3(&a, 1e-2);
-        let rq = quat_mat(&q);
+        let rq = Matrix3::from_fn(|i, j| quat_mat(&q)[i][j]);
         let back = rq * Matrix3::from_diagonal(&Vector3::from(e)) * rq.transpose();
         assert!((back - a).abs().max() / a.abs().max() > 1e-12);
     }

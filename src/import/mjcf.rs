@@ -2149,6 +2149,10 @@ impl<'d, 'a, 'i> Meshes<'d, 'a, 'i> {
             (None, Some(v)) => mesh::inline(&v, list("face")?.as_deref(), scale).map_err(at)?,
             (None, None) => return Err(at("a <mesh> needs `file` or `vertex`".into())),
         };
+        let hull_weighed = kind == MeshInertia::Convex || m.face.is_empty();
+        if let Some(v) = attr("maxhullvert").filter(|v| hull_weighed && v.trim() != "-1") {
+            return Err(err(src, n, &format!("{what}.maxhullvert"), format!("`maxhullvert=\"{v}\"` stops MuJoCo's hull early, and this mesh is weighed by its hull: that partial hull is not reproduced (drop the attribute, or give the body an <inertial>)")));
+        }
         let norm = refquat.iter().map(|x| x * x).sum::<f64>().sqrt();
         mesh::transform(&mut m, refpos, refquat.map(|x| x / norm), scale);
         mesh::mass(&m, kind).map_err(|e| at(format!("mesh `{name}`: {e}")))

@@ -16,6 +16,7 @@
 //! line, column, element).
 
 mod geom_inertia;
+mod hull;
 pub mod include;
 mod mesh;
 pub mod mjcf;

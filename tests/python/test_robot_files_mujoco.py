@@ -779,13 +779,17 @@ def test_a_mesh_body_has_the_exact_inertia_of_its_mesh(tmp_path, geom):
 
 
 @pytest.mark.parametrize("change, message", [
-    ('file="blob.obj" class="big" inertia="exact"', 'file="blob.obj" class="big" inertia="convex"'),
+    ('file="blob.obj" class="big" inertia="exact"',
+     'file="blob.obj" class="big" inertia="convex" maxhullvert="12"'),
     ('face="0 2 1  0 1 3  0 3 2  1 2 3"', 'face="0 1 2  0 1 3  0 3 2  1 2 3"'),
     ('<mesh name="stl_blob" file="blob.stl"/>', '<mesh name="stl_blob" file="../../blob.stl"/>'),
+    ('vertex="0 0 0  0.2 0 0  0 0.3 0  0 0 0.1" face="0 2 1  0 1 3  0 3 2  1 2 3"',
+     'vertex="0 0 0  0.2 0 0  0 0.3 0  0.2 0.3 0"'),
 ])
 def test_a_mesh_progmo_cannot_weigh_is_refused_at_its_line(tmp_path, change, message):
-    """Refusals name the file, the line of the <mesh> and the reason: a convex-hull inertia (not
-    computed), inconsistently oriented faces under `exact` (MuJoCo refuses them too), a mesh file
+    """Refusals name the file, the line of the <mesh> and the reason: a hull weighed but cut
+    short by `maxhullvert` (MuJoCo's partial hull is not reproduced), vertices without faces that
+    span no volume (MuJoCo refuses them too), inconsistently oriented faces under `exact` (MuJoCo refuses them too), a mesh file
     outside the folders a scene may read."""
     xml = _mesh_files(tmp_path)
     text = MESH_MJCF.replace(change, message)
@@ -797,6 +801,133 @@ def test_a_mesh_progmo_cannot_weigh_is_refused_at_its_line(tmp_path, change, mes
     line = next(k + 1 for k, s in enumerate(text.splitlines()) if message in s)
     assert f"meshes.xml:{line}" in str(e.value), str(e.value)
     assert "asset.mesh[" in str(e.value), str(e.value)
+
+
+HULL_MJCF = """<mujoco model="hulls">
+  <asset>
+    <mesh name="blob_hull" file="blob.stl" inertia="convex" scale="0.2 0.1 0.15"/>
+    <mesh name="cloud" vertex="{cloud}"/>
+    <mesh name="cloud_shell" vertex="{cloud}" inertia="shell" scale="0.5 0.5 0.5"/>
+    <mesh name="obj_hull" file="blob.obj" inertia="convex" refpos="0.2 -0.1 0.3" scale="0.1 0.1 0.1"/>
+  </asset>
+  <worldbody>
+    <body name="a" pos="0 0 1">
+      <freejoint name="a_free"/>
+      <geom type="mesh" mesh="blob_hull" pos="0.1 -0.2 0.05" euler="20 -30 50" density="800"/>
+      <body name="b" pos="0.3 0 0">
+        <joint name="j1" axis="0 1 0"/>
+        <geom type="mesh" mesh="cloud" quat="0.9 0.1 -0.3 0.2"/>
+        <body name="c" pos="0 0.2 0.1">
+          <joint name="j2" axis="1 0 0"/>
+          <geom type="mesh" mesh="cloud_shell" density="30"/>
+          <geom type="box" mesh="obj_hull" pos="0 0 0.1"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+def _cloud(n: int, seed: int) -> np.ndarray:
+    """Points in a squashed ball, a third of them on its surface: a vertex-only mesh."""
+    rng = np.random.default_rng(seed)
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    r = np.where(np.arange(n) % 3 == 0, 1.0, rng.uniform(0, 1, n) ** (1 / 3))
+    return d * r[:, None] * [0.2, 0.1, 0.05]
+
+
+def _hull_files(tmp: pathlib.Path) -> pathlib.Path:
+    v, f = _blob(2, 7)
+    _stl(tmp / "blob.stl", v, f)
+    _obj(tmp / "blob.obj", v + [0.2, -0.1, 0.3], f)
+    cloud = " ".join(f"{x!r}" for x in _cloud(200, 3).ravel().tolist())
+    xml = tmp / "hulls.xml"
+    xml.write_text(HULL_MJCF.format(cloud=cloud))
+    return xml
+
+
+def test_convex_hull_meshes_are_weighed_as_mujoco_weighs_them(tmp_path):
+    """Issue 30, item 1 (meshes weighed by their convex hull): `inertia="convex"` on a non-convex
+    STL and on an OBJ with `refpos`, a mesh given by vertices only (MuJoCo takes its hull's
+    triangles as its faces) with volume and shell inertia, a box fitted to a hull. A and G + Q
+    equal MuJoCo's reading of the same file at random states (relative 1e-12); MuJoCo's reading
+    with the STL weighed by its own (non-convex) volume instead must fail."""
+    xml = _hull_files(tmp_path)
+    scene = mjcf_scene(tmp_path, xml, dict(gravity=[0.0, 0.0, -9.81]))
+    wa, wf = worst(scene, mujoco.MjModel.from_xml_path(str(xml)), 6)
+    assert wa <= TOL and wf <= TOL, (wa, wf)
+    legacy = tmp_path / "legacy.xml"
+    legacy.write_text(xml.read_text().replace('file="blob.stl" inertia="convex"', 'file="blob.stl"'))
+    wa, wf = worst(scene, mujoco.MjModel.from_xml_path(str(legacy)), 6)
+    assert max(wa, wf) > 1e-3, (wa, wf)
+
+
+def test_a_convex_hull_body_has_the_exact_inertia_of_the_hull(tmp_path):
+    """An independent reference: scipy's ConvexHull of the blob's vertices (float32, scaled),
+    its triangles oriented outward and weighed by signed tetrahedra (`_exact_inertia`) against
+    progmo's body read from A at the identity pose: mass and centre relative 1e-12, the inertia
+    within MESH_TOL (MuJoCo's axes' tolerance, which progmo keeps)."""
+    from scipy.spatial import ConvexHull
+
+    _hull_files(tmp_path)
+    xml = tmp_path / "one.xml"
+    xml.write_text(HULL_MJCF.split("<worldbody>")[0].format(cloud="0 0 0 1 0 0 0 1 0 0 0 1")
+                   + '<worldbody><body name="a"><freejoint name="a_free"/><geom type="mesh" '
+                   'mesh="blob_hull"/></body></worldbody></mujoco>\n')
+    v, _ = _blob(2, 7)
+    v = v.astype(np.float32).astype(float) * [0.2, 0.1, 0.15]
+    h = ConvexHull(v)
+    inside = v[h.vertices].mean(axis=0)
+    tri = [(a, b, c) if np.dot(np.cross(v[b] - v[a], v[c] - v[a]), v[a] - inside) > 0 else (a, c, b)
+           for a, b, c in h.simplices]
+    m0, c0, I0 = _exact_inertia(v, tri, 1000.0)
+    m1, _, _ = _exact_inertia(v, _blob(2, 7)[1], 1000.0)
+    assert m0 > 1.05 * m1  # the blob is not convex: its hull is heavier
+    scene = mjcf_scene(tmp_path, xml, dict())
+    q = np.array(scene.q0)
+    q[3:7] = [1.0, 0.0, 0.0, 0.0]
+    m, c, I = _free_body_inertia(np.array(scene.dynamics(0.0, q, np.zeros(6))["mass"]))
+    assert abs(m - m0) <= 1e-12 * m0 and np.abs(c - c0).max() <= 1e-12 * np.abs(c0).max(), (m, m0)
+    assert np.abs(I - I0).max() <= MESH_TOL * np.abs(I0).max(), np.abs(I - I0).max() / np.abs(I0).max()
+
+
+@pytest.mark.parametrize("faces", [False, True])
+def test_a_nearly_axis_aligned_mesh_has_mujocos_principal_axes(tmp_path, faces):
+    """A box-like cloud of 2871 points (its inertia's axes within 1e-3 of the coordinate axes: the
+    Jacobi rotations are small), as vertices only (weighed by its hull) or with the hull's faces
+    given: the body's inertia equals MuJoCo's relative to the inertia itself at 1e-13. Before
+    progmo took the half angle as MuJoCo 4.0 does (tan(phi/2), not sqrt((1 - cos phi) / 2)), it
+    differed by 4e-10 here."""
+    from scipy.spatial import ConvexHull
+
+    rng = np.random.default_rng(5)
+    for _ in range(4):
+        c = rng.uniform(-0.1, 0.1, (int(rng.integers(1000, 3000)), 3)) * [1, 0.5, 0.2]
+    c = c.astype(np.float32).astype(float)
+    face = ""
+    if faces:
+        h = ConvexHull(c)
+        inside = c[h.vertices].mean(axis=0)
+        tri = [(a, b, d) if np.dot(np.cross(c[b] - c[a], c[d] - c[a]), c[a] - inside) > 0 else (a, d, b)
+               for a, b, d in h.simplices]
+        face = 'face="' + " ".join(str(i) for t in tri for i in t) + '"'
+    xml = tmp_path / "cloud.xml"
+    xml.write_text(f'<mujoco><asset><mesh name="m" vertex="{" ".join(repr(x) for x in c.ravel().tolist())}" '
+                   f'{face}/></asset><worldbody><body name="a"><freejoint name="f"/><geom type="mesh" '
+                   'mesh="m"/></body></worldbody></mujoco>')
+    scene = mjcf_scene(tmp_path, xml, dict())
+    q = np.array(scene.q0)
+    q[3:7] = [1.0, 0.0, 0.0, 0.0]
+    _, _, I = _free_body_inertia(np.array(scene.dynamics(0.0, q, np.zeros(6))["mass"]))
+    model = mujoco.MjModel.from_xml_path(str(xml))
+    d = mujoco.MjData(model)
+    M = np.zeros((6, 6))
+    mujoco.mj_forward(model, d)
+    mujoco.mj_fullM(model, d, M)
+    _, _, Im = _free_body_inertia(M)
+    assert np.abs(I - Im).max() <= 1e-13 * np.abs(Im).max(), np.abs(I - Im).max() / np.abs(Im).max()
 
 
 SPRINGDAMPER_MJCF = """<mujoco model="springdamper">
