@@ -344,6 +344,45 @@ fn keyframes(src: &Source, root: Node, layout: &[(String, Vec<f64>)]) -> R<Vec<K
     Ok(out)
 }
 
+/// The file's keys followed by the `<attach>`ed models' (MuJoCo's order): an attached key gives
+/// its model's joints their values there, every other joint its qpos0 and zero velocity, as MuJoCo
+/// compiles it. A name used twice is refused at the second key.
+fn attached_keyframes(
+    src: &Source,
+    root: Node,
+    mut own: Vec<Keyframe>,
+    attached: Vec<Keyframe>,
+    layout: &[(String, Vec<f64>)],
+) -> R<Vec<Keyframe>> {
+    for mut k in attached {
+        if let Some(first) = own.iter().find(|o| o.name == k.name) {
+            // located at the file's own key of that name, if it is one (else the whole file)
+            let node = elements(root)
+                .filter(|n| n.has_tag_name("keyframe"))
+                .flat_map(elements)
+                .find(|n| n.has_tag_name("key") && n.attribute("name") == Some(&k.name));
+            let what = format!("keyframe[{}]", k.name);
+            return Err(match node {
+                Some(n) => err(src, n, &what, format!("keyframe `{}` of an <attach>ed model ({}:{}) has the name of the key at {}:{}: give the <attach> a prefix", k.name, k.file.display(), k.line, first.file.display(), first.line)),
+                None => src.error(0..0, &what, format!("keyframe `{}` of an <attach>ed model ({}:{}) has the name of another attached key ({}:{})", k.name, k.file.display(), k.line, first.file.display(), first.line)),
+            });
+        }
+        let given: HashMap<String, (Vec<f64>, Vec<f64>)> =
+            k.joints.drain(..).map(|(j, q, v)| (j, (q, v))).collect();
+        k.joints = layout
+            .iter()
+            .map(|(j, q0)| {
+                let (q, v) = given.get(j).cloned().unwrap_or_else(|| {
+                    (q0.clone(), vec![0.0; q0.len() - usize::from(q0.len() >= 4)])
+                });
+                (j.clone(), q, v)
+            })
+            .collect();
+        own.push(k);
+    }
+    Ok(own)
+}
+
 /// The `springdamper`s of the file's joints applied ([`spring_dampers`]); refused in an
 /// `<attach>`ed file (its stiffness would need the whole model's mass matrix).
 fn apply_spring_dampers(
@@ -769,6 +808,7 @@ fn import_at(src: &Source, locked: &[String], depth: usize) -> R<Robot> {
         meshes: &meshes,
         spring_dampers: vec![],
         suffix: String::new(),
+        attached_keys: vec![],
         models: models(src, root)?,
         depth,
     };
@@ -812,7 +852,13 @@ fn import_at(src: &Source, locked: &[String], depth: usize) -> R<Robot> {
         unmodelled,
         ranges: w.ranges,
         locked: w.locked_values,
-        keyframes: keyframes(src, root, &w.layout)?,
+        keyframes: attached_keyframes(
+            src,
+            root,
+            keyframes(src, root, &w.layout)?,
+            w.attached_keys,
+            &w.layout,
+        )?,
         sites: w.sites,
         body_at: w.body_at,
         mass_unknown: w.mass_unknown,
@@ -1079,6 +1125,9 @@ struct Walk<'s, 'd, 'a, 'i> {
     spring_dampers: Vec<(String, [f64; 2])>,
     /// The suffix the `<replicate>`s around the current body add to its subtree's names.
     suffix: String,
+    /// The `<attach>`ed models' named keys, renamed, with the values of the attached joints only
+    /// (completed over the whole model by [`attached_keyframes`]).
+    attached_keys: Vec<Keyframe>,
     /// The `<asset>` `<model>`s (name -> element) an `<attach>` may name.
     models: HashMap<String, Node<'a, 'i>>,
     /// How many `<attach>`es deep this file is read.
@@ -1173,7 +1222,8 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
     /// file, read as that file says (its own compiler settings, defaults and mesh folder), its
     /// names prefixed (and suffixed by the replicates around the attach point), its root placed at
     /// the attach point (`frame`: the frames and replicates around it) in body `parent`. The
-    /// attached file's records (limits, actuators, ...) and sites come along; its keyframes do not.
+    /// attached file's records (limits, actuators, ...), sites and named keys come along (a key
+    /// renamed as a body is, holding the attached joints' values: [`attached_keyframes`]).
     fn attach(&mut self, e: Node<'a, 'i>, parent: &str, frame: Pose) -> R<()> {
         let src = self.src;
         let what = format!("attach[{}]", e.attribute("model").unwrap_or(""));
@@ -1261,6 +1311,16 @@ impl<'a, 'i> Walk<'_, '_, 'a, 'i> {
             .filter(|x| inside.contains(x.0.as_str()))
         {
             self.body_at.push((rename(&name), at));
+        }
+        for mut key in child.keyframes {
+            key.name = rename(&key.name);
+            key.joints = key
+                .joints
+                .into_iter()
+                .filter(|(j, _, _)| self.joint_set.contains(&rename(j)))
+                .map(|(j, q, v)| (rename(&j), q, v))
+                .collect();
+            self.attached_keys.push(key);
         }
         Ok(())
     }

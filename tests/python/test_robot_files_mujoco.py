@@ -1097,6 +1097,44 @@ def test_attach_grafts_the_models_subtree_where_mujoco_puts_it(tmp_path):
     assert max(wa, wf) > 1e-4, (wa, wf)
 
 
+ATTACH_KEYS = """  <keyframe>
+    <key name="home" qpos="0.7 0.3 -0.02" qvel="5 1.5 -0.5"/>
+    <key name="short" qpos="0.7"/>
+  </keyframe>
+</mujoco>
+"""
+
+
+@pytest.mark.parametrize("key", ["start", "g_home", "g_short"])
+def test_an_attached_models_keys_are_mujocos(tmp_path, key):
+    """Issue 30, item 1: the attached model's named keys come along, renamed with the prefix
+    (`[initial] keyframe = "g_home"`): the attached joints take the key's values (a short key:
+    their qpos0), every other joint its qpos0 (the shoulder's `ref`) and zero velocity, as MuJoCo
+    compiles them (`key_qpos`, `key_qvel`); the file's own key is unchanged. A file key with an
+    attached key's name is refused at the attached key."""
+    (tmp_path / "gripper.xml").write_text(ATTACH_CHILD.replace("</mujoco>\n", ATTACH_KEYS))
+    xml = tmp_path / "arm.xml"
+    xml.write_text(ATTACH_MJCF.replace('axis="0 1 0"/>', 'axis="0 1 0" ref="20"/>').replace(
+        "</mujoco>", '<keyframe><key name="start" qpos="0.4 0.1 0.01" qvel="1 2 3"/></keyframe>\n</mujoco>'))
+    p = tmp_path / "key.toml"
+    p.write_text(f'name = "key"\n[model]\nkind = "mjcf"\nfile = "{xml}"\n[initial]\nkeyframe = "{key}"\n'
+                 "[time]\nt1 = 1.0\n")
+    scene = progmo.load(str(p))
+    model = mujoco.MjModel.from_xml_path(str(xml))
+    k = model.key(key).id
+    assert [model.key(i).name for i in range(model.nkey)] == ["start", "g_home", "g_short"]
+    qa, va = coordinates(scene, model)
+    assert np.array_equal(np.asarray(scene.q0), model.key_qpos[k][qa]), (scene.q0, model.key_qpos[k])
+    assert np.array_equal(np.asarray(scene.v0), model.key_qvel[k][va]), (scene.v0, model.key_qvel[k])
+    clash = tmp_path / "clash.xml"
+    clash.write_text(xml.read_text().replace('name="start"', 'name="g_home"'))
+    p.write_text(p.read_text().replace(str(xml), str(clash)))
+    with pytest.raises(Exception) as e:
+        progmo.load(str(p))
+    line = next(k + 1 for k, t in enumerate(clash.read_text().splitlines()) if 'name="g_home"' in t)
+    assert f"clash.xml:{line}:" in str(e.value) and "gripper.xml:" in str(e.value), str(e.value)
+
+
 @pytest.mark.parametrize("change, expected", [
     ('body="base"', 'no body `nothing`'),
     ('file="gripper.xml"', 'nested <attach>ed models'),
