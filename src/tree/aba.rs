@@ -164,14 +164,13 @@ pub fn aba_factor<S: Scalar>(
             None => Inertia::zero(),
         };
         let nv = link.joint.map_or(0, |j| model.joints[j].nv);
-        let mut s = [[S::zero(); 6]; 6];
-        for (k, sk) in s.iter_mut().take(nv).enumerate() {
+        // written in place: the columns past nv stay zero from `AbaLink::new`
+        let ab = &mut data.aba[i];
+        for (k, sk) in ab.s.iter_mut().take(nv).enumerate() {
             *sk = v6(&xw.inv_apply_motion(&ld.s[k]));
         }
-        let ab = &mut data.aba[i];
         ab.ia = inertia_matrix(&iw);
         ab.iw = iw;
-        ab.s = s;
     }
     let mut pivot = (f64::INFINITY, 0.0f64);
     for i in (0..model.links.len()).rev() {
@@ -211,8 +210,9 @@ pub fn aba_factor<S: Scalar>(
             }
         }
         if let Some(p) = link.parent {
-            let ia = data.aba[i].ia;
-            for (cp, ci) in data.aba[p].ia.iter_mut().zip(ia.iter()) {
+            // parents come before their children (p < i): both borrowed, nothing copied
+            let (head, tail) = data.aba.split_at_mut(i);
+            for (cp, ci) in head[p].ia.iter_mut().zip(tail[0].ia.iter()) {
                 for r in 0..6 {
                     cp[r] += ci[r];
                 }
