@@ -182,29 +182,55 @@ pub fn aba_factor<S: Scalar>(
             for c in 0..k {
                 ab.u[c] = mul6(&ab.ia, &ab.s[c]);
             }
-            let mut d = [[S::zero(); 6]; 6];
-            for c in 0..k {
-                for r in 0..k {
-                    d[c][r] = dot6(&ab.s[r], &ab.u[c]);
+            if k == 1 {
+                // hinge and slide: D = s^T U scalar, no k x k work (the same operations as the
+                // general branch below: D^-1 = (1 / sqrt(D)) / sqrt(D), results to the bit)
+                let mut d = dot6(&ab.s[0], &ab.u[0]);
+                if jt.armature != 0.0 {
+                    d += S::from(jt.armature);
                 }
-            }
-            // armature: A gains it on the joint's diagonal, so does the pivot D_i (A's block
-            // elimination from the leaves sees the joint's own diagonal block last)
-            if jt.armature != 0.0 {
-                for (c, dc) in d.iter_mut().enumerate().take(k) {
-                    dc[c] += S::from(jt.armature);
+                let r = re(d);
+                if r <= 0.0 || !r.is_finite() {
+                    return Err(Singular {
+                        column: jt.iv,
+                        rcond: 0.0,
+                    });
                 }
-            }
-            ab.dinv = spd_inverse(&d, k, &mut pivot).map_err(|c| Singular {
-                column: jt.iv + c,
-                rcond: 0.0,
-            })?;
-            // I^a = I^A - U D^-1 U^T
-            for c in 0..k {
-                let w = mul_k(&ab.dinv, &ab.u, c, k); // (D^-1 U^T)^T column: U D^-1 e_c
-                for (col, &uc) in ab.ia.iter_mut().zip(ab.u[c].iter()) {
+                pivot = (pivot.0.min(r), pivot.1.max(r));
+                let l = d.sqrt();
+                let dinv = (S::one() / l) / l;
+                ab.dinv[0][0] = dinv;
+                let w = ab.u[0].map(|x| x * dinv);
+                for (col, &uc) in ab.ia.iter_mut().zip(ab.u[0].iter()) {
                     for r in 0..6 {
                         col[r] -= w[r] * uc;
+                    }
+                }
+            } else {
+                let mut d = [[S::zero(); 6]; 6];
+                for c in 0..k {
+                    for r in 0..k {
+                        d[c][r] = dot6(&ab.s[r], &ab.u[c]);
+                    }
+                }
+                // armature: A gains it on the joint's diagonal, so does the pivot D_i (A's block
+                // elimination from the leaves sees the joint's own diagonal block last)
+                if jt.armature != 0.0 {
+                    for (c, dc) in d.iter_mut().enumerate().take(k) {
+                        dc[c] += S::from(jt.armature);
+                    }
+                }
+                ab.dinv = spd_inverse(&d, k, &mut pivot).map_err(|c| Singular {
+                    column: jt.iv + c,
+                    rcond: 0.0,
+                })?;
+                // I^a = I^A - U D^-1 U^T
+                for c in 0..k {
+                    let w = mul_k(&ab.dinv, &ab.u, c, k); // (D^-1 U^T)^T column: U D^-1 e_c
+                    for (col, &uc) in ab.ia.iter_mut().zip(ab.u[c].iter()) {
+                        for r in 0..6 {
+                            col[r] -= w[r] * uc;
+                        }
                     }
                 }
             }
