@@ -109,6 +109,8 @@ pub struct Signals {
 /// Scratch for computing signals.
 pub struct SignalWork<S: Scalar> {
     data: Option<TreeData<S>>,
+    /// Per link: the centre of mass's subtree sums ([`tree::weighted_points_jacobian`]).
+    com_sub: Vec<(S, Vector3<S>)>,
 }
 
 /// Signals as Taylor jets along the motion with dv/dt = 0 at (q, v), and their velocity
@@ -123,6 +125,10 @@ pub struct SignalJets<S: Scalar> {
     /// The world angular (rows 0..3) and linear (rows 3..6) Jacobian of the site read last: the
     /// signals of one site share it (a frame task reads up to seven).
     site_jac: DMatrix<S>,
+    /// The centre of mass c, c' and c''_0, and its linear Jacobian (`3 x nv`): computed at the
+    /// first `com` position signal of a call, read by the others.
+    com: [Vector3<S>; 3],
+    com_jac: DMatrix<S>,
 }
 
 impl<S: Scalar> SignalJets<S> {
@@ -132,6 +138,8 @@ impl<S: Scalar> SignalJets<S> {
             taylor: vec![[S::zero(); 3]; n],
             jac: DMatrix::from_element(n, nv, S::zero()),
             site_jac: DMatrix::from_element(6, nv, S::zero()),
+            com: [Vector3::zeros(); 3],
+            com_jac: DMatrix::from_element(3, nv, S::zero()),
         }
     }
 }
@@ -246,6 +254,7 @@ impl Signals {
     pub fn work<S: Scalar>(&self) -> SignalWork<S> {
         SignalWork {
             data: self.tree.as_ref().map(|t| t.data::<S>()),
+            com_sub: Vec::with_capacity(self.tree.as_ref().map_or(0, |t| t.links.len())),
         }
     }
 
@@ -344,7 +353,8 @@ impl Signals {
         needs: &[bool],
         out: &mut SignalJets<S>,
     ) {
-        let (Some(tree), Some(own)) = (&self.tree, &mut w.data) else {
+        let SignalWork { data: own, com_sub } = w;
+        let (Some(tree), Some(own)) = (&self.tree, own) else {
             return;
         };
         if self.list.is_empty() {
@@ -360,8 +370,18 @@ impl Signals {
         let z = S::zero();
         // (site, its kinematics, whether site_jac holds its Jacobian) of the site read last
         let mut last: Option<(usize, tree::PointKinematics<S>, bool)> = None;
+        // the centre of mass's position signals share one computation (`com_jets`)
+        let com_position = |(&(si, q), &need): (&(usize, Quantity), &bool)| {
+            si == COM && matches!(q, Quantity::Position { .. }) && need
+        };
+        let mut com_done = false;
         for (k, &(si, quantity)) in self.list.iter().enumerate() {
             if si == COM {
+                if !com_done && matches!(quantity, Quantity::Position { .. }) {
+                    let jac = self.list.iter().zip(needs).any(com_position);
+                    self.com_jets(tree, data, jac, com_sub, out);
+                    com_done = true;
+                }
                 self.com_jet(tree, data, quantity, needs[k], k, out);
                 continue;
             }
@@ -424,8 +444,9 @@ impl Signals {
 }
 
 impl Signals {
-    /// Signal `k`, a centre-of-mass component, into `out` ([`Signals::jets`]): the bodies' jets
-    /// and Jacobian rows weighted by m_i / M.
+    /// Signal `k`, a centre-of-mass component, into `out` ([`Signals::jets`]): a position
+    /// component from `out.com` and `out.com_jac` ([`Signals::com_jets`]), a momentum component
+    /// from [`Signals::momentum_jet`].
     fn com_jet<S: Scalar>(
         &self,
         tree: &tree::Model,
@@ -443,24 +464,40 @@ impl Signals {
         };
         let z = S::zero();
         let mut jet = [z; 3];
-        if need {
-            out.jac.row_mut(k).fill(z);
+        for (m, j) in jet.iter_mut().enumerate().take(3 - order as usize) {
+            *j = out.com[m + order as usize][axis];
         }
+        out.taylor[k] = jet;
+        if need {
+            for j in 0..out.jac.ncols() {
+                out.jac[(k, j)] = out.com_jac[(axis, j)];
+            }
+        }
+    }
+
+    /// c = sum_i m_i p_i / M, c' and c''_0 (the same sums of the bodies' point kinematics) into
+    /// `out.com`, and when `jac` its linear Jacobian into `out.com_jac`, by subtree sums
+    /// ([`tree::weighted_points_jacobian`]): once per call, for every `com` position signal.
+    fn com_jets<S: Scalar>(
+        &self,
+        tree: &tree::Model,
+        data: &tree::TreeData<S>,
+        jac: bool,
+        sub: &mut Vec<(S, Vector3<S>)>,
+        out: &mut SignalJets<S>,
+    ) {
+        out.com = [Vector3::zeros(); 3];
         for (b, p, w) in &self.com {
             let w = S::from(*w);
             let pk = tree::point_kinematics(tree, data, *b, &lift(p));
-            let x = [pk.pos[axis], pk.vel[axis], pk.acc[axis]];
-            for (m, j) in jet.iter_mut().enumerate().take(3 - order as usize) {
-                *j += x[m + order as usize] * w;
-            }
-            if need {
-                let mut row = out.jac.row_mut(k);
-                tree::for_each_point_column(tree, data, *b, &pk.pos, |j, _, lin| {
-                    row[j] += lin[axis] * w;
-                });
-            }
+            out.com[0] += pk.pos * w;
+            out.com[1] += pk.vel * w;
+            out.com[2] += pk.acc * w;
         }
-        out.taylor[k] = jet;
+        if jac {
+            let points = (self.com.iter()).map(|(b, p, w)| (*b, lift(p), S::from(*w)));
+            tree::weighted_points_jacobian(tree, data, points, sub, &mut out.com_jac);
+        }
     }
 }
 

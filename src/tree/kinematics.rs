@@ -561,6 +561,53 @@ pub fn for_each_point_column<S: Scalar>(
     }
 }
 
+/// The linear Jacobian (`3 x nv`, world frame) of a weighted sum of body points c = sum_i w_i p_i
+/// (`points`: body, the point in the body frame, weight w_i), after [`forward_kinematics`]. Column k, for dof k
+/// of link l, is sum over the points of l's subtree of w_i (R s_lin + R s_ang x (p_i - o_l)) =
+/// W_l R s_lin + R s_ang x (P_l - W_l o_l) with W_l = sum w_i and P_l = sum w_i p_i over the
+/// subtree: one pass from the leaves, O(links + points), instead of a walk to the root per point
+/// ([`for_each_point_column`], which sums the same terms in another order). `sub` is scratch.
+pub fn weighted_points_jacobian<S: Scalar>(
+    model: &Model,
+    data: &TreeData<S>,
+    points: impl Iterator<Item = (usize, Vector3<S>, S)>,
+    sub: &mut Vec<(S, Vector3<S>)>,
+    jac: &mut DMatrix<S>,
+) {
+    let z = c(0.0);
+    sub.clear();
+    sub.resize(model.links.len(), (z, Vector3::zeros()));
+    for (body, point, w) in points {
+        let l = model.body_link[body];
+        let ld = &data.links[l];
+        // p_i as point_kinematics computes it
+        let p = ld.pos + ld.rot * point_in_link(model, body, &point);
+        sub[l].0 += w;
+        sub[l].1 += p * w;
+    }
+    // children after their parents in `links`: one reverse sweep sums each subtree
+    for l in (0..model.links.len()).rev() {
+        if let Some(parent) = model.links[l].parent {
+            debug_assert!(parent < l, "links are ordered parents first");
+            let (w, p) = sub[l];
+            sub[parent].0 += w;
+            sub[parent].1 += p;
+        }
+    }
+    jac.fill(z);
+    for (l, link) in model.links.iter().enumerate() {
+        let Some(j) = link.joint else { continue };
+        let (jt, ld, (w, p)) = (&model.joints[j], &data.links[l], sub[l]);
+        let d = p - ld.pos * w;
+        for k in 0..jt.nv {
+            let col = ld.rot * ld.s[k].lin * w + cross(&(ld.rot * ld.s[k].ang), &d);
+            for r in 0..3 {
+                jac[(r, jt.iv + k)] = col[r];
+            }
+        }
+    }
+}
+
 /// Jacobian of a body point, world frame, `6 x nv`: rows 0..3 map v to the body's angular velocity,
 /// rows 3..6 to the point's linear velocity.
 pub fn point_jacobian<S: Scalar>(

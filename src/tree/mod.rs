@@ -62,7 +62,8 @@ pub use kinematics::{
     body_angular_velocity, body_frame, body_pose, body_quaternion, for_each_point_column,
     forward_acceleration, forward_bias_acceleration, forward_kinematics, forward_velocity, neutral,
     normalize_quaternions, point_acceleration, point_jacobian, point_kinematics, point_position,
-    point_velocity, qdot, PointKinematics, SweepPasses, TreeData, TreeSweep,
+    point_velocity, qdot, weighted_points_jacobian, PointKinematics, SweepPasses, TreeData,
+    TreeSweep,
 };
 pub(crate) use model::JointKind;
 pub use model::{

@@ -624,6 +624,70 @@ fn point_kinematics_consistency() {
     }
 }
 
+/// The subtree sums of [`weighted_points_jacobian`] against two other routes to the same
+/// Jacobian of c = sum_i w_i p_i: the weighted sum of each point's own Jacobian
+/// ([`point_jacobian`]: a walk to the root per point), and J_c v = dc/dt by a dual number through
+/// the positions. On the zoo (every joint type, several joints per body, a welded body folded into
+/// its parent, two roots), with a negative weight and a point listed twice. Control: a point's
+/// weight changed in one route only is seen.
+#[test]
+fn weighted_points_jacobian_matches_the_point_jacobians() {
+    let model = zoo(Fields::default());
+    let nb = model.bodies().len();
+    let (mut d, mut dd) = (
+        TreeData::<f64>::new(&model),
+        TreeData::<Dual64>::new(&model),
+    );
+    let mut rng = Rng(2718);
+    let points: Vec<(usize, Vector3<f64>, f64)> = (0..nb)
+        .chain([nb - 1])
+        .map(|b| {
+            let p = Vector3::new(rng.next(), rng.next(), rng.next());
+            (b, p, if b == 1 { -0.4 } else { 0.5 + rng.next().abs() })
+        })
+        .collect();
+    let (mut sub, mut jc, mut jp) = (vec![], DMatrix::zeros(3, model.nv()), DMatrix::zeros(0, 0));
+    let mut qd = DVector::zeros(0);
+    for _ in 0..5 {
+        let (q, v, _) = random_state(&model, &mut rng);
+        forward_kinematics(&model, &mut d, &q);
+        weighted_points_jacobian(&model, &d, points.iter().copied(), &mut sub, &mut jc);
+        let route = |w_of: &dyn Fn(usize) -> f64, d: &mut TreeData<f64>, jp: &mut DMatrix<f64>| {
+            let mut sum = DMatrix::zeros(3, model.nv());
+            for (i, (b, p, _)) in points.iter().enumerate() {
+                point_jacobian(&model, d, &q, *b, p, jp);
+                sum += jp.rows(3, 3) * w_of(i);
+            }
+            sum
+        };
+        let sum = route(&|i| points[i].2, &mut d, &mut jp);
+        let scale = max_abs(&sum);
+        assert!(scale > 0.1);
+        assert!(
+            max_abs(&(&jc - &sum)) <= 64.0 * EPS * scale,
+            "{jc} vs {sum}"
+        );
+        // control: one weight off by 1 % in the per-point route
+        let off = route(
+            &|i| points[i].2 * if i == 2 { 1.01 } else { 1.0 },
+            &mut d,
+            &mut jp,
+        );
+        assert!(max_abs(&(&jc - &off)) > 1e-4 * scale);
+        // J_c v = dc/dt
+        qdot(&model, &q, &v, &mut qd);
+        let qs = seeded(&q, qd.as_slice());
+        let mut cdot = Vector3::zeros();
+        for (b, p, w) in &points {
+            cdot += point_position(&model, &mut dd, &qs, *b, &p.map(Dual64::from_re))
+                .map(|x| x.eps)
+                * *w;
+        }
+        let jv = &jc * DVector::from_vec(v.clone());
+        assert!((Vector3::new(jv[0], jv[1], jv[2]) - cdot).amax() <= 64.0 * EPS * scale);
+    }
+}
+
 /// The velocity-product accelerations the point kinematics read after the forces' RNEA
 /// ([`bias`], then [`forward_bias_acceleration`] without a pass of its own) are a gravity-free
 /// pass's bit for bit, and the second derivative of each point's position along dv/dt = 0 (a
