@@ -405,13 +405,20 @@ impl<S: Scalar> FormulationWork<S> {
             u_terms: 0.0,
             det_sign: 0.0,
         };
-        // Normalize rows: B_hat = N^-1 B, gamma_hat = N^-1 gamma.
-        for i in 0..s {
-            let mut n2 = S::zero();
-            for j in 0..nv {
-                n2 += b[(i, j)] * b[(i, j)];
+        // Normalize rows: B_hat = N^-1 B, gamma_hat = N^-1 gamma. B is column-major: the squared
+        // row norms accumulate column by column (each row's sum in the order j = 0..nv, as a
+        // row-wise loop would), into `norms`.
+        assert_eq!((b.nrows(), b.ncols()), (s, nv), "B is s x nv");
+        let bs = b.as_slice();
+        let norms = &mut self.norms[..s];
+        norms.fill(S::zero());
+        for col in bs.chunks_exact(s.max(1)).take(nv) {
+            for (n2, &x) in norms.iter_mut().zip(col) {
+                *n2 += x * x;
             }
-            let n = n2.sqrt();
+        }
+        for i in 0..s {
+            let n = self.norms[i].sqrt();
             if !re(n).is_finite() || !re(gamma[i]).is_finite() {
                 return Err(FormulationError::NonFinite);
             }
@@ -429,10 +436,13 @@ impl<S: Scalar> FormulationWork<S> {
             }
             self.norms[i] = n;
             let inv = n.recip();
+            let (lb, lx) = (self.bt.nrows(), self.x.nrows());
+            let bt = &mut self.bt.as_mut_slice()[i * lb..i * lb + nv];
+            let x = &mut self.x.as_mut_slice()[i * lx..i * lx + nv];
             for j in 0..nv {
-                let x = b[(i, j)] * inv;
-                self.bt[(j, i)] = x;
-                self.x[(j, i)] = x;
+                let y = bs[j * s + i] * inv;
+                bt[j] = y;
+                x[j] = y;
             }
         }
         // Rank-revealing QR of B_hat^T (nv x s): B_hat^T P = Q R.
@@ -636,54 +646,57 @@ impl<S: Scalar> FormulationWork<S> {
         if m == 0 {
             return self.factor_reduced_inertia(0, diag);
         }
+        // Over column slices (dt is nv x 2m: D^T, then A D^T), each sum in the order of the
+        // index loops it replaces: the same operations, bit for bit.
+        debug_assert_eq!(self.dt.nrows(), nv);
+        let (dt, tmp) = (self.dt.as_mut_slice(), &mut self.tmp[..nv]);
+        let (d_t, ad_t) = dt.split_at_mut(m * nv);
         // D^T: Q applied to the unit vectors e_s.. e_nv-1; then A D^T.
-        for j in 0..m {
-            self.tmp[..nv].fill(z);
-            self.tmp[s + j] = S::one();
-            linalg::qr_apply_q(&self.bt, nv, s, &self.beta, &mut self.tmp[..nv]);
-            for i in 0..nv {
-                self.dt[(i, j)] = self.tmp[i];
-            }
+        for (j, dj) in d_t.chunks_exact_mut(nv).enumerate() {
+            dj.fill(z);
+            dj[s + j] = S::one();
+            linalg::qr_apply_q(&self.bt, nv, s, &self.beta, dj);
         }
-        for j in 0..m {
-            for i in 0..nv {
-                self.dt[(i, m + j)] = z;
-            }
-            for (k, col) in a.column_iter().enumerate() {
-                let d = self.dt[(k, j)];
-                for i in 0..nv {
-                    self.dt[(i, m + j)] += col[i] * d;
+        let columns = || a.as_slice().chunks_exact(a.nrows()).take(nv);
+        for (dj, out) in d_t.chunks_exact(nv).zip(ad_t.chunks_exact_mut(nv)) {
+            out.fill(z);
+            for (col, &d) in columns().zip(dj) {
+                for (o, &x) in out.iter_mut().zip(col) {
+                    *o += x * d;
                 }
             }
         }
         // r = F - A a_p, rhs2 = D r; K22 = D (A D^T), lower triangle.
-        self.tmp[..nv].copy_from_slice(&force[..nv]);
-        for (k, col) in a.column_iter().enumerate() {
-            let ak = acc[k];
-            for i in 0..nv {
-                self.tmp[i] -= col[i] * ak;
+        tmp.copy_from_slice(&force[..nv]);
+        for (col, &ak) in columns().zip(acc.iter()) {
+            for (t, &x) in tmp.iter_mut().zip(col) {
+                *t -= x * ak;
             }
         }
-        for j in 0..m {
+        let dot = |x: &[S], y: &[S]| {
             let mut r = z;
-            for i in 0..nv {
-                r += self.dt[(i, j)] * self.tmp[i];
+            for (&p, &q) in x.iter().zip(y) {
+                r += p * q;
             }
-            self.rhs[j] = r;
-            for c in 0..=j {
-                let mut k = z;
-                for i in 0..nv {
-                    k += self.dt[(i, j)] * self.dt[(i, m + c)];
-                }
-                self.inv[(j, c)] = k;
+            r
+        };
+        for (j, dj) in d_t.chunks_exact(nv).enumerate() {
+            self.rhs[j] = dot(dj, tmp);
+            for (c, adc) in ad_t.chunks_exact(nv).enumerate().take(j + 1) {
+                self.inv[(j, c)] = dot(dj, adc);
             }
         }
         self.factor_reduced_inertia(m, diag)?;
         linalg::cholesky_solve(&self.inv, m, &mut self.rhs[..m]);
-        for j in 0..m {
-            let y = self.rhs[j];
-            for i in 0..nv {
-                acc[i] += self.dt[(i, j)] * y;
+        for (dj, &y) in self
+            .dt
+            .as_slice()
+            .chunks_exact(nv)
+            .take(m)
+            .zip(&self.rhs[..m])
+        {
+            for (x, &d) in acc[..nv].iter_mut().zip(dj) {
+                *x += d * y;
             }
         }
         Ok(())
