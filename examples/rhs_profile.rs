@@ -3,8 +3,8 @@
 //! nearby states alternated, each evaluation at a new q); the printed time is wall clock and only
 //! a guide: speed figures come from `progmo bench` and `cargo bench`.
 //!
-//! With `--split` (last argument) a second line splits the call into its parts, each timed alone over the same loop: A
-//! (`mass_matrix`), F = G + Q (`natural_forces`), the rows' jet (B, gamma: `prepare_geometry`
+//! With `--split` (last argument) a second line splits the call into its parts, each timed
+//! alone over the same loop: A (`mass_matrix`), F = G + Q (`natural_forces`), the rows' jet (B, gamma: `prepare_geometry`
 //! minus A) and the formulation (dv/dt, lambda and the diagnostics: the whole call minus
 //! `prepare`). On a tree A and F alone each run the kinematics that `prepare` shares, so their sum
 //! can exceed the prepared part: the split says where to look, not what a pass costs to the

@@ -562,8 +562,9 @@ pub fn for_each_point_column<S: Scalar>(
 }
 
 /// The linear Jacobian (`3 x nv`, world frame) of a weighted sum of body points c = sum_i w_i p_i
-/// (`points`: body, the point in the body frame, weight w_i), after [`forward_kinematics`]. Column k, for dof k
-/// of link l, is sum over the points of l's subtree of w_i (R s_lin + R s_ang x (p_i - o_l)) =
+/// (`points`: body, the point in the body frame, weight w_i), after [`forward_kinematics`].
+/// Column k, for dof k of link l, is sum over the points of l's subtree of
+/// w_i (R s_lin + R s_ang x (p_i - o_l)) =
 /// W_l R s_lin + R s_ang x (P_l - W_l o_l) with W_l = sum w_i and P_l = sum w_i p_i over the
 /// subtree: one pass from the leaves, O(links + points), instead of a walk to the root per point
 /// ([`for_each_point_column`], which sums the same terms in another order). `sub` is scratch.
