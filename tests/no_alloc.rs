@@ -1,6 +1,8 @@
 //! The right-hand side allocates nothing (issue requirement; Pinocchio's "hot paths must not
 //! allocate"): a counting global allocator around repeated evaluations of every formulation, on a
 //! Euclidean, a quaternion, an expression-based tree scene and a system with system constraints.
+//! A module of the integration binary: the allocator serves every test, each counting on its
+//! own thread's counter.
 
 use progmo::formulation::{Formulation, RankTolerances};
 use progmo::model::Model;
