@@ -6,7 +6,18 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 start=$SECONDS
 phase() { echo "== [$(( (SECONDS - start) / 60 ))m$(( (SECONDS - start) % 60 ))s] $* ==" >&2; }
-phase "set-up (harness/setup.sh)"
+phase "set-up (harness/setup.sh) beside cargo fmt --check and clippy -D warnings (functions <= 100 lines)"
+for c in rustfmt clippy; do  # part of rustup's default profile; added if a toolchain lacks them
+  cargo "${c/rustfmt/fmt}" --version >/dev/null 2>&1 || rustup component add "$c"
+done
+# The Rust checks need nothing of setup.sh: they run beside it, on the core its pip phase leaves
+# idle (on a fresh clone set-up spends about a minute on one core: downloads and unpacking), and
+# they build the proc-macros and build scripts its extension build would build. That build waits
+# for them on cargo's build-directory lock.
+rust_static_log="$(mktemp)"
+( cargo fmt --all -- --check && cargo clippy --release --workspace --all-targets -q -- -D warnings ) \
+  >"$rust_static_log" 2>&1 &
+rust_static_pid=$!
 bash harness/setup.sh
 # The C++ anchor of `progmo bench` (g++ against the pin wheel's headers: about 5 min of one core)
 # builds into its cache beside the Rust phases, which leave a core idle part of the time; the bench
@@ -15,12 +26,15 @@ bash harness/setup.sh
 anchor_log="$(mktemp)"
 .venv/bin/python -c 'from progmo.bench import anchor; anchor.build()' >"$anchor_log" 2>&1 &
 anchor_pid=$!
-phase "static checks: cargo fmt, clippy -D warnings (functions <= 100 lines), ruff (complexity <= 15), mypy, stubtest (the .pyi against the built extension)"
-for c in rustfmt clippy; do  # part of rustup's default profile; added if a toolchain lacks them
-  cargo "${c/rustfmt/fmt}" --version >/dev/null 2>&1 || rustup component add "$c"
-done
-cargo fmt --all -- --check
-cargo clippy --release --workspace --all-targets -q -- -D warnings
+phase "static checks: cargo fmt and clippy's outcome, ruff (complexity <= 15), mypy, stubtest (the .pyi against the built extension)"
+rust_static=0
+wait "$rust_static_pid" || rust_static=$?
+cat "$rust_static_log" >&2
+rm -f "$rust_static_log"
+if [ "$rust_static" != 0 ]; then
+  echo "test.sh: FAILED: cargo fmt --check or cargo clippy -D warnings (its output is above)" >&2
+  exit 1
+fi
 .venv/bin/ruff check -q harness/progmo tests/python fuzz/python
 .venv/bin/python -m mypy
 .venv/bin/python -m mypy.stubtest progmo._core --allowlist harness/stubtest-allowlist.txt
@@ -42,9 +56,8 @@ export PROGMO_ROBOT_PATH
 cargo_log="$(mktemp)"
 PROGMO_BIN_READY="$(mktemp -u)"
 export PROGMO_BIN_READY
-# The examples are not built here (clippy --all-targets above compiles them; rhs_profile alone was
-# 55 CPU seconds of a 700-second build): the library, the binary, the integration tests, then the
-# doctests.
+# The examples are not built here (clippy --all-targets above compiles them; rhs_profile was a
+# 55-second unit of this build): the library, the binary, the integration tests, then the doctests.
 tests=(--lib --bins --tests)
 ( if cargo test --release --no-run "${tests[@]}"; then echo ok >"$PROGMO_BIN_READY"
     cargo test --release "${tests[@]}" && cargo test --release --doc

@@ -1,9 +1,9 @@
 //! The integration tests, one module per concern (`tests/<concern>.rs`), built as one test binary:
 //! one link and one instantiation of the core's generic code instead of one per file (the
 //! integration tests took about 1,000 CPU seconds to build as 25 binaries). Run one concern with
-//! `cargo test --release --test integration <concern>::`. `no_alloc.rs` joined them (it was a
-//! binary of its own: 170 of the build's 700 CPU seconds for three tests); its counting global
-//! allocator counts per thread, and libtest runs each test on a thread of its own.
+//! `cargo test --release --test integration <concern>::`. `no_alloc.rs` joined them (as a binary
+//! of its own it instantiated the solver again: a 167-second unit for three tests); its counting
+//! global allocator counts per thread, and libtest runs each test on a thread of its own.
 
 mod common;
 
