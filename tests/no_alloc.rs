@@ -117,3 +117,56 @@ fn the_counter_counts() {
     assert!(count() > before);
     drop(v);
 }
+
+/// The servo right-hand side (issue 31 item 2: u = H tau from the decoupling of the
+/// index-reduced system, its Lie derivatives over nested duals) allocates nothing once its
+/// workspaces exist: every bundled scene with `[[actuators]]` (found by reading the scene files).
+#[test]
+fn servo_right_hand_side_does_not_allocate() {
+    let dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("references/scenes");
+    let mut paths: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .filter(|p| {
+            let text = std::fs::read_to_string(p).unwrap();
+            text.lines().any(|l| l.trim() == "[[actuators]]")
+        })
+        .collect();
+    paths.sort();
+    let mut servo = vec![];
+    for path in paths {
+        let scene = progmo::scene::Scene::load(&path).unwrap();
+        let n = progmo::with_problem!(&scene.system, p => (|| {
+            let act = p.constraints.actuation()?;
+            let an = progmo::servo::Servo::new(&p.model, &p.constraints, act)
+                .analyse(p.t0, &p.q0, &p.v0, 1e-10)
+                .unwrap();
+            let mut ev = Evaluator::<_, _, f64>::new(&p.model, &p.constraints);
+            ev.set_servo(an.degrees.clone(), an.b_norms.clone(), an.reduction.clone());
+            let tol = RankTolerances::default();
+            let f = Formulation::Auto;
+            ev.evaluate(f, &tol, None, p.t0, &p.q0, &p.v0).unwrap(); // warm-up
+            // ten states near the initial one (made before counting)
+            let vs: Vec<Vec<f64>> = (0..10)
+                .map(|k| p.v0.iter().map(|x| x + 1e-3 * k as f64).collect())
+                .collect();
+            let before = count();
+            for (k, v) in vs.iter().enumerate() {
+                ev.evaluate(f, &tol, None, p.t0 + 0.01 * k as f64, &p.q0, v).unwrap();
+            }
+            Some(count() - before)
+        })());
+        if let Some(n) = n {
+            servo.push(path.file_stem().unwrap().to_string_lossy().into_owned());
+            assert_eq!(
+                n,
+                0,
+                "{}: {n} allocations in 10 evaluations",
+                servo.last().unwrap()
+            );
+        }
+    }
+    // the scenes with actuators were found (the test judged something)
+    assert!(servo.len() >= 6, "servo scenes found: {servo:?}");
+}

@@ -169,6 +169,19 @@ impl Actuation {
 
     /// out += H(t, q) tau (u = H tau, the actuators' generalized force).
     pub fn add_force<T: Scalar>(&self, t: T, q: &[T], tau: &[T], out: &mut [T]) {
+        self.add_force_with(&mut ForceWork::default(), t, q, tau, out);
+    }
+
+    /// [`Actuation::add_force`] with the expression entries' slots and stack in `w` (kept by the
+    /// caller: no allocation once they have grown to size).
+    pub fn add_force_with<T: Scalar>(
+        &self,
+        w: &mut ForceWork<T>,
+        t: T,
+        q: &[T],
+        tau: &[T],
+        out: &mut [T],
+    ) {
         for (c, &tj) in self.fixed.iter().zip(tau) {
             for (o, &h) in out.iter_mut().zip(c) {
                 if h != 0.0 {
@@ -177,9 +190,11 @@ impl Actuation {
             }
         }
         if !self.entries.is_empty() {
-            let slots = Self::slots(t, q);
+            w.slots.clear();
+            w.slots.push(t);
+            w.slots.extend_from_slice(q);
             for e in &self.entries {
-                out[e.row] += tau[e.col] * e.expr.value(&slots);
+                out[e.row] += tau[e.col] * e.expr.eval(&w.slots, &mut w.stack);
             }
         }
     }
@@ -211,5 +226,22 @@ impl Actuation {
             }
         }
         r
+    }
+}
+
+/// Buffers of [`Actuation::add_force_with`] at one scalar type: the expressions' slots (t, q)
+/// and their evaluation stack.
+#[derive(Clone, Debug)]
+pub struct ForceWork<T> {
+    slots: Vec<T>,
+    stack: Vec<T>,
+}
+
+impl<T> Default for ForceWork<T> {
+    fn default() -> Self {
+        ForceWork {
+            slots: Vec::new(),
+            stack: Vec::new(),
+        }
     }
 }

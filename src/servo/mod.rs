@@ -38,6 +38,7 @@
 use crate::linalg;
 use crate::model::{Model, Segment};
 use crate::programme::{
+    actuation::ForceWork,
     jet::{Jet, JetRows},
     Constraints,
 };
@@ -191,6 +192,7 @@ struct AccelWork<W, T> {
     ws: W,
     a: DMatrix<T>,
     scratch: Vec<T>,
+    force: ForceWork<T>,
 }
 
 /// What [`Servo::direct`] needs at one scalar type: the model's and the rows' workspaces and
@@ -206,6 +208,7 @@ struct DirectWork<W, R, T> {
     x: Vec<T>,
     scratch: Vec<T>,
     e: Vec<T>,
+    force: ForceWork<T>,
 }
 
 type LieFn<M, C, T> =
@@ -238,6 +241,19 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         self
     }
 
+    /// Run `f` on a `W` from the cache when there is one (made by `make` otherwise): each pass
+    /// keeps its buffers in its own type, so a right-hand side allocates nothing.
+    fn with_work<W: Any + Send, R>(
+        &self,
+        make: impl FnOnce() -> W,
+        f: impl FnOnce(&mut W) -> R,
+    ) -> R {
+        match self.work {
+            Some(w) => w.with(make, f),
+            None => f(&mut make()),
+        }
+    }
+
     /// Run `f` on the model's workspace, the n x n matrix and a scratch vector at scalar type T
     /// (from the cache when there is one).
     fn with_accel_work<T: Scalar, R>(
@@ -249,11 +265,9 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
             ws: self.model.workspace::<T>(),
             a: DMatrix::from_element(n, n, T::zero()),
             scratch: vec![T::zero(); n],
+            force: ForceWork::default(),
         };
-        match self.work {
-            Some(w) => w.with(make, f),
-            None => f(&mut make()),
-        }
+        self.with_work(make, f)
     }
 
     /// The same servo with every derivative taken by nested dual numbers (module docs: the
@@ -288,6 +302,7 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
 
     /// A^-1 h_j into `x`: the acceleration actuator j gives per unit tau_j (2.2), with `chol` the
     /// Cholesky factor of A and `e` scratch of length m.
+    #[allow(clippy::too_many_arguments)]
     fn force_direction<T: Scalar>(
         &self,
         t: T,
@@ -295,13 +310,14 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         j: usize,
         chol: &DMatrix<T>,
         e: &mut [T],
+        force: &mut ForceWork<T>,
         x: &mut [T],
     ) {
         e.iter_mut()
             .enumerate()
             .for_each(|(l, y)| *y = if l == j { T::one() } else { T::zero() });
         x.iter_mut().for_each(|y| *y = T::zero());
-        self.act.add_force(t, q, e, x);
+        self.act.add_force_with(force, t, q, e, x);
         linalg::cholesky_solve(chol, x.len(), x);
     }
 
@@ -332,8 +348,9 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
             x: vec![T::zero(); n],
             scratch: vec![T::zero(); n],
             e: vec![T::zero(); m],
+            force: ForceWork::default(),
         };
-        let mut body = |w: &mut DirectWork<M::Workspace<T>, C::Workspace<T>, T>| {
+        let body = |w: &mut DirectWork<M::Workspace<T>, C::Workspace<T>, T>| {
             let DirectWork {
                 model: ws,
                 rows,
@@ -345,6 +362,7 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
                 x,
                 scratch,
                 e,
+                force,
             } = w;
             // A and F first: the rows' jet then reads the model's forward passes (one sweep).
             self.model.mass_matrix(ws, q, a);
@@ -370,17 +388,14 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
                 *y = bx(x, i) - gamma[i];
             }
             for j in (0..m).filter(|j| cols.is_none_or(|c| c.contains(j))) {
-                self.force_direction(t, q, j, a, e, x);
+                self.force_direction(t, q, j, a, e, force, x);
                 for i in 0..s {
                     db[(i, j)] = bx(x, i);
                 }
             }
             Ok(())
         };
-        match self.work {
-            Some(c) => c.with(make, body),
-            None => body(&mut make()),
-        }
+        self.with_work(make, body)
     }
 
     /// The same servo with the rows of a [`Reduction`] (from [`Analysis::reduction`]): the
@@ -419,7 +434,7 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
             self.model.mass_matrix(&mut w.ws, q, &mut w.a);
             self.model
                 .natural_forces(&mut w.ws, t, q, v, out, &mut w.scratch);
-            self.act.add_force(t, q, tau, out);
+            self.act.add_force_with(&mut w.force, t, q, tau, out);
             linalg::cholesky(&mut w.a, n)?;
             linalg::cholesky_solve(&w.a, n, out);
             Ok(())
@@ -435,20 +450,17 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         tau: &[T],
         out: &mut [T],
     ) -> Result<(), linalg::Singular> {
-        let mut acc = vec![T::zero(); v.len()];
-        if self.has_acc_rows {
-            self.accel(t, q, v, tau, &mut acc)?;
-        }
-        /// The rows' workspace at one scalar type ([`WorkCache`]).
-        struct RowsWork<R>(R);
-        let make = || RowsWork(self.cons.workspace::<T>());
-        let mut eval =
-            |w: &mut RowsWork<C::Workspace<T>>| self.cons.eval(&mut w.0, t, q, v, &acc, out);
-        match self.work {
-            Some(c) => c.with(make, eval),
-            None => eval(&mut make()),
-        }
-        Ok(())
+        /// The rows' workspace and dv/dt at one scalar type ([`WorkCache`]).
+        struct RowsWork<R, T>(R, Vec<T>);
+        let make = || RowsWork(self.cons.workspace::<T>(), vec![T::zero(); v.len()]);
+        self.with_work(make, |w: &mut RowsWork<C::Workspace<T>, T>| {
+            fit(&mut w.1, v.len(), T::zero());
+            if self.has_acc_rows {
+                self.accel(t, q, v, tau, &mut w.1)?;
+            }
+            self.cons.eval(&mut w.0, t, q, v, &w.1, out);
+            Ok(())
+        })
     }
 
     /// One Lie derivative: d/dt of `inner` along (1, v, a) at constant tau, by one dual level.
@@ -462,18 +474,20 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         inner: LieFn<M, C, Dual<T>>,
     ) -> Result<(), linalg::Singular> {
         let n = v.len();
-        let mut a = vec![T::zero(); n];
-        self.accel(t, q, v, tau, &mut a)?;
-        let td = Dual::new(t, T::one());
-        let qd: Vec<Dual<T>> = (0..n).map(|i| Dual::new(q[i], v[i])).collect();
-        let vd: Vec<Dual<T>> = (0..n).map(|i| Dual::new(v[i], a[i])).collect();
-        let taud: Vec<Dual<T>> = tau.iter().map(|&x| Dual::from_re(x)).collect();
-        let mut o = vec![Dual::from_re(T::zero()); out.len()];
-        inner(self, td, &qd, &vd, &taud, &mut o)?;
-        for (x, d) in out.iter_mut().zip(&o) {
-            *x = d.eps;
-        }
-        Ok(())
+        self.with_work(StepWork::<T>::default, |w: &mut StepWork<T>| {
+            fit(&mut w.a, n, T::zero());
+            self.accel(t, q, v, tau, &mut w.a)?;
+            let td = Dual::new(t, T::one());
+            seed(&mut w.qd, q, v);
+            seed(&mut w.vd, v, &w.a);
+            lift(&mut w.taud, tau);
+            fit(&mut w.o, out.len(), Dual::from_re(T::zero()));
+            inner(self, td, &w.qd, &w.vd, &w.taud, &mut w.o)?;
+            for (x, d) in out.iter_mut().zip(&w.o) {
+                *x = d.eps;
+            }
+            Ok(())
+        })
     }
 
     /// y^(k) = L^k g of every row at (t, q, v) with constant tau, k <= [`MAX_RELATIVE_DEGREE`].
@@ -594,20 +608,21 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
     ) -> Result<(), linalg::Singular> {
         let (s, m) = self.dims();
         let td = Dual::from_re(t);
-        let qd: Vec<Dual<T>> = q.iter().map(|&x| Dual::from_re(x)).collect();
-        let vd: Vec<Dual<T>> = v.iter().map(|&x| Dual::from_re(x)).collect();
-        let mut o = vec![Dual::from_re(T::zero()); s];
-        for j in 0..m {
-            let taud: Vec<Dual<T>> = (0..m)
-                .map(|l| Dual::new(tau[l], if l == j { T::one() } else { T::zero() }))
-                .collect();
-            f(td, &qd, &vd, &taud, &mut o)?;
-            for i in 0..s {
-                db[(i, j)] = o[i].eps;
-                val[i] = o[i].re;
+        self.with_work(StepWork::<T>::default, |w: &mut StepWork<T>| {
+            lift(&mut w.qd, q);
+            lift(&mut w.vd, v);
+            fit(&mut w.o, s, Dual::from_re(T::zero()));
+            for j in 0..m {
+                lift(&mut w.taud, tau);
+                w.taud[j].eps = T::one();
+                f(td, &w.qd, &w.vd, &w.taud, &mut w.o)?;
+                for i in 0..s {
+                    db[(i, j)] = w.o[i].eps;
+                    val[i] = w.o[i].re;
+                }
             }
-        }
-        Ok(())
+            Ok(())
+        })
     }
 
     /// [`Servo::lie_tau`] (`z` false) or [`Servo::z_tau`] (`z` true) for the rows whose degree is
@@ -646,29 +661,47 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         derivative(k, t, q, v, tau, val)?;
         let (s, m) = self.dims();
         let n = v.len();
-        let a = self.with_accel_work(|w: &mut AccelWork<M::Workspace<T>, T>| {
-            self.model.mass_matrix(&mut w.ws, q, &mut w.a);
-            linalg::cholesky(&mut w.a, n).map(|_| w.a.clone())
-        })?;
-        let td = Dual::from_re(t);
-        let qd: Vec<Dual<T>> = q.iter().map(|&x| Dual::from_re(x)).collect();
-        let taud: Vec<Dual<T>> = tau.iter().map(|&x| Dual::from_re(x)).collect();
-        let mut e = vec![T::zero(); m];
-        let mut w = vec![T::zero(); n];
-        let mut o = vec![Dual::from_re(T::zero()); s];
-        for j in 0..m {
-            self.force_direction(t, q, j, &a, &mut e, &mut w);
-            let vd: Vec<Dual<T>> = (0..n).map(|i| Dual::new(v[i], w[i])).collect();
-            if z {
-                self.zlie(k - 1, td, &qd, &vd, &taud, &mut o)?;
-            } else {
-                self.lie(k - 1, td, &qd, &vd, &taud, &mut o)?;
-            }
-            for i in 0..s {
-                db[(i, j)] = o[i].eps;
-            }
+        /// [`Servo::flow_tau`]'s buffers at one scalar type: the Cholesky factor of A, A^-1 h_j.
+        struct FlowWork<T: Scalar> {
+            chol: DMatrix<T>,
+            e: Vec<T>,
+            x: Vec<T>,
+            force: ForceWork<T>,
+            step: StepWork<T>,
         }
-        Ok(())
+        let make = || FlowWork {
+            chol: DMatrix::from_element(n, n, T::zero()),
+            e: vec![T::zero(); m],
+            x: vec![T::zero(); n],
+            force: ForceWork::default(),
+            step: StepWork::default(),
+        };
+        self.with_work(make, |fw: &mut FlowWork<T>| {
+            self.with_accel_work(|w: &mut AccelWork<M::Workspace<T>, T>| {
+                self.model.mass_matrix(&mut w.ws, q, &mut w.a);
+                linalg::cholesky(&mut w.a, n)?;
+                fw.chol.copy_from(&w.a);
+                Ok::<(), linalg::Singular>(())
+            })?;
+            let td = Dual::from_re(t);
+            let w = &mut fw.step;
+            lift(&mut w.qd, q);
+            lift(&mut w.taud, tau);
+            fit(&mut w.o, s, Dual::from_re(T::zero()));
+            for j in 0..m {
+                self.force_direction(t, q, j, &fw.chol, &mut fw.e, &mut fw.force, &mut fw.x);
+                seed(&mut w.vd, v, &fw.x);
+                if z {
+                    self.zlie(k - 1, td, &w.qd, &w.vd, &w.taud, &mut w.o)?;
+                } else {
+                    self.lie(k - 1, td, &w.qd, &w.vd, &w.taud, &mut w.o)?;
+                }
+                for i in 0..s {
+                    db[(i, j)] = w.o[i].eps;
+                }
+            }
+            Ok(())
+        })
     }
 
     /// L^k z of the reduction's combinations at constant tau, k <= [`MAX_REDUCED_DEGREE`].
@@ -702,62 +735,76 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
     ) -> Result<(), linalg::Singular> {
         let red = self.red.expect("zrows needs a reduction");
         let (s, m) = self.dims();
-        let zero = vec![T::zero(); m];
-        let mut val = vec![T::zero(); s];
-        let mut b = DMatrix::from_element(s, m, T::zero());
-        let mut vk = vec![T::zero(); s];
-        let mut bk = DMatrix::from_element(s, m, T::zero());
-        let mut ks = red.row_degrees.clone();
-        if (0..s).all(|i| self.is_direct(i, red.row_degrees[i])) {
-            // c_r reads the pivot columns J only
-            self.direct(t, q, v, Some(&red.cols), &mut val, &mut b)?;
+        let rho = red.kept.len();
+        let make = || ZrowsWork {
+            zero: vec![T::zero(); m],
+            val: vec![T::zero(); s],
+            b: DMatrix::from_element(s, m, T::zero()),
+            vk: vec![T::zero(); s],
+            bk: DMatrix::from_element(s, m, T::zero()),
+            ks: Vec::with_capacity(s),
+            bij: DMatrix::from_element(rho, rho, T::zero()),
+            piv: vec![0; rho],
+            c: vec![T::zero(); rho],
+        };
+        self.with_work(make, |w: &mut ZrowsWork<T>| {
+            let ZrowsWork {
+                zero,
+                val,
+                b,
+                vk,
+                bk,
+                ks,
+                bij,
+                piv,
+                c,
+            } = w;
             ks.clear();
-        }
-        ks.sort_unstable();
-        ks.dedup();
-        for &k in &ks {
-            self.tau_columns(
-                t,
-                q,
-                v,
-                &zero,
-                &mut vk,
-                &mut bk,
-                |td, qd, vd, taud, o| match k {
+            if (0..s).all(|i| self.is_direct(i, red.row_degrees[i])) {
+                // c_r reads the pivot columns J only
+                self.direct(t, q, v, Some(&red.cols), val, b)?;
+            } else {
+                ks.extend_from_slice(&red.row_degrees);
+            }
+            ks.sort_unstable();
+            ks.dedup();
+            for &k in ks.iter() {
+                self.tau_columns(t, q, v, zero, vk, bk, |td, qd, vd, taud, o| match k {
                     0 => lie0(self, td, qd, vd, taud, o),
                     1 => lie1(self, td, qd, vd, taud, o),
                     2 => lie2(self, td, qd, vd, taud, o),
                     _ => panic!("eliminated degree {k} beyond MAX_ELIMINATED_DEGREE"),
-                },
-            )?;
-            for i in (0..s).filter(|&i| red.row_degrees[i] == k) {
-                val[i] = vk[i];
-                for j in 0..m {
-                    b[(i, j)] = bk[(i, j)];
+                })?;
+                for i in (0..s).filter(|&i| red.row_degrees[i] == k) {
+                    val[i] = vk[i];
+                    for j in 0..m {
+                        b[(i, j)] = bk[(i, j)];
+                    }
                 }
             }
-        }
-        // b[I, J]^T c_r = b[r, J]^T
-        let rho = red.kept.len();
-        let mut bij = DMatrix::from_fn(rho, rho, |a, c| b[(red.kept[c], red.cols[a])]);
-        let mut piv = vec![0; rho];
-        linalg::lu_factor(&mut bij, rho, &mut piv, 0.0)?;
-        for x in out.iter_mut() {
-            *x = T::zero();
-        }
-        let mut c = vec![T::zero(); rho];
-        for &r in &red.eliminated {
-            for (a, x) in c.iter_mut().enumerate() {
-                *x = b[(r, red.cols[a])];
+            // b[I, J]^T c_r = b[r, J]^T
+            for a in 0..rho {
+                for (cc, &i) in red.kept.iter().enumerate() {
+                    bij[(a, cc)] = b[(i, red.cols[a])];
+                }
             }
-            linalg::lu_solve(&bij, rho, &piv, &mut c);
-            let mut z = val[r];
-            for (a, &i) in red.kept.iter().enumerate() {
-                z -= c[a] * val[i];
+            linalg::lu_factor(bij, rho, piv, 0.0)?;
+            for x in out.iter_mut() {
+                *x = T::zero();
             }
-            out[r] = z;
-        }
-        Ok(())
+            for &r in &red.eliminated {
+                for (a, x) in c.iter_mut().enumerate() {
+                    *x = b[(r, red.cols[a])];
+                }
+                linalg::lu_solve(bij, rho, piv, c);
+                let mut z = val[r];
+                for (a, &i) in red.kept.iter().enumerate() {
+                    z -= c[a] * val[i];
+                }
+                out[r] = z;
+            }
+            Ok(())
+        })
     }
 
     /// Relative degrees, index, realization and the decoupling matrix's conditioning at a state.
@@ -860,70 +907,122 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         b_norms: &[f64],
         rank_tol: f64,
     ) -> Result<Decoupled<T>, linalg::Singular> {
+        let mut tau = vec![T::zero(); self.dims().1];
+        let c = self.decouple(t, q, v, degrees, b_norms, rank_tol, &mut tau)?;
+        Ok(Decoupled {
+            tau,
+            rcond: c.rcond,
+            row_ratio: c.row_ratio,
+            row: c.row,
+            det_sign: c.det_sign,
+        })
+    }
+
+    /// [`Servo::decoupling`] with tau into `tau` (length m), allocating nothing when cached.
+    #[allow(clippy::too_many_arguments)]
+    fn decouple<T: Scalar>(
+        &self,
+        t: T,
+        q: &[T],
+        v: &[T],
+        degrees: &[usize],
+        b_norms: &[f64],
+        rank_tol: f64,
+        tau: &mut [T],
+    ) -> Result<Conditioning, linalg::Singular> {
         let (s, m) = self.dims();
         debug_assert_eq!(s, m);
-        let zero = vec![T::zero(); m];
-        let mut b = DMatrix::from_element(s, m, T::zero());
-        let mut rhs = vec![T::zero(); s];
-        let mut val = vec![T::zero(); s];
-        let mut db = DMatrix::from_element(s, m, T::zero());
-        let direct = self.direct_rows(degrees);
-        if !direct.is_empty() {
-            self.direct(t, q, v, None, &mut val, &mut db)?;
-            for &i in &direct {
-                rhs[i] = -val[i];
-                for j in 0..m {
-                    b[(i, j)] = db[(i, j)];
-                }
-            }
+        /// [`Servo::decouple`]'s buffers at one scalar type.
+        struct DecoupleWork<T> {
+            zero: Vec<T>,
+            b: DMatrix<T>,
+            val: Vec<T>,
+            db: DMatrix<T>,
+            direct: Vec<usize>,
+            ks: Vec<usize>,
+            piv: Vec<usize>,
         }
-        for z in [false, true] {
-            let mut ks: Vec<usize> = (0..s)
-                .filter(|&i| self.is_z(i) == z && !direct.contains(&i))
-                .map(|i| degrees[i])
-                .collect();
-            ks.sort_unstable();
-            ks.dedup();
-            for &k in &ks {
-                self.flow_tau(z, k, t, q, v, &zero, &mut val, &mut db)?;
-                for i in
-                    (0..s).filter(|&i| degrees[i] == k && self.is_z(i) == z && !direct.contains(&i))
-                {
+        let make = || DecoupleWork {
+            zero: vec![T::zero(); m],
+            b: DMatrix::from_element(s, m, T::zero()),
+            val: vec![T::zero(); s],
+            db: DMatrix::from_element(s, m, T::zero()),
+            direct: Vec::with_capacity(s),
+            ks: Vec::with_capacity(s),
+            piv: vec![0; s],
+        };
+        self.with_work(make, |w: &mut DecoupleWork<T>| {
+            let DecoupleWork {
+                zero,
+                b,
+                val,
+                db,
+                direct,
+                ks,
+                piv,
+            } = w;
+            let rhs = tau;
+            rhs.iter_mut().for_each(|x| *x = T::zero());
+            b.fill(T::zero());
+            direct.clear();
+            direct.extend((0..s).filter(|&i| !self.is_z(i) && self.is_direct(i, degrees[i])));
+            if !direct.is_empty() {
+                self.direct(t, q, v, None, val, db)?;
+                for &i in direct.iter() {
                     rhs[i] = -val[i];
                     for j in 0..m {
                         b[(i, j)] = db[(i, j)];
                     }
                 }
             }
-        }
-        let (mut ratio, mut row) = (1.0f64, 0);
-        for i in 0..s {
-            let r = (0..m).map(|j| re(b[(i, j)]).abs()).fold(0.0, f64::max)
-                / b_norms[i].max(f64::MIN_POSITIVE);
-            if r < ratio || r.is_nan() {
-                (ratio, row) = (r, i);
+            for z in [false, true] {
+                ks.clear();
+                ks.extend(
+                    (0..s)
+                        .filter(|&i| self.is_z(i) == z && !direct.contains(&i))
+                        .map(|i| degrees[i]),
+                );
+                ks.sort_unstable();
+                ks.dedup();
+                for &k in ks.iter() {
+                    self.flow_tau(z, k, t, q, v, zero, val, db)?;
+                    for i in (0..s)
+                        .filter(|&i| degrees[i] == k && self.is_z(i) == z && !direct.contains(&i))
+                    {
+                        rhs[i] = -val[i];
+                        for j in 0..m {
+                            b[(i, j)] = db[(i, j)];
+                        }
+                    }
+                }
             }
-        }
-        if !(ratio >= rank_tol) {
-            return Err(linalg::Singular {
-                column: row,
-                rcond: ratio,
+            let (mut ratio, mut row) = (1.0f64, 0);
+            for i in 0..s {
+                let r = (0..m).map(|j| re(b[(i, j)]).abs()).fold(0.0, f64::max)
+                    / b_norms[i].max(f64::MIN_POSITIVE);
+                if r < ratio || r.is_nan() {
+                    (ratio, row) = (r, i);
+                }
+            }
+            if !(ratio >= rank_tol) {
+                return Err(linalg::Singular {
+                    column: row,
+                    rcond: ratio,
+                });
+            }
+            let rcond = linalg::lu_factor(b, s, piv, rank_tol)?;
+            // sign of det b = prod u_kk times the parity of the row swaps
+            let det_sign = (0..s).fold(1.0, |sg, k| {
+                let swap = if piv[k] != k { -1.0 } else { 1.0 };
+                sg * swap * re(b[(k, k)]).signum()
             });
-        }
-        let mut piv = vec![0; s];
-        let rcond = linalg::lu_factor(&mut b, s, &mut piv, rank_tol)?;
-        // sign of det b = prod u_kk times the parity of the row swaps
-        let det_sign = (0..s).fold(1.0, |sg, k| {
-            let swap = if piv[k] != k { -1.0 } else { 1.0 };
-            sg * swap * re(b[(k, k)]).signum()
-        });
-        linalg::lu_solve(&b, s, &piv, &mut rhs);
-        Ok(Decoupled {
-            tau: rhs,
-            rcond,
-            row_ratio: ratio,
-            row,
-            det_sign,
+            linalg::lu_solve(b, s, piv, rhs);
+            Ok(Conditioning {
+                rcond,
+                row_ratio: ratio,
+                row,
+                det_sign,
+            })
         })
     }
 
@@ -939,10 +1038,17 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         rank_tol: f64,
         tau: &mut [T],
         acc: &mut [T],
-    ) -> Result<Decoupled<T>, linalg::Singular> {
-        let d = self.decoupling(t, q, v, degrees, b_norms, rank_tol)?;
-        tau.copy_from_slice(&d.tau);
-        self.accel(t, q, v, tau, acc)?;
+    ) -> Result<Conditioning, linalg::Singular> {
+        let d = self.decouple(
+            t,
+            q,
+            v,
+            degrees,
+            b_norms,
+            rank_tol,
+            &mut tau[..self.dims().1],
+        )?;
+        self.accel(t, q, v, &tau[..self.dims().1], acc)?;
         Ok(d)
     }
 
@@ -1244,6 +1350,71 @@ pub struct Decoupled<T> {
     /// Sign of det b (+1 or -1): a change between two states means b passed through singular
     /// between them, however narrow the region where it is small.
     pub det_sign: f64,
+}
+
+/// How the decoupling matrix was conditioned where [`Servo::solve`] solved it (the fields of
+/// [`Decoupled`] without tau).
+#[derive(Clone, Copy, Debug)]
+pub struct Conditioning {
+    /// LU pivot ratio of b.
+    pub rcond: f64,
+    /// Smallest |b_i| / reference over the rows, and its row.
+    pub row_ratio: f64,
+    pub row: usize,
+    /// Sign of det b (+1 or -1).
+    pub det_sign: f64,
+}
+
+/// Buffers of [`Servo::step`] (and of the tau-seeded passes) at one scalar type.
+struct StepWork<T: Scalar> {
+    a: Vec<T>,
+    qd: Vec<Dual<T>>,
+    vd: Vec<Dual<T>>,
+    taud: Vec<Dual<T>>,
+    o: Vec<Dual<T>>,
+}
+
+impl<T: Scalar> Default for StepWork<T> {
+    fn default() -> Self {
+        StepWork {
+            a: Vec::new(),
+            qd: Vec::new(),
+            vd: Vec::new(),
+            taud: Vec::new(),
+            o: Vec::new(),
+        }
+    }
+}
+
+/// [`Servo::zrows`]'s buffers at one scalar type.
+struct ZrowsWork<T> {
+    zero: Vec<T>,
+    val: Vec<T>,
+    b: DMatrix<T>,
+    vk: Vec<T>,
+    bk: DMatrix<T>,
+    ks: Vec<usize>,
+    bij: DMatrix<T>,
+    piv: Vec<usize>,
+    c: Vec<T>,
+}
+
+/// `x` resized to `n` (its capacity kept: no allocation once it has held `n`).
+fn fit<X: Copy>(x: &mut Vec<X>, n: usize, zero: X) {
+    x.clear();
+    x.resize(n, zero);
+}
+
+/// `out[i] = x[i] + eps dx[i]` (a dual seeded along dx).
+fn seed<T: Scalar>(out: &mut Vec<Dual<T>>, x: &[T], dx: &[T]) {
+    out.clear();
+    out.extend(x.iter().zip(dx).map(|(&a, &b)| Dual::new(a, b)));
+}
+
+/// `out[i] = x[i]` as duals with zero derivative.
+fn lift<T: Scalar>(out: &mut Vec<Dual<T>>, x: &[T]) {
+    out.clear();
+    out.extend(x.iter().map(|&a| Dual::from_re(a)));
 }
 
 /// What [`Servo::project`] did.

@@ -54,6 +54,8 @@ pub struct Evaluator<'a, M: Model, C: Constraints, S: Scalar> {
     servo_reduction: Option<crate::servo::Reduction>,
     /// With actuators: u = H(t, q) tau at the last state.
     servo_u: Vec<S>,
+    /// Buffers of u = H(t, q) tau (the actuators' expression entries).
+    servo_force: crate::programme::actuation::ForceWork<S>,
     /// The constraint jet reads the model's forward passes ([`Model::tree_sweep`]); off, it runs
     /// its own (the plain computation the tests and the bench compare with).
     share_sweep: bool,
@@ -82,6 +84,7 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
             servo_work: Default::default(),
             servo_reduction: None,
             servo_u: vec![z; nv],
+            servo_force: Default::default(),
             share_sweep: true,
         }
     }
@@ -161,10 +164,13 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
         v: &[S],
     ) -> Result<(), FormulationError> {
         let cons = self.cons;
-        if let (Some(act), Some(deg)) = (cons.actuation(), self.servo_degrees.clone()) {
+        if let (Some(act), Some(deg)) = (cons.actuation(), self.servo_degrees.take()) {
             // the servo system (actuators) solves its own equations on the prepared state
+            // (the degrees lent out and put back: no copy per call)
             self.prepare(t, q, v);
-            return self.evaluate_servo(act, &deg, tol, t, q, v);
+            let r = self.evaluate_servo(act, &deg, tol, t, q, v);
+            self.servo_degrees = Some(deg);
+            return r;
         }
         let factored = self.model.has_mass_factor();
         let formulation = formulation.resolve(self.model.nv(), factored);
@@ -256,7 +262,13 @@ impl<'a, M: Model, C: Constraints, S: Scalar> Evaluator<'a, M, C, S> {
             return Err(FormulationError::NonFinite);
         }
         self.servo_u.iter_mut().for_each(|x| *x = S::zero());
-        act.add_force(t, q, &self.lambda[..act.len()], &mut self.servo_u);
+        act.add_force_with(
+            &mut self.servo_force,
+            t,
+            q,
+            &self.lambda[..act.len()],
+            &mut self.servo_u,
+        );
         let u_norm = self.lambda.iter().fold(0.0f64, |m, x| m.max(re(*x).abs()));
         let f_norm = self.force.iter().fold(0.0f64, |m, x| m.max(re(*x).abs()));
         self.diag = Diagnostics {
