@@ -6,6 +6,10 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 start=$SECONDS
 phase() { echo "== [$(( (SECONDS - start) / 60 ))m$(( (SECONDS - start) % 60 ))s] $* ==" >&2; }
+# The tests judge results, not speed: the release profile's whole-program LTO and single codegen
+# unit (Cargo.toml: the shipped build) would make every release build of this run (the extension,
+# the wheel, the test binaries) slower on 2 cores for the same results (no fast-math).
+export CARGO_PROFILE_RELEASE_LTO=false CARGO_PROFILE_RELEASE_CODEGEN_UNITS=16
 phase "set-up (harness/setup.sh) beside cargo fmt --check and clippy -D warnings (functions <= 100 lines)"
 for c in rustfmt clippy; do  # part of rustup's default profile; added if a toolchain lacks them
   cargo "${c/rustfmt/fmt}" --version >/dev/null 2>&1 || rustup component add "$c"

@@ -164,10 +164,11 @@ pub struct Servo<'a, M: Model, C: Constraints> {
     work: Option<&'a WorkCache>,
 }
 
-/// Workspaces of the servo's passes, one set per scalar type (each nested dual level has its
-/// own), made at first use and reused by every later evaluation: the owner (the evaluator, the
-/// projector) keeps it for the whole solve, so a right-hand side allocates no model or row
-/// workspace (a tree's workspace over nested duals is tens of kilobytes).
+/// Workspaces of the servo's passes, one set per pass and scalar type (each nested dual level has
+/// its own), made at first use and reused by every later evaluation: the owner (the evaluator,
+/// the projector) keeps it for the whole solve, so a right-hand side allocates nothing (model and
+/// row workspaces, the passes' seed vectors and matrices, the actuators' expression stacks;
+/// `tests/no_alloc.rs` counts it on every bundled servo scene).
 #[derive(Default)]
 pub struct WorkCache(std::cell::RefCell<HashMap<TypeId, Box<dyn Any + Send>>>);
 
