@@ -9,7 +9,7 @@
 
 use crate::programme::Level;
 use crate::scalar::Scalar;
-use crate::tree::spatial::{cross, quat_from_rot};
+use crate::tree::spatial::{cross, mm, mv, quat_from_rot};
 use crate::tree::{self, TreeData};
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use std::sync::Arc;
@@ -315,7 +315,7 @@ impl Signals {
             let p = lift(&site.pos);
             let (rot, origin) = tree::body_frame(tree, data, site.body);
             out[k] = match quantity {
-                Quantity::Position { axis, order: 0 } => (origin + rot * p)[axis],
+                Quantity::Position { axis, order: 0 } => (origin + mv(&rot, &p))[axis],
                 Quantity::Orientation { k } => quat_from_rot(&rot)[k],
                 _ => {
                     let pk = tree::point_kinematics(tree, data, site.body, &p);
@@ -525,7 +525,7 @@ impl Signals {
         let (mut h, mut dh) = (Vector3::zeros(), Vector3::zeros());
         for ((b, p, _), (m, inertia)) in self.com.iter().zip(&self.com_inertia) {
             let pk = tree::point_kinematics(tree, data, *b, &lift(p));
-            let iw = pk.rot * inertia.map(S::from) * pk.rot.transpose();
+            let iw = mm(&mm(&pk.rot, &inertia.map(S::from)), &pk.rot.transpose());
             let (r, m) = (pk.pos - c, S::from(*m));
             let iw_w = iw * pk.omega;
             h += iw_w + cross(&r, &pk.vel) * m;
@@ -561,7 +561,7 @@ impl Signals {
         row.fill(z);
         for ((b, p, _), (m, inertia)) in self.com.iter().zip(&self.com_inertia) {
             let pk = tree::point_kinematics(tree, data, *b, &lift(p));
-            let iw = pk.rot * inertia.map(S::from) * pk.rot.transpose();
+            let iw = mm(&mm(&pk.rot, &inertia.map(S::from)), &pk.rot.transpose());
             let r = pk.pos - c;
             let m = S::from(*m);
             tree::for_each_point_column(tree, data, *b, &pk.pos, |j, wc, lin| {

@@ -6,7 +6,7 @@ use super::kinematics::{
     forward_velocity, point_in_link, TreeData,
 };
 use super::model::{JointKind, Model};
-use super::spatial::{lift3, Inertia, Motion, Xform};
+use super::spatial::{lift3, mv, Inertia, Motion, Xform};
 use crate::scalar::{c, Scalar};
 use nalgebra::{DMatrix, DVector, Vector3};
 
@@ -181,7 +181,7 @@ pub(crate) fn add_point_force<S: Scalar>(
     out: &mut DVector<S>,
 ) {
     let ld = &data.links[model.body_link[body]];
-    let pw = ld.pos + ld.rot * point_in_link(model, body, point);
+    let pw = ld.pos + mv(&ld.rot, &point_in_link(model, body, point));
     for_each_point_column(model, data, body, &pw, |k, _w, lin| {
         out[k] += lin.dot(force);
     });
@@ -270,7 +270,7 @@ fn add_field_forces<S: Scalar>(
             }
             let com = lift3::<S>(&body.com);
             let ld = &data.links[model.body_link[b]];
-            let cw = ld.pos + ld.rot * point_in_link(model, b, &com);
+            let cw = ld.pos + mv(&ld.rot, &point_in_link(model, b, &com));
             for at in &model.fields.attractors {
                 let r = cw - lift3::<S>(&Vector3::from(at.point));
                 let r2 = r.dot(&r);
@@ -334,7 +334,7 @@ pub fn potential_energy<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &[S
             continue;
         }
         let ld = &data.links[model.body_link[b]];
-        let cw = ld.pos + ld.rot * point_in_link(model, b, &lift3::<S>(&body.com));
+        let cw = ld.pos + mv(&ld.rot, &point_in_link(model, b, &lift3::<S>(&body.com)));
         e -= g.dot(&cw) * c::<S>(body.mass);
         if body.gravcomp != 0.0 {
             e += g.dot(&cw) * c::<S>(body.gravcomp * body.mass);

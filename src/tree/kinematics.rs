@@ -3,7 +3,8 @@
 
 use super::model::{JointKind, Model};
 use super::spatial::{
-    cross, lift3, lift33, quat_from_rot, rot_axis_angle, rot_quat, Force, Inertia, Motion, Xform,
+    cross, lift3, lift33, mm, mv, quat_from_rot, rot_axis_angle, rot_quat, Force, Inertia, Motion,
+    Xform,
 };
 use crate::scalar::{c, Scalar};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
@@ -220,8 +221,8 @@ pub fn forward_kinematics<S: Scalar>(model: &Model, data: &mut TreeData<S>, q: &
             None => (Matrix3::identity(), Vector3::zeros()),
         };
         let ld = &mut data.links[i];
-        ld.rot = rp * x.e.transpose();
-        ld.pos = pp + rp * x.r;
+        ld.rot = mm(&rp, &x.e.transpose());
+        ld.pos = pp + mv(&rp, &x.r);
         ld.x = x;
         ld.s = s;
     }
@@ -431,7 +432,7 @@ pub fn point_velocity<S: Scalar>(
     forward_velocity(model, data, v);
     let ld = &data.links[model.body_link[body]];
     let p = point_in_link(model, body, point);
-    ld.rot * (ld.v.lin + cross(&ld.v.ang, &p))
+    mv(&ld.rot, &(ld.v.lin + cross(&ld.v.ang, &p)))
 }
 
 /// Angular velocity of a body, world frame (body frame: `R^T ω`).
@@ -445,7 +446,7 @@ pub fn body_angular_velocity<S: Scalar>(
     forward_kinematics(model, data, q);
     forward_velocity(model, data, v);
     let ld = &data.links[model.body_link[body]];
-    ld.rot * ld.v.ang
+    mv(&ld.rot, &ld.v.ang)
 }
 
 /// World-frame classical acceleration of a body point and angular acceleration of the body, given
@@ -478,7 +479,7 @@ pub fn body_frame<S: Scalar>(
     let ld = &data.links[model.body_link[body]];
     match &model.body_offset[body] {
         None => (ld.rot, ld.pos),
-        Some((r, p)) => (ld.rot * lift33(r), ld.pos + ld.rot * lift3(p)),
+        Some((r, p)) => (mm(&ld.rot, &lift33(r)), ld.pos + mv(&ld.rot, &lift3(p))),
     }
 }
 
@@ -527,11 +528,11 @@ pub fn point_kinematics<S: Scalar>(
     let ap = ld.a.lin + cross(&ld.a.ang, point) + cross(&w, &vp);
     PointKinematics {
         rot: body_frame(model, data, body).0,
-        pos: ld.pos + ld.rot * point,
-        vel: ld.rot * vp,
-        acc: ld.rot * ap,
-        omega: ld.rot * w,
-        alpha: ld.rot * ld.a.ang,
+        pos: ld.pos + mv(&ld.rot, point),
+        vel: mv(&ld.rot, &vp),
+        acc: mv(&ld.rot, &ap),
+        omega: mv(&ld.rot, &w),
+        alpha: mv(&ld.rot, &ld.a.ang),
     }
 }
 
@@ -552,8 +553,8 @@ pub fn for_each_point_column<S: Scalar>(
             let ld = &data.links[i];
             let d = pw - ld.pos;
             for k in 0..jt.nv {
-                let w = ld.rot * ld.s[k].ang;
-                let lin = ld.rot * ld.s[k].lin + cross(&w, &d);
+                let w = mv(&ld.rot, &ld.s[k].ang);
+                let lin = mv(&ld.rot, &ld.s[k].lin) + cross(&w, &d);
                 f(jt.iv + k, w, lin);
             }
         }
@@ -582,7 +583,7 @@ pub fn weighted_points_jacobian<S: Scalar>(
         let l = model.body_link[body];
         let ld = &data.links[l];
         // p_i as point_kinematics computes it
-        let p = ld.pos + ld.rot * point_in_link(model, body, &point);
+        let p = ld.pos + mv(&ld.rot, &point_in_link(model, body, &point));
         sub[l].0 += w;
         sub[l].1 += p * w;
     }
@@ -601,7 +602,7 @@ pub fn weighted_points_jacobian<S: Scalar>(
         let (jt, ld, (w, p)) = (&model.joints[j], &data.links[l], sub[l]);
         let d = p - ld.pos * w;
         for k in 0..jt.nv {
-            let col = ld.rot * ld.s[k].lin * w + cross(&(ld.rot * ld.s[k].ang), &d);
+            let col = mv(&ld.rot, &ld.s[k].lin) * w + cross(&mv(&ld.rot, &ld.s[k].ang), &d);
             for r in 0..3 {
                 jac[(r, jt.iv + k)] = col[r];
             }
@@ -623,7 +624,7 @@ pub fn point_jacobian<S: Scalar>(
     ensure_mat(jac, 6, model.nv());
     jac.fill(c(0.0));
     let ld = &data.links[model.body_link[body]];
-    let pw = ld.pos + ld.rot * point_in_link(model, body, point);
+    let pw = ld.pos + mv(&ld.rot, &point_in_link(model, body, point));
     for_each_point_column(model, data, body, &pw, |k, w, lin| {
         for r in 0..3 {
             jac[(r, k)] = w[r];
