@@ -50,7 +50,6 @@ pub mod scalar;
 pub mod scene;
 pub mod servo;
 pub mod solve;
-pub mod taylor;
 pub mod tree;
 
 pub use error::{Error, Result};
