@@ -54,18 +54,19 @@ PROGMO_ROBOT_PATH="$(.venv/bin/python -c 'import os; from progmo import data; pr
 export PROGMO_ROBOT_PATH
 # Side by side (CI time): each phase leaves a core idle part of the time (rustc's serial front
 # end and links; pytest's last files on one worker); the two together keep both busy.
-# pytest's test_stdout.py runs target/release/progmo: built here by cargo test's own build (one
-# feature resolution, so the core is not compiled twice), which writes "ok" or "failed" into
-# $PROGMO_BIN_READY when it ends; those tests wait for it there.
+# pytest's test_stdout.py runs target/release/progmo: built first (a link: the core's release
+# build is the one `maturin develop` made for the extension, reused because the features resolve
+# alike, Cargo.toml), then "ok" or "failed" goes into $PROGMO_BIN_READY, where those tests wait,
+# and only then cargo test's own build (the unit tests' and integration tests' binaries: minutes).
 cargo_log="$(mktemp)"
 PROGMO_BIN_READY="$(mktemp -u)"
 export PROGMO_BIN_READY
 # The examples are not built here (clippy --all-targets above compiles them; rhs_profile was a
 # 55-second unit of this build): the library, the binary, the integration tests, then the doctests.
 tests=(--lib --bins --tests)
-( if cargo test --release --no-run "${tests[@]}"; then echo ok >"$PROGMO_BIN_READY"
-    cargo test --release "${tests[@]}" && cargo test --release --doc
-  else echo failed >"$PROGMO_BIN_READY"; exit 1; fi ) >"$cargo_log" 2>&1 &
+( if cargo build --release --bin progmo; then echo ok >"$PROGMO_BIN_READY"
+  else echo failed >"$PROGMO_BIN_READY"; exit 1; fi
+  cargo test --release "${tests[@]}" && cargo test --release --doc ) >"$cargo_log" 2>&1 &
 cargo_pid=$!
 phase "headless Chromium for the report test"
 wait "$chromium_pid" || { cat "$chromium_log" >&2; echo "warning: no headless Chromium: the report browser test will be skipped (and say so)" >&2; }

@@ -24,7 +24,10 @@ def run(cmd, cwd, env=None, timeout=1800):
 
 def test_wheel_in_a_fresh_venv_runs_solve_check_and_the_readme(tmp_path):
     wheels = tmp_path / "wheels"
-    run([sys.executable, "-m", "maturin", "build", "--release", "-q", "-o", wheels], cwd=ROOT)
+    # -i: the interpreter `maturin develop` built the extension for (harness/setup.sh, in .venv).
+    # Without it maturin picks another python3, pyo3's build script sees PYO3_PYTHON change and
+    # pyo3, numpy and the bindings compile again (about 130 s of CPU on a fresh clone's CI).
+    run([sys.executable, "-m", "maturin", "build", "--release", "-q", "-i", sys.executable, "-o", wheels], cwd=ROOT)
     (wheel,) = wheels.glob("progmo-*.whl")
     venv = tmp_path / "venv"
     run([sys.executable, "-m", "venv", venv], cwd=tmp_path)
