@@ -1,9 +1,10 @@
 //! Criterion benchmarks of the solver core on the shared test problems: one right-hand side
 //! (accelerations and multipliers) per formulation (chains up to n = 128 for the articulated-body
 //! formulation), the shared sweep against the plain passes (`sweep/`), lagrangian scenes' right-hand
-//! side (car axis, slider crank) and whole solves.
+//! side (car axis, slider crank), whole solves and the servo right-hand side (`servo_rhs/`: Taylor
+//! series against nested dual numbers).
 //!
-//! Run: `cargo bench --bench core` (one group: `cargo bench --bench core -- sweep/`, or `-- lagrangian`).
+//! Run: `cargo bench --bench core` (one group: `cargo bench --bench core -- sweep/`, `-- lagrangian` or `-- servo_rhs`).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use progmo::formulation::{Formulation, RankTolerances};
@@ -235,5 +236,60 @@ fn lagrangian(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, rhs, sweep, lagrangian, whole_solves, drift);
+/// The servo right-hand side (tau by the decoupling, then dv/dt = A^-1 (F + H tau)) of the bundled
+/// servo scenes at t0, its Lie derivatives by univariate Taylor series (`series`, the default) and
+/// by nested dual numbers (`nested`): the A/B of the series in one binary.
+fn servo(c: &mut Criterion) {
+    use progmo::scene::{Scene, SceneSystem};
+    use progmo::servo::{Servo, WorkCache};
+    let mut g = c.benchmark_group("servo_rhs");
+    for name in [
+        "two_car_chain",
+        "thruster_cars",
+        "overhead_crane",
+        "passive_arm",
+    ] {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join(format!("references/scenes/{name}.toml"));
+        let text = std::fs::read_to_string(&path).expect("a bundled scene");
+        let scene = Scene::from_text(&path, &text).expect("it loads");
+        let an = scene
+            .servo_analysis()
+            .expect("actuated")
+            .expect("realizable");
+        let SceneSystem::Tree(p) = &scene.system else {
+            panic!("{name}: a tree scene")
+        };
+        let act = p.constraints.actuation().expect("actuators");
+        let (s, m) = (an.degrees.len(), act.len());
+        for (label, series) in [("series", true), ("nested", false)] {
+            let work = WorkCache::default();
+            let servo = Servo::new(&p.model, &p.constraints, act)
+                .reduced(an.reduction.as_ref())
+                .cached(&work)
+                .taylor(series);
+            let (mut tau, mut acc) = (vec![0.0; s.max(m)], vec![0.0; p.q0.len()]);
+            g.bench_function(BenchmarkId::new(label, name), |b| {
+                b.iter(|| {
+                    servo
+                        .solve(
+                            p.t0,
+                            &p.q0,
+                            &p.v0,
+                            &an.degrees,
+                            &an.b_norms,
+                            1e-12,
+                            &mut tau,
+                            &mut acc,
+                        )
+                        .expect("realizable at t0");
+                    black_box(acc[0])
+                })
+            });
+        }
+    }
+    g.finish();
+}
+
+criterion_group!(benches, rhs, sweep, lagrangian, whole_solves, drift, servo);
 criterion_main!(benches);

@@ -50,6 +50,7 @@ pub mod scalar;
 pub mod scene;
 pub mod servo;
 pub mod solve;
+pub mod taylor;
 pub mod tree;
 
 pub use error::{Error, Result};

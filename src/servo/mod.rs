@@ -21,9 +21,19 @@
 //! differentiation index of the DAE (A dv/dt - F = H tau, g = 0) is max_i r_i + 1 (tau itself needs
 //! one more differentiation).
 //!
-//! Derivatives are exact: L^k g is evaluated by nesting k first-order dual numbers, each level
-//! seeded with the flow, (t, q, v) + eps (1, v, a) (Euclidean coordinates only: q' = v). b comes
-//! from one more dual level seeded on tau. Cost grows as 3^(k+1) model evaluations; k <= 5 here.
+//! Derivatives are exact, by one of two routes (tested against each other to 1e-12 on every
+//! bundled servo scene):
+//! - nested duals: L^k g by nesting k first-order dual numbers, each level seeded with the flow,
+//!   (t, q, v) + eps (1, v, a) (Euclidean coordinates only: q' = v); cost 3^k per operation;
+//! - univariate Taylor propagation ([`Servo::series`], [`crate::taylor`]): the motion's Taylor
+//!   series to degree k from k passes of a = A^-1 (F + H tau) on truncated series, then one
+//!   evaluation of the rows on it; O(k^2) per operation, and every lower order comes free.
+//!
+//! Orders from [`TAYLOR_FROM`] = 3 take the series over f64 and Dual64 (the right-hand side and
+//! its tau columns; degree-4 rows: 8-10 % less CPU per solve); below that order, and over the
+//! Jacobians' nested duals, the nested route (cheaper at low order: a series carries its full
+//! capacity's coefficients; and each scalar type of the series compiles the model once more).
+//! b comes from one more dual level seeded on tau, over either. k <= 5 here.
 //!
 //! The direct route: a row whose relative degree is its level's (2 for a position row, 1 for a
 //! velocity row, 0 for an acceleration row; the orthogonal and mixed realizations) reads
@@ -43,8 +53,10 @@ use crate::programme::{
     Constraints,
 };
 use crate::scalar::{re, Dual, Scalar};
+use crate::taylor::Taylor;
 use nalgebra::DMatrix;
 use num_dual::Dual64;
+use num_traits::Zero;
 use std::any::{Any, TypeId};
 use std::collections::HashMap;
 
@@ -160,6 +172,10 @@ pub struct Servo<'a, M: Model, C: Constraints> {
     /// Nested dual numbers for every row (no direct route): the reference the direct route is
     /// tested against ([`Servo::nested_only`]).
     nested_only: bool,
+    /// Lie derivatives by univariate Taylor propagation ([`Servo::series`]); off: nested duals.
+    taylor: bool,
+    /// Every row is g(t, q) (position level): the series' top velocity coefficient goes unread.
+    position_rows: bool,
     /// Workspaces kept by the caller between evaluations ([`WorkCache`]).
     work: Option<&'a WorkCache>,
 }
@@ -232,6 +248,11 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
                 .any(|r| r.level == crate::programme::Level::Acceleration),
             red: None,
             nested_only: false,
+            taylor: true,
+            position_rows: cons
+                .rows()
+                .iter()
+                .all(|r| r.level == crate::programme::Level::Position),
             work: None,
         }
     }
@@ -275,6 +296,14 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
     /// direct route switched off); the independent route the direct one is checked against.
     pub fn nested_only(mut self, on: bool) -> Self {
         self.nested_only = on;
+        self.taylor = !on;
+        self
+    }
+
+    /// The same servo taking L^k g and L^k z by univariate Taylor propagation (`on`, the default:
+    /// [`Servo::series`]) or by k nested dual numbers (the reference it is tested against).
+    pub fn taylor(mut self, on: bool) -> Self {
+        self.taylor = on;
         self
     }
 
@@ -501,6 +530,16 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         tau: &[T],
         out: &mut [T],
     ) -> Result<(), linalg::Singular> {
+        if self.taylor && k >= TAYLOR_FROM {
+            let mut top = |j, i, y| {
+                if j == k {
+                    out[i] = y;
+                }
+            };
+            if let Some(r) = self.series_at(false, k, t, q, v, tau, &mut top) {
+                return r;
+            }
+        }
         match k {
             0 => lie0(self, t, q, v, tau, out),
             1 => lie1(self, t, q, v, tau, out),
@@ -715,6 +754,16 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         tau: &[T],
         out: &mut [T],
     ) -> Result<(), linalg::Singular> {
+        if self.taylor && k >= TAYLOR_FROM && self.z_direct() {
+            let mut top = |j, i, y| {
+                if j == k {
+                    out[i] = y;
+                }
+            };
+            if let Some(r) = self.series_at(true, k, t, q, v, tau, &mut top) {
+                return r;
+            }
+        }
         match k {
             0 => zlie0(self, t, q, v, tau, out),
             1 => zlie1(self, t, q, v, tau, out),
@@ -722,6 +771,186 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
             3 => zlie3(self, t, q, v, tau, out),
             _ => panic!("reduced degree {k} beyond MAX_REDUCED_DEGREE (checked by the caller)"),
         }
+    }
+
+    /// [`Servo::series`] when T is f64 or Dual64 (the right-hand side's values and its tau
+    /// columns), None otherwise: each scalar type the series run over instantiates the model, the
+    /// rows and the factorizations once more (compile time: docs/benchmarks.md, stop 50), and the
+    /// Jacobians' nested duals gain little from them. T is matched at run time (no
+    /// specialization in Rust); values cross as the concrete type, unchanged.
+    #[allow(clippy::too_many_arguments)]
+    fn series_at<T: Scalar>(
+        &self,
+        z: bool,
+        k: usize,
+        t: T,
+        q: &[T],
+        v: &[T],
+        tau: &[T],
+        emit: &mut dyn FnMut(usize, usize, T),
+    ) -> Option<Result<(), linalg::Singular>> {
+        if TypeId::of::<T>() == TypeId::of::<f64>() {
+            Some(self.series_as::<T, f64>(z, k, t, q, v, tau, emit))
+        } else if TypeId::of::<T>() == TypeId::of::<Dual64>() {
+            Some(self.series_as::<T, Dual64>(z, k, t, q, v, tau, emit))
+        } else {
+            None
+        }
+    }
+
+    /// [`Servo::series`] at U for T = U (buffers of U kept per type in the cache).
+    #[allow(clippy::too_many_arguments)]
+    fn series_as<T: Scalar, U: Scalar>(
+        &self,
+        z: bool,
+        k: usize,
+        t: T,
+        q: &[T],
+        v: &[T],
+        tau: &[T],
+        emit: &mut dyn FnMut(usize, usize, T),
+    ) -> Result<(), linalg::Singular> {
+        /// q, v, tau as U.
+        struct AsWork<U>(Vec<U>, Vec<U>, Vec<U>);
+        let make = || AsWork::<U>(Vec::new(), Vec::new(), Vec::new());
+        self.with_work(make, |w: &mut AsWork<U>| {
+            for (to, from) in [(&mut w.0, q), (&mut w.1, v), (&mut w.2, tau)] {
+                to.clear();
+                to.extend(from.iter().map(same::<T, U>));
+            }
+            let mut back = |j, i, y: U| emit(j, i, same::<U, T>(&y));
+            self.series(z, k, same::<T, U>(&t), &w.0, &w.1, &w.2, &mut back)
+        })
+    }
+
+    /// y^(j) = L^j g (`z` false) or z^(j) = L^j z (`z` true) of every row for j <= k at constant
+    /// tau, by univariate Taylor propagation (Griewank & Walther 2008, Sec. 13.2; [`Taylor`]):
+    /// along the motion q(s) = sum q_j s^j, v(s) = sum v_j s^j the flow q' = v, v' = a gives
+    ///   q_(j+1) = v_j / (j + 1),   v_(j+1) = a_j / (j + 1),
+    /// with a_j the top coefficient of a = A^-1 (F + H tau) (2.2) evaluated on the series known to
+    /// degree j; k such passes (degrees 0 .. k-1), then one evaluation of the rows on the series to
+    /// degree k yields y_j = y^(j) / j!. A product on a series of degree d costs (d+1)(d+2)/2
+    /// multiplications, against 3^d for d nested duals. `emit(j, i, y)` receives y_i^(j). For z_r
+    /// the reduction's rows must all take the direct route ([`Servo::z_direct`]; otherwise z_r's
+    /// own tau-seeded passes would nest dual numbers over the series).
+    #[allow(clippy::too_many_arguments)]
+    pub fn series<T: Scalar>(
+        &self,
+        z: bool,
+        k: usize,
+        t: T,
+        q: &[T],
+        v: &[T],
+        tau: &[T],
+        emit: &mut dyn FnMut(usize, usize, T),
+    ) -> Result<(), linalg::Singular> {
+        assert!(
+            k <= if z {
+                MAX_REDUCED_DEGREE
+            } else {
+                MAX_RELATIVE_DEGREE
+            },
+            "degree {k} beyond the servo's maximum (checked by the caller)"
+        );
+        assert!(
+            !z || self.z_direct(),
+            "z_r by series: the direct route's rows only"
+        );
+        let n = v.len();
+        let make = || SeriesWork {
+            q: vec![[T::zero(); SERIES]; n],
+            v: vec![[T::zero(); SERIES]; n],
+            a: vec![T::zero(); n],
+        };
+        self.with_work(make, |w: &mut SeriesWork<T>| {
+            fit(&mut w.q, n, [T::zero(); SERIES]);
+            fit(&mut w.v, n, [T::zero(); SERIES]);
+            fit(&mut w.a, n, T::zero());
+            for i in 0..n {
+                w.q[i][0] = q[i];
+                w.v[i][0] = v[i];
+                w.q[i][1] = v[i];
+            }
+            // rows g(t, q) (position level only) read q to degree k, which needs a_0 .. a_(k-2):
+            // the pass giving a_(k-1) (v_k) is skipped and v_k set to zero
+            let top = if !z && self.position_rows {
+                k.saturating_sub(1)
+            } else {
+                k
+            };
+            if top > 0 {
+                // degree 0: a_0 = dv/dt at the state
+                self.accel(t, q, v, tau, &mut w.a)?;
+                for i in 0..n {
+                    w.v[i][1] = w.a[i];
+                    w.q[i][2] = w.a[i] / 2.0;
+                }
+            }
+            // passes on the series to degrees 1 .. top-1, then the rows on the series to degree k
+            for d in 1..top {
+                self.series_pass(d + 1, t, tau, w)?;
+            }
+            if top < k {
+                w.v.iter_mut().for_each(|c| c[k] = T::zero());
+            }
+            self.series_rows(z, k + 1, t, tau, w, emit)
+        })
+    }
+
+    /// One pass of [`Servo::series`]: a on the series known to degree len-1, whose top
+    /// coefficient a_(len-1) gives v_len = a_(len-1) / len and q_(len+1) = v_len / (len + 1).
+    fn series_pass<T: Scalar>(
+        &self,
+        len: usize,
+        t: T,
+        tau: &[T],
+        w: &mut SeriesWork<T>,
+    ) -> Result<(), linalg::Singular> {
+        self.with_work(PassWork::<T>::default, |p: &mut PassWork<T>| {
+            p.load(len, t, tau, w);
+            self.accel(p.t, &p.q, &p.v, &p.tau, &mut p.out)?;
+            for (i, a) in p.out.iter().enumerate() {
+                let vn = a.coefficient(len - 1) / len as f64;
+                w.v[i][len] = vn;
+                if len + 1 < SERIES {
+                    w.q[i][len + 1] = vn / (len + 1) as f64;
+                }
+            }
+            Ok(())
+        })
+    }
+
+    /// The rows (or the combinations z_r, all of the direct route) on the series to degree
+    /// len-1: y^(j) = j! y_j.
+    fn series_rows<T: Scalar>(
+        &self,
+        z: bool,
+        len: usize,
+        t: T,
+        tau: &[T],
+        w: &mut SeriesWork<T>,
+        emit: &mut dyn FnMut(usize, usize, T),
+    ) -> Result<(), linalg::Singular> {
+        let s = self.dims().0;
+        self.with_work(PassWork::<T>::default, |p: &mut PassWork<T>| {
+            p.load(len, t, tau, w);
+            fit(&mut p.out, s, Taylor::zero());
+            if z {
+                self.zrows_direct(p.t, &p.q, &p.v, &mut p.out)?;
+            } else {
+                self.rows_at(p.t, &p.q, &p.v, &p.tau, &mut p.out)?;
+            }
+            for (i, y) in p.out.iter().enumerate() {
+                let mut fact = 1.0;
+                for j in 0..len {
+                    if j > 1 {
+                        fact *= j as f64;
+                    }
+                    emit(j, i, y.coefficient(j) * fact);
+                }
+            }
+            Ok(())
+        })
     }
 
     /// The combinations z_r = y_r^(r_r) - c_r^T y_I^(r_I), c_r^T = b[r, J] b[I, J]^-1, at
@@ -734,77 +963,65 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
         v: &[T],
         out: &mut [T],
     ) -> Result<(), linalg::Singular> {
+        if self.z_direct() {
+            return self.zrows_direct(t, q, v, out);
+        }
         let red = self.red.expect("zrows needs a reduction");
         let (s, m) = self.dims();
-        let rho = red.kept.len();
-        let make = || ZrowsWork {
-            zero: vec![T::zero(); m],
-            val: vec![T::zero(); s],
-            b: DMatrix::from_element(s, m, T::zero()),
-            vk: vec![T::zero(); s],
-            bk: DMatrix::from_element(s, m, T::zero()),
-            ks: Vec::with_capacity(s),
-            bij: DMatrix::from_element(rho, rho, T::zero()),
-            piv: vec![0; rho],
-            c: vec![T::zero(); rho],
-        };
-        self.with_work(make, |w: &mut ZrowsWork<T>| {
-            let ZrowsWork {
-                zero,
-                val,
-                b,
-                vk,
-                bk,
-                ks,
-                bij,
-                piv,
-                c,
-            } = w;
-            ks.clear();
-            if (0..s).all(|i| self.is_direct(i, red.row_degrees[i])) {
-                // c_r reads the pivot columns J only
-                self.direct(t, q, v, Some(&red.cols), val, b)?;
-            } else {
-                ks.extend_from_slice(&red.row_degrees);
-            }
-            ks.sort_unstable();
-            ks.dedup();
-            for &k in ks.iter() {
-                self.tau_columns(t, q, v, zero, vk, bk, |td, qd, vd, taud, o| match k {
-                    0 => lie0(self, td, qd, vd, taud, o),
-                    1 => lie1(self, td, qd, vd, taud, o),
-                    2 => lie2(self, td, qd, vd, taud, o),
-                    _ => panic!("eliminated degree {k} beyond MAX_ELIMINATED_DEGREE"),
-                })?;
+        self.with_work(ZrowsWork::make(s, m, red), |w: &mut ZrowsWork<T>| {
+            w.ks.clear();
+            w.ks.extend_from_slice(&red.row_degrees);
+            w.ks.sort_unstable();
+            w.ks.dedup();
+            for ki in 0..w.ks.len() {
+                let k = w.ks[ki];
+                self.tau_columns(
+                    t,
+                    q,
+                    v,
+                    &w.zero,
+                    &mut w.vk,
+                    &mut w.bk,
+                    |td, qd, vd, taud, o| match k {
+                        0 => lie0(self, td, qd, vd, taud, o),
+                        1 => lie1(self, td, qd, vd, taud, o),
+                        2 => lie2(self, td, qd, vd, taud, o),
+                        _ => panic!("eliminated degree {k} beyond MAX_ELIMINATED_DEGREE"),
+                    },
+                )?;
                 for i in (0..s).filter(|&i| red.row_degrees[i] == k) {
-                    val[i] = vk[i];
+                    w.val[i] = w.vk[i];
                     for j in 0..m {
-                        b[(i, j)] = bk[(i, j)];
+                        w.b[(i, j)] = w.bk[(i, j)];
                     }
                 }
             }
-            // b[I, J]^T c_r = b[r, J]^T
-            for a in 0..rho {
-                for (cc, &i) in red.kept.iter().enumerate() {
-                    bij[(a, cc)] = b[(i, red.cols[a])];
-                }
-            }
-            linalg::lu_factor(bij, rho, piv, 0.0)?;
-            for x in out.iter_mut() {
-                *x = T::zero();
-            }
-            for &r in &red.eliminated {
-                for (a, x) in c.iter_mut().enumerate() {
-                    *x = b[(r, red.cols[a])];
-                }
-                linalg::lu_solve(bij, rho, piv, c);
-                let mut z = val[r];
-                for (a, &i) in red.kept.iter().enumerate() {
-                    z -= c[a] * val[i];
-                }
-                out[r] = z;
-            }
-            Ok(())
+            w.combine(red, out)
+        })
+    }
+
+    /// Do all rows of the reduction take the direct route (the cranes)? Then z_r needs one jet
+    /// and one factorization ([`Servo::zrows_direct`]) and no dual level for tau.
+    fn z_direct(&self) -> bool {
+        self.red.is_some_and(|red| {
+            (0..red.row_degrees.len()).all(|i| self.is_direct(i, red.row_degrees[i]))
+        })
+    }
+
+    /// [`Servo::zrows`] when [`Servo::z_direct`]: y^(r) and b from the direct route (its pivot
+    /// columns J only).
+    fn zrows_direct<T: Scalar>(
+        &self,
+        t: T,
+        q: &[T],
+        v: &[T],
+        out: &mut [T],
+    ) -> Result<(), linalg::Singular> {
+        let red = self.red.expect("zrows needs a reduction");
+        let (s, m) = self.dims();
+        self.with_work(ZrowsWork::make(s, m, red), |w: &mut ZrowsWork<T>| {
+            self.direct(t, q, v, Some(&red.cols), &mut w.val, &mut w.b)?;
+            w.combine(red, out)
         })
     }
 
@@ -1119,8 +1336,20 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
             .max()
             .unwrap_or(0);
         let mut by_k = vec![vec![T::zero(); s]; kmax];
-        for (k, row) in by_k.iter_mut().enumerate() {
-            self.lie(k, t, q, v, &zero, row)?;
+        // every order from one series where it runs, else order by order
+        let one = (self.taylor && kmax > TAYLOR_FROM)
+            .then(|| {
+                let mut put = |j: usize, i: usize, y| by_k[j][i] = y;
+                self.series_at(false, kmax - 1, t, q, v, &zero, &mut put)
+            })
+            .flatten();
+        match one {
+            Some(r) => r?,
+            None => {
+                for (k, row) in by_k.iter_mut().enumerate() {
+                    self.lie(k, t, q, v, &zero, row)?;
+                }
+            }
         }
         let zmax = (0..s)
             .filter(|&i| self.is_z(i))
@@ -1128,8 +1357,19 @@ impl<'a, M: Model, C: Constraints> Servo<'a, M, C> {
             .max()
             .unwrap_or(0);
         let mut zk = vec![vec![T::zero(); s]; zmax];
-        for (k, row) in zk.iter_mut().enumerate() {
-            self.zlie(k, t, q, v, &zero, row)?;
+        let one = (self.taylor && zmax > TAYLOR_FROM && self.z_direct())
+            .then(|| {
+                let mut put = |j: usize, i: usize, y| zk[j][i] = y;
+                self.series_at(true, zmax - 1, t, q, v, &zero, &mut put)
+            })
+            .flatten();
+        match one {
+            Some(r) => r?,
+            None => {
+                for (k, row) in zk.iter_mut().enumerate() {
+                    self.zlie(k, t, q, v, &zero, row)?;
+                }
+            }
         }
         out.clear();
         for i in 0..s {
@@ -1387,6 +1627,108 @@ impl<T: Scalar> Default for StepWork<T> {
     }
 }
 
+impl<T: Scalar> ZrowsWork<T> {
+    fn make(s: usize, m: usize, red: &Reduction) -> impl FnOnce() -> Self {
+        let rho = red.kept.len();
+        move || ZrowsWork {
+            zero: vec![T::zero(); m],
+            val: vec![T::zero(); s],
+            b: DMatrix::from_element(s, m, T::zero()),
+            vk: vec![T::zero(); s],
+            bk: DMatrix::from_element(s, m, T::zero()),
+            ks: Vec::with_capacity(s),
+            bij: DMatrix::from_element(rho, rho, T::zero()),
+            piv: vec![0; rho],
+            c: vec![T::zero(); rho],
+        }
+    }
+
+    /// z_r = y_r^(r_r) - c_r^T y_I^(r_I) from the values `val` and the decoupling rows `b`:
+    /// b[I, J]^T c_r = b[r, J]^T.
+    fn combine(&mut self, red: &Reduction, out: &mut [T]) -> Result<(), linalg::Singular> {
+        let rho = red.kept.len();
+        for a in 0..rho {
+            for (cc, &i) in red.kept.iter().enumerate() {
+                self.bij[(a, cc)] = self.b[(i, red.cols[a])];
+            }
+        }
+        linalg::lu_factor(&mut self.bij, rho, &mut self.piv, 0.0)?;
+        for x in out.iter_mut() {
+            *x = T::zero();
+        }
+        for &r in &red.eliminated {
+            for (a, x) in self.c.iter_mut().enumerate() {
+                *x = self.b[(r, red.cols[a])];
+            }
+            linalg::lu_solve(&self.bij, rho, &self.piv, &mut self.c);
+            let mut z = self.val[r];
+            for (a, &i) in red.kept.iter().enumerate() {
+                z -= self.c[a] * self.val[i];
+            }
+            out[r] = z;
+        }
+        Ok(())
+    }
+}
+
+/// The lowest order taken by [`Servo::series`]; below it nested duals are cheaper (a series of
+/// degree d carries the full capacity's coefficients; docs/benchmarks.md, stop 50).
+pub const TAYLOR_FROM: usize = 3;
+
+/// Coefficients kept by [`Servo::series`]: q_j, v_j for j <= [`MAX_RELATIVE_DEGREE`].
+const SERIES: usize = MAX_RELATIVE_DEGREE + 1;
+
+/// The motion's Taylor coefficients at one scalar type ([`Servo::series`]).
+struct SeriesWork<T> {
+    q: Vec<[T; SERIES]>,
+    v: Vec<[T; SERIES]>,
+    a: Vec<T>,
+}
+
+/// The series type of [`Servo::series`] over T (each pass sets its length).
+type Series<T> = Taylor<T, SERIES>;
+
+/// One pass's series of t, q, v, tau and its outputs ([`Servo::series_pass`]).
+struct PassWork<T: Scalar> {
+    t: Series<T>,
+    q: Vec<Series<T>>,
+    v: Vec<Series<T>>,
+    tau: Vec<Series<T>>,
+    out: Vec<Series<T>>,
+}
+
+impl<T: Scalar> Default for PassWork<T> {
+    fn default() -> Self {
+        PassWork {
+            t: Taylor::zero(),
+            q: Vec::new(),
+            v: Vec::new(),
+            tau: Vec::new(),
+            out: Vec::new(),
+        }
+    }
+}
+
+impl<T: Scalar> PassWork<T> {
+    /// t + s, the series q, v to degree len-1 and tau constant.
+    fn load(&mut self, len: usize, t: T, tau: &[T], w: &SeriesWork<T>) {
+        // t + s at the pass's length (an expression of t alone must carry every coefficient)
+        let mut tc = [T::zero(); SERIES];
+        tc[0] = t;
+        tc[1] = T::one();
+        self.t = Taylor::from_coefficients(&tc[..len]);
+        self.q.clear();
+        self.q
+            .extend(w.q.iter().map(|c| Taylor::from_coefficients(&c[..len])));
+        self.v.clear();
+        self.v
+            .extend(w.v.iter().map(|c| Taylor::from_coefficients(&c[..len])));
+        self.tau.clear();
+        self.tau.extend(tau.iter().map(|&x| Taylor::constant(x)));
+        fit(&mut self.out, w.v.len(), Taylor::zero());
+    }
+}
+
 /// [`Servo::zrows`]'s buffers at one scalar type.
 struct ZrowsWork<T> {
     zero: Vec<T>,
@@ -1398,6 +1740,13 @@ struct ZrowsWork<T> {
     bij: DMatrix<T>,
     piv: Vec<usize>,
     c: Vec<T>,
+}
+
+/// x as U where the caller has checked that T is U ([`Servo::series_at`]).
+fn same<T: 'static + Copy, U: 'static + Copy>(x: &T) -> U {
+    *(x as &dyn Any)
+        .downcast_ref::<U>()
+        .expect("the caller matched the types")
 }
 
 /// `x` resized to `n` (its capacity kept: no allocation once it has held `n`).
